@@ -1,0 +1,81 @@
+"""Run-size tiers: one environment variable, read in one place.
+
+``HANDMESH_BUDGET`` selects how big every run is:
+
+* ``smoke``: seconds per notebook; what tests and CI use.
+* ``default``: minutes on a 2-core laptop; what the committed notebooks were executed with.
+* ``full``: approaches the paper's scale (hours to days; a GPU helps).
+
+Nothing else in the library reads the variable: code asks :func:`budget` for sizes.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass
+
+ENV_VAR = "HANDMESH_BUDGET"
+TIERS = ("smoke", "default", "full")
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Sizes of a run. All counts are plain integers; ``image_size`` is in pixels (square).
+
+    Attributes:
+        name: the tier, one of ``smoke``, ``default``, ``full``.
+        samples: scenes generated for a dataset (all kinds together).
+        epochs: training epochs.
+        image_size: side of the square network input image, pixels.
+        batch_size: training batch size.
+        threads: CPU threads for torch (``torch.set_num_threads``).
+        steps: optimisation steps of small in-notebook demos (e.g. overfitting a decoder).
+        eval_samples: samples in evaluation or metric demos.
+        test_pairs: random primitive pairs in geometry checks and in-notebook benchmarks.
+    """
+
+    name: str
+    samples: int
+    epochs: int
+    image_size: int
+    batch_size: int
+    threads: int
+    steps: int
+    eval_samples: int
+    test_pairs: int
+
+    def as_dict(self) -> dict:
+        """The sizes as a plain dict (for logs and reports)."""
+        return asdict(self)
+
+
+_TIERS = {
+    "smoke": Budget("smoke", samples=12, epochs=1, image_size=64, batch_size=4, threads=2,
+                    steps=20, eval_samples=8, test_pairs=2_000),
+    "default": Budget("default", samples=600, epochs=20, image_size=128, batch_size=16, threads=2,
+                      steps=400, eval_samples=200, test_pairs=100_000),
+    "full": Budget("full", samples=40_000, epochs=200, image_size=224, batch_size=32, threads=8,
+                   steps=3_000, eval_samples=3_960, test_pairs=1_000_000),
+}
+
+
+def budget(name: str | None = None) -> Budget:
+    """Return the run sizes of a tier.
+
+    Args:
+        name: a tier name; when ``None`` the tier comes from the ``HANDMESH_BUDGET`` environment
+            variable, and ``default`` when it is unset or empty.
+
+    Returns:
+        The :class:`Budget` of that tier.
+
+    Raises:
+        ValueError: the tier name is not one of ``smoke``, ``default``, ``full``.
+    """
+    if name is None:
+        name = os.environ.get(ENV_VAR, "").strip() or "default"
+    key = name.lower()
+    if key not in _TIERS:
+        raise ValueError(f"unknown budget tier {name!r} (from {ENV_VAR} or the argument); "
+                         f"expected one of {', '.join(TIERS)}")
+    return _TIERS[key]
