@@ -123,6 +123,183 @@ def plot_skeleton(ax, joints, parents=None, colors=FINGER_COLORS, linewidth: flo
     ax.scatter(*j.T, s=marker_size, c="k", depthshade=False)
 
 
+def plot_frames(ax, origins, frames, length: float = 0.012,
+                colors=("#d62728", "#2ca02c", "#1f77b4"), linewidth: float = 1.5,
+                labels: bool = False) -> None:
+    """Draw local coordinate systems as three arrows each (x red, y green, z blue by default).
+
+    Args:
+        ax: a matplotlib ``Axes3D``.
+        origins: (J,3) frame origins (e.g. joint positions), metres.
+        frames: (J,3,3) rotation matrices whose *columns* are the x, y, z axes
+            (:func:`handmesh_tutorial.lcs.local_frames`).
+        length: arrow length, same unit as ``origins``.
+        colors: colours of the x, y and z arrows.
+        linewidth: arrow line width.
+        labels: write "x", "y", "z" at the arrow tips of the first frame (for a legend).
+    """
+    o = _to_numpy(origins).reshape(-1, 3)
+    f = _to_numpy(frames).reshape(-1, 3, 3)
+    for axis in range(3):
+        d = f[:, :, axis] * length
+        ax.quiver(o[:, 0], o[:, 1], o[:, 2], d[:, 0], d[:, 1], d[:, 2], color=colors[axis],
+                  linewidth=linewidth, arrow_length_ratio=0.25)
+        if labels and len(o):
+            tip = o[0] + 1.15 * d[0]
+            ax.text(*tip, "xyz"[axis], color=colors[axis], fontsize=9)
+
+
+#: Default camera for hands in the open hand's template frame (fingers +x, palm -y): y is drawn
+#: up, seen from above the back of the hand and from the side.
+HAND_VIEW = {"elev": 40.0, "azim": -65.0, "vertical_axis": "y"}
+#: Light for that view (travels down and away from the viewer).
+HAND_LIGHT = (-0.3, -1.0, -0.6)
+
+
+def plot_hand(ax, vertices, faces, colors=None, joints=None, view: dict | None = None,
+              title: str | None = None, light=HAND_LIGHT, edgecolor=None,
+              linewidth: float = 0.0) -> None:
+    """Draw one hand (mesh, optionally its 21 keypoints) on a 3D axes, axes hidden.
+
+    Args:
+        ax: a matplotlib ``Axes3D``.
+        vertices: (V,3) metres (numpy or torch).
+        faces: (F,3) int.
+        colors: (V,3) RGB in [0,1], e.g. ``HandModel.vertex_colors()``.
+        joints: optional (21,3) keypoints, FreiHAND order, drawn on top.
+        view: ``ax.view_init`` keywords; :data:`HAND_VIEW` when ``None``.
+        title: axes title.
+        light: light direction for the shading (flipped to the palm side for views from below).
+        edgecolor: triangle edge colour (``None``: no edges).
+        linewidth: triangle edge width.
+    """
+    view = HAND_VIEW if view is None else view
+    if light is HAND_LIGHT and view.get("elev", 0) < 0:
+        light = (light[0], -light[1], light[2])   # seen from below: light the palm side
+    plot_mesh(ax, vertices, faces, colors=colors, light=light, edgecolor=edgecolor,
+              linewidth=linewidth, alpha=0.55 if joints is not None else 1.0)
+    if joints is not None:
+        plot_skeleton(ax, joints, linewidth=1.5, marker_size=6)
+    ax.view_init(**view)
+    ax.set_box_aspect((1, 1, 1), zoom=1.5)  # a hand fills little of its bounding cube
+    ax.set_axis_off()
+    if title:
+        ax.set_title(title, fontsize=10)
+
+
+def save_hand_gallery(path: str | os.PathLike, seed: int = 0, dpi: int = 90) -> Path:
+    """Figure of the open hand, right and left, in a few poses, saved atomically as PNG.
+
+    Rows: right hand, left hand (the left is posed with the mirrored pose, see
+    :func:`handmesh_tutorial.hand.mirror_axis_angle`). Columns: flat (rest), fist, pointing,
+    pinch, and a random pose drawn from ``seed``.
+
+    Args:
+        path: output ``.png`` (parent folders are created).
+        seed: seed of the random pose and of the skin tones.
+        dpi: resolution.
+
+    Returns:
+        The written path.
+    """
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        matplotlib.use("Agg")  # headless-safe; harmless when already on Agg
+    import matplotlib.pyplot as plt
+    import torch
+
+    from . import hand
+
+    rng = np.random.default_rng(seed)
+    tones = rng.choice(4, size=2, replace=False)   # the lighter tones read best in print
+    random_right = hand.random_pose(rng, 1)[0]
+    names = ("flat", "fist", "point", "pinch", "random")
+    fig = plt.figure(figsize=(3.0 * len(names), 6.2))
+    for row, side in enumerate(("right", "left")):
+        model = hand.HandModel(side)
+        colors = model.vertex_colors(tone=int(tones[row]), rng=seed)
+        for col, name in enumerate(names):
+            if name == "random":
+                pose = random_right if side == "right" else hand.mirror_axis_angle(random_right)
+            else:
+                pose = hand.example_pose(name, side)
+            with torch.no_grad():
+                out = model(pose=torch.as_tensor(pose)[None])
+            ax = fig.add_subplot(2, len(names), row * len(names) + col + 1, projection="3d")
+            plot_hand(ax, out.vertices[0], model.faces, colors=colors,
+                      title=f"{side}: {name}")
+    fig.suptitle(f"open hand ({model.num_vertices} vertices), right and left, seed={seed}",
+                 fontsize=11)
+    fig.tight_layout()
+    try:
+        return save_figure(fig, path, dpi=dpi)
+    finally:
+        plt.close(fig)
+
+
+def plot_pck_curves(ax, curves: dict, thresholds=None, unit: str = "mm", show_auc: bool = True):
+    """Draw 3D PCK curves (fraction of points with error <= threshold), one line per entry.
+
+    Args:
+        ax: a matplotlib ``Axes``.
+        curves: {label: errors or (thresholds, pck)}: either an array of point errors in metres
+            (any shape; the curve is computed with :func:`handmesh_tutorial.metrics.pck_curve`)
+            or a precomputed pair of (T,) thresholds in metres and (T,) PCK values.
+        thresholds: (T,) thresholds in metres for error arrays; FreiHAND's 0-50 mm, 100 values
+            when ``None``.
+        unit: x-axis unit, ``"mm"`` or ``"m"``.
+        show_auc: append the normalised AUC to each legend label.
+    """
+    from . import metrics
+
+    thr_default = metrics.FREIHAND_THRESHOLDS if thresholds is None else np.asarray(thresholds)
+    factor = 1000.0 if unit == "mm" else 1.0
+    for label, data in curves.items():
+        if isinstance(data, tuple) and len(data) == 2:
+            thr, pck = np.asarray(data[0], dtype=float), np.asarray(data[1], dtype=float)
+        else:
+            thr, pck = thr_default, metrics.pck_curve(_to_numpy(data), thr_default)
+        text = f"{label} (AUC {metrics.auc(pck, thr):.3f})" if show_auc else str(label)
+        ax.plot(thr * factor, pck, label=text)
+    ax.set_xlabel(f"error threshold ({unit})")
+    ax.set_ylabel("3D PCK")
+    ax.set_ylim(0, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize="small")
+
+
+def plot_vr_table(ax, rows: list, metric: str = "auc", label: str | None = None,
+                  color=None, offset: float = 0.0, width: float = 0.8):
+    """Bar chart of one score per visibility-ratio bin (rows of ``metrics.scores_by_vr_bin``).
+
+    Call it once per model with different ``offset``/``width`` to get grouped bars.
+
+    Args:
+        ax: a matplotlib ``Axes``.
+        rows: list of per-bin dicts with ``bin``, ``count`` and the ``metric`` key.
+        metric: the score to draw, e.g. ``"auc"``, ``"pa_mpjpe"``, ``"f_at_5mm"``.
+        label: legend label (e.g. the model name).
+        color: bar colour.
+        offset: horizontal shift of the bars (for grouped bars).
+        width: bar width.
+
+    Returns:
+        The matplotlib ``BarContainer``.
+    """
+    x = np.arange(len(rows)) + offset
+    values = [float(r.get(metric, np.nan)) for r in rows]
+    bars = ax.bar(x, values, width=width, label=label, color=color)
+    for xi, v, r in zip(x, values, rows, strict=True):
+        if np.isfinite(v):
+            ax.annotate(f"n={r.get('count', '?')}", (xi, v), ha="center", va="bottom",
+                        fontsize="x-small")
+    ax.set_xticks(np.arange(len(rows)), [str(r.get("bin", "")) for r in rows])
+    ax.set_xlabel("visibility ratio (VR) bin")
+    ax.set_ylabel(metric)
+    return bars
+
+
 def save_figure(fig, path: str | os.PathLike, dpi: int = 100) -> Path:
     """Save a matplotlib figure atomically (temp file + rename) and return its path."""
     path = Path(path)
@@ -131,6 +308,7 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 100) -> Path:
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600; a figure is meant to be shared
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -142,3 +320,81 @@ def _to_numpy(x) -> np.ndarray:
     if hasattr(x, "detach"):
         x = x.detach().cpu().numpy()
     return np.asarray(x)
+
+
+def _cylinder_polygons(p0, p1, r, n: int = 24):
+    """Side quads and two cap polygons of one cylinder, (k, 3) arrays in metres."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    u = p1 - p0
+    u = u / np.linalg.norm(u)
+    helper = np.array([1.0, 0, 0]) if abs(u[0]) < 0.9 else np.array([0, 1.0, 0])
+    e1 = np.cross(u, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    ang = np.linspace(0, 2 * np.pi, n + 1)
+    ring = r * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+    bottom, top = p0 + ring, p1 + ring
+    quads = [np.array([bottom[k], bottom[k + 1], top[k + 1], top[k]]) for k in range(n)]
+    return quads, [bottom[:-1], top[:-1]]
+
+
+def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: int = 24,
+                   edgecolor=None, axes: bool = True, labels: bool = False,
+                   capsule: bool = False):
+    """Draw a :class:`~handmesh_tutorial.collision.Cylinders` body on a 3D axes.
+
+    Args:
+        ax: a matplotlib ``Axes3D``.
+        cylinders: the body (or any object with ``p0``, ``p1`` (N,3) and ``radius`` (N,), metres).
+        colors: one colour for all, or N colours; default: by ``parts`` (finger colours).
+        alpha: face transparency.
+        segments: polygons around each cylinder.
+        edgecolor: polygon edge colour (None: no edges).
+        axes: also draw each axis segment as a line.
+        labels: write each cylinder's name at its middle.
+        capsule: draw capsules (hemispherical ends) instead of flat end caps.
+
+    Returns:
+        The list of added ``Poly3DCollection`` artists.
+    """
+    from matplotlib.colors import to_rgba
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    p0, p1 = np.asarray(cylinders.p0, float), np.asarray(cylinders.p1, float)
+    radius = np.asarray(cylinders.radius, float)
+    n = len(p0)
+    if colors is None:
+        parts = np.asarray(getattr(cylinders, "parts", np.zeros(n, int)))
+        palette = FINGER_COLORS + ("#8c564b", "#7f7f7f", "#bcbd22", "#17becf")
+        colors = [palette[int(k) % len(palette)] for k in parts]
+    elif isinstance(colors, str) or np.ndim(colors) == 1 and len(colors) in (3, 4) and n != 3:
+        colors = [colors] * n
+    artists = []
+    for k in range(n):
+        quads, caps = _cylinder_polygons(p0[k], p1[k], radius[k], segments)
+        polys = quads
+        if capsule:
+            u = (p1[k] - p0[k]) / np.linalg.norm(p1[k] - p0[k])
+            lat = np.linspace(0, np.pi / 2, max(segments // 4, 3))
+            for end, sign in ((p0[k], -1.0), (p1[k], 1.0)):
+                rings = []
+                for a in lat:
+                    q, _ = _cylinder_polygons(end, end + u, radius[k] * np.cos(a), segments)
+                    rings.append(np.array([qq[0] for qq in q]) + sign * radius[k] * np.sin(a) * u)
+                for r0, r1 in zip(rings[:-1], rings[1:], strict=True):
+                    m = len(r0)
+                    polys = polys + [np.array([r0[i], r0[(i + 1) % m], r1[(i + 1) % m], r1[i]])
+                                     for i in range(m)]
+        else:
+            polys = polys + caps
+        col = Poly3DCollection(polys, facecolor=to_rgba(colors[k], alpha),
+                               edgecolor=edgecolor or "none", linewidth=0.3)
+        ax.add_collection3d(col)
+        artists.append(col)
+        if axes:
+            ax.plot(*np.stack([p0[k], p1[k]]).T, color=colors[k], linewidth=1.0)
+        if labels:
+            names = getattr(cylinders, "names", None)
+            if names:
+                ax.text(*(0.5 * (p0[k] + p1[k])), names[k], fontsize="x-small")
+    return artists

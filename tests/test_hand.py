@@ -1,0 +1,416 @@
+"""Tests of the open hand (handmesh_tutorial.hand): mesh, rig, mirror, shape, asset, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from handmesh_tutorial import hand as H
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def right():
+    return H.HandModel("right")
+
+
+@pytest.fixture(scope="module")
+def left():
+    return H.HandModel("left")
+
+
+def _edges(faces):
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return np.unique(np.sort(e, axis=1), axis=0)
+
+
+def _np(t):
+    return t.detach().cpu().numpy()
+
+
+# -- constants -----------------------------------------------------------------------------------
+
+def test_joint_order_constants_agree_by_name():
+    assert len(H.MANO_JOINT_NAMES) == 16 and len(H.MANO_PARENTS) == 16
+    assert len(H.FREIHAND_JOINT_NAMES) == 21 and len(H.FREIHAND_PARENTS) == 21
+    assert sorted(H.MANO_TO_FREIHAND) == list(range(21))
+    names21 = list(H.MANO_JOINT_NAMES) + list(H.FINGERTIP_NAMES)
+    for i, row in enumerate(H.MANO_TO_FREIHAND):
+        frei = H.FREIHAND_JOINT_NAMES[i]
+        assert names21[row] == frei, (i, frei, names21[row])
+    # The FreiHAND parent of each keypoint is the MANO parent (or the previous joint for tips).
+    for i, row in enumerate(H.MANO_TO_FREIHAND):
+        p = H.FREIHAND_PARENTS[i]
+        if row == 0:
+            assert p == -1
+        elif row < 16:
+            assert H.MANO_TO_FREIHAND[p] == H.MANO_PARENTS[row]
+        else:
+            assert H.FREIHAND_JOINT_NAMES[p].endswith("3")
+    assert H.FREIHAND_JOINT_NAMES[9] == "middle1"     # the root for centring
+
+
+# -- mesh ---------------------------------------------------------------------------------------
+
+def test_template_topology_and_quality(right):
+    v, f = right.template_vertices, right.faces
+    assert f.dtype == np.int64 and f.shape[1] == 3
+    assert 600 <= right.num_vertices <= 1500
+    tm = trimesh.Trimesh(v, f, process=False)
+    assert tm.is_watertight and tm.is_winding_consistent
+    assert tm.euler_number == 2                                   # genus 0
+    assert len(tm.split(only_watertight=False)) == 1
+    assert tm.volume > 0                                          # outward normals
+    assert len(H.self_intersections(v, f)) == 0
+    e = tm.edges_unique_length
+    assert e.std() / e.mean() < 0.45                              # reasonably uniform
+    assert np.degrees(tm.face_angles.min()) > 8.0
+
+
+def test_self_intersection_detector_finds_overlapping_boxes():
+    a = trimesh.creation.box((1, 1, 1))
+    b = trimesh.creation.box((1, 1, 1))
+    b.apply_translation([0.5, 0.3, 0.2])
+    both = trimesh.util.concatenate([a, b])
+    assert len(H.self_intersections(both.vertices, both.faces)) > 0
+    b.apply_translation([2.0, 0, 0])
+    apart = trimesh.util.concatenate([a, b])
+    assert len(H.self_intersections(apart.vertices, apart.faces)) == 0
+
+
+def test_proportions(right):
+    k = right.rest_keypoints
+    middle_len = np.linalg.norm(k[12] - k[9])
+    assert 0.075 <= middle_len <= 0.09, middle_len
+    hand_len = k[12, 0] - k[0, 0]
+    assert 0.16 <= hand_len <= 0.19, hand_len
+    v = right.template_vertices
+    not_thumb = right.skinning_weights[:, 13:].sum(1) < 0.5
+    knuckles = v[(v[:, 0] > 0.070) & (v[:, 0] < 0.085) & not_thumb]
+    palm_width = knuckles[:, 2].max() - knuckles[:, 2].min()
+    assert 0.080 <= palm_width <= 0.095, palm_width
+    thickness = v[(np.abs(v[:, 0] - 0.05) < 0.01) & (np.abs(v[:, 2]) < 0.01), 1]
+    assert 0.02 <= thickness.max() - thickness.min() <= 0.035
+    # Frame convention: fingers along +x, palm faces -y, right thumb on -z.
+    assert np.all(k[[8, 12, 16, 20], 0] > k[[5, 9, 13, 17], 0])
+    assert k[4, 2] < k[8, 2] < k[12, 2] < k[16, 2] < k[20, 2]
+    palmar = right.palmar > 0.8
+    normals = trimesh.Trimesh(v, right.faces, process=False).vertex_normals
+    assert normals[palmar, 1].mean() < -0.5
+    # fingertip vertices are the tips of the fingers
+    for f_i in range(5):
+        base = 1 + 4 * f_i
+        d = (k[base + 3] - k[base + 2]) / np.linalg.norm(k[base + 3] - k[base + 2])
+        near = np.linalg.norm(v - k[base + 3], axis=1) < 0.02
+        assert ((v[near] - k[base + 2]) @ d).max() <= (k[base + 3] - k[base + 2]) @ d + 2e-3
+
+
+# -- rig ----------------------------------------------------------------------------------------
+
+def test_skinning_weights_are_a_partition_of_unity(right):
+    w = right.skinning_weights
+    assert w.shape == (right.num_vertices, 16)
+    assert np.all(w >= 0)
+    np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-5)
+    assert set(np.unique(w.argmax(1))) == set(range(16))      # every bone owns some skin
+
+
+def test_zero_pose_is_the_template(right):
+    out = right()
+    assert out.vertices.shape == (1, right.num_vertices, 3) and out.vertices.dtype == torch.float32
+    assert out.joints.shape == (1, 21, 3) and out.joints_mano.shape == (1, 16, 3)
+    assert out.transforms.shape == (1, 16, 4, 4)
+    np.testing.assert_allclose(_np(out.vertices[0]), right.template_vertices, atol=1e-7)
+    np.testing.assert_allclose(_np(out.joints_mano[0]), right.rest_joints, atol=1e-7)
+    np.testing.assert_allclose(_np(out.joints[0]), right.rest_keypoints, atol=1e-7)
+    np.testing.assert_allclose(_np(out.transforms[0, :, :3, :3]), np.tile(np.eye(3), (16, 1, 1)),
+                               atol=1e-7)
+    zero = right(pose=torch.zeros(2, 45), shape=torch.zeros(2, 4))
+    np.testing.assert_allclose(_np(zero.vertices[1]), right.template_vertices, atol=1e-7)
+
+
+def _finger_of(joint: int) -> list[int]:
+    """MANO joints of the finger that joint belongs to."""
+    return [j for j in range(1, 16) if (j - 1) // 3 == (joint - 1) // 3]
+
+
+@pytest.mark.parametrize("joint", [1, 4, 7, 10, 13, 2, 5, 15])
+def test_rotating_a_joint_moves_only_its_descendants(right, joint):
+    k = right.rest_keypoints
+    v0 = right.template_vertices
+    axes = H.flexion_axes()
+    pose = torch.zeros(1, 15, 3)
+    pose[0, joint - 1] = torch.tensor(axes[joint - 1] * np.deg2rad(60))
+    moved = np.linalg.norm(_np(right(pose=pose).vertices[0]) - v0, axis=1)
+    # Geometric regions (independent of the weights): the part of each finger beyond its middle
+    # joint (PIP / thumb IP) and the proximal palm.
+    fingers = {"thumb": 1, "index": 5, "middle": 9, "ring": 13, "pinky": 17}
+    name = H.MANO_JOINT_NAMES[joint].rstrip("123")
+    level = (joint - 1) % 3                                  # 0 = MCP/CMC, 1 = PIP/MCP, 2 = DIP/IP
+    for finger, base in fingers.items():
+        d = k[base + 3] - k[base]
+        d /= np.linalg.norm(d)
+        near_axis = np.linalg.norm(np.cross(v0 - k[base], d), axis=1) < 0.0125
+        if finger == name:      # beyond the rotated joint: moves a lot
+            region = near_axis & ((v0 - k[base + level]) @ d > 0.018)
+            assert moved[region].min() > 0.005
+        else:                   # the other fingers beyond their middle joint: do not move
+            region = near_axis & ((v0 - k[base + 1]) @ d > 0.012)
+            assert moved[region].max() < 1e-3, finger
+    # The wrist end of the palm (away from the thumb's ball) does not move.
+    proximal_palm = (v0[:, 0] < 0.01) & (v0[:, 2] > 0.0)
+    assert moved[proximal_palm].max() < 1e-3
+    # Ancestors: the finger's joints before the rotated one stay put.
+    out = right(pose=pose)
+    chain = _finger_of(joint)
+    for j in chain:
+        if j < joint:
+            np.testing.assert_allclose(_np(out.joints_mano[0, j]), right.rest_joints[j], atol=1e-6)
+
+
+@pytest.mark.parametrize("joint", list(range(1, 16)))
+def test_bending_90_degrees_does_not_collapse(right, joint):
+    v0, f = right.template_vertices, right.faces
+    e = _edges(f)
+    l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
+    vol0 = trimesh.Trimesh(v0, f, process=False).volume
+    pose = torch.zeros(1, 15, 3)
+    pose[0, joint - 1] = torch.tensor(H.flexion_axes()[joint - 1] * np.pi / 2)
+    v = _np(right(pose=pose).vertices[0])
+    ratio = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) / l0
+    assert ratio.min() > 0.15 and ratio.max() < 5.0
+    assert abs(trimesh.Trimesh(v, f, process=False).volume / vol0 - 1) < 0.10
+    assert trimesh.Trimesh(v, f, process=False).is_watertight
+
+
+def test_global_orient_and_transl_are_rigid(right):
+    rng = np.random.default_rng(3)
+    rotvec = rng.normal(size=(4, 3))
+    transl = rng.normal(size=(4, 3)) * 0.1
+    pose = torch.tensor(H.random_pose(rng, 4))
+    base = right(pose=pose)
+    out = right(pose=pose, global_orient=torch.tensor(rotvec, dtype=torch.float32),
+                transl=torch.tensor(transl, dtype=torch.float32))
+    for b in range(4):
+        rot = Rotation.from_rotvec(rotvec[b])
+        wrist = right.rest_joints[0]            # global_orient rotates about the wrist joint
+        want = rot.apply(_np(base.vertices[b]) - wrist) + wrist + transl[b]
+        np.testing.assert_allclose(_np(out.vertices[b]), want, atol=2e-6)
+        want_j = rot.apply(_np(base.joints[b]) - wrist) + wrist + transl[b]
+        np.testing.assert_allclose(_np(out.joints[b]), want_j, atol=2e-6)
+        np.testing.assert_allclose(_np(out.transforms[b, :, :3, 3]), _np(out.joints_mano[b]))
+        r = _np(out.transforms[b, 0, :3, :3])
+        np.testing.assert_allclose(r, rot.as_matrix(), atol=1e-5)
+
+
+def test_axis_angle_matches_scipy():
+    rv = np.random.default_rng(0).normal(size=(50, 3)) * 2
+    rv[0] = 0
+    rv[1] = [1e-6, 0, 0]
+    got = _np(H.axis_angle_to_matrix(torch.tensor(rv, dtype=torch.float64)))
+    np.testing.assert_allclose(got, Rotation.from_rotvec(rv).as_matrix(), atol=1e-10)
+
+
+def test_transforms_map_rest_frames_to_posed_joints(right):
+    pose = torch.tensor(H.random_pose(1, 2))
+    out = right(pose=pose, transl=torch.tensor([[0.1, 0.2, 0.3]] * 2))
+    # Child joint = parent transform applied to the rest offset (the kinematic chain).
+    for k in range(1, 16):
+        p = H.MANO_PARENTS[k]
+        off = right.rest_joints[k] - right.rest_joints[p]
+        g = _np(out.transforms[:, p])
+        want = np.einsum("bij,j->bi", g[:, :3, :3], off) + g[:, :3, 3]
+        np.testing.assert_allclose(_np(out.joints_mano[:, k]), want, atol=1e-6)
+
+
+def test_batch_consistency(right):
+    pose = torch.tensor(H.random_pose(5, 3))
+    shape = torch.tensor(np.random.default_rng(5).uniform(-1, 1, (3, 4)), dtype=torch.float32)
+    go = torch.randn(3, 3, generator=torch.Generator().manual_seed(0))
+    tr = torch.randn(3, 3, generator=torch.Generator().manual_seed(1))
+    out = right(pose=pose, shape=shape, global_orient=go, transl=tr)
+    for b in range(3):
+        one = right(pose=pose[b:b + 1].reshape(1, 45), shape=shape[b:b + 1],
+                    global_orient=go[b:b + 1], transl=tr[b:b + 1])
+        np.testing.assert_allclose(_np(out.vertices[b]), _np(one.vertices[0]), atol=1e-6)
+        np.testing.assert_allclose(_np(out.joints[b]), _np(one.joints[0]), atol=1e-6)
+    assert right(transl=torch.zeros(5, 3)).vertices.shape[0] == 5     # batch from any input
+
+
+def test_joint_regressor(right):
+    reg = right.joint_regressor
+    assert reg.shape == (21, right.num_vertices)
+    assert np.all(reg >= 0)
+    np.testing.assert_allclose(reg.sum(1), 1.0, atol=1e-5)
+    rest_err = np.linalg.norm(reg @ right.template_vertices - right.rest_keypoints, axis=1)
+    assert rest_err.max() < 1e-3
+    out = right(pose=torch.tensor(H.random_pose(7, 32)))
+    est = torch.einsum("jv,bvc->bjc", torch.tensor(reg), out.vertices)
+    err = _np((est - out.joints).norm(dim=-1))
+    assert err.mean() < 0.003 and err.max() < 0.01, (err.mean(), err.max())
+
+
+# -- mirror -------------------------------------------------------------------------------------
+
+def test_left_is_the_mirror_of_right(right, left):
+    np.testing.assert_allclose(left.template_vertices, H.mirror_points(right.template_vertices))
+    tm = trimesh.Trimesh(left.template_vertices, left.faces, process=False)
+    assert tm.volume > 0 and tm.is_winding_consistent           # normals still outward
+    np.testing.assert_array_equal(left.fingertip_vertex_ids, right.fingertip_vertex_ids)
+    rng = np.random.default_rng(11)
+    pose = torch.tensor(H.random_pose(rng, 3))
+    go = torch.tensor(rng.normal(size=(3, 3)), dtype=torch.float32)
+    tr = torch.tensor(rng.normal(size=(3, 3)) * 0.1, dtype=torch.float32)
+    shape = torch.tensor(rng.uniform(-1, 1, (3, 4)), dtype=torch.float32)
+    r = right(pose=pose, global_orient=go, transl=tr, shape=shape)
+    lo = left(pose=H.mirror_axis_angle(pose), global_orient=H.mirror_axis_angle(go),
+              transl=H.mirror_points(tr), shape=shape)
+    np.testing.assert_allclose(_np(lo.vertices), _np(H.mirror_points(r.vertices)), atol=2e-6)
+    np.testing.assert_allclose(_np(lo.joints), _np(H.mirror_points(r.joints)), atol=2e-6)
+    # The mirrored axis-angle really is M R M (independent check with scipy).
+    rv = rng.normal(size=(5, 3))
+    m = np.diag([1.0, 1.0, 1.0])
+    m[H.MIRROR_AXIS, H.MIRROR_AXIS] = -1
+    want = m @ Rotation.from_rotvec(rv).as_matrix() @ m
+    got = Rotation.from_rotvec(H.mirror_axis_angle(rv)).as_matrix()
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    ex = H.example_pose("point", side="left")
+    np.testing.assert_allclose(ex, H.mirror_axis_angle(H.example_pose("point")), atol=0)
+
+
+# -- shape --------------------------------------------------------------------------------------
+
+def _measure(model, shape_row):
+    out = model(shape=torch.tensor([shape_row], dtype=torch.float32))
+    v, k = _np(out.vertices[0]), _np(out.joints[0])
+    not_thumb = model.skinning_weights[:, 13:].sum(1) < 0.5
+    knuckles = v[(v[:, 0] > k[17, 0] - 0.01) & (v[:, 0] < k[17, 0] + 0.005) & not_thumb]
+    mid = v[np.abs(v[:, 0] - 0.05) < 0.01]
+    mid = mid[np.abs(mid[:, 2]) < 0.01]
+    return {
+        "hand_length": k[12, 0] - k[0, 0],
+        "middle": np.linalg.norm(k[12] - k[9]),
+        "palm_width": knuckles[:, 2].max() - knuckles[:, 2].min(),
+        "thickness": mid[:, 1].max() - mid[:, 1].min(),
+        "volume": trimesh.Trimesh(v, model.faces, process=False).volume,
+    }
+
+
+@pytest.mark.parametrize("param,quantity,others", [
+    (0, "hand_length", []),
+    (1, "middle", ["palm_width", "thickness"]),
+    (2, "palm_width", ["middle", "thickness"]),
+    (3, "thickness", ["middle", "hand_length"]),
+])
+def test_shape_parameters_are_monotonic(right, param, quantity, others):
+    values = []
+    for s in (-1.0, -0.5, 0.0, 0.5, 1.0):
+        row = [0.0] * 4
+        row[param] = s
+        values.append(_measure(right, row))
+    q = [m[quantity] for m in values]
+    assert np.all(np.diff(q) > 0), q
+    assert 0.08 < q[-1] / q[2] - 1 < 0.22                     # about +15 % per unit
+    for other in others:                                      # the others barely change
+        o = [m[other] for m in values]
+        assert max(o) / min(o) - 1 < 0.05, (other, o)
+    vol = [m["volume"] for m in values]
+    assert np.all(np.diff(vol) > 0)
+
+
+def test_shaped_joints_follow_the_shaped_mesh(right):
+    shape = torch.tensor([[0.8, -0.6, 0.7, 0.5]])
+    out = right(shape=shape)
+    est = right.joint_regressor @ _np(out.vertices[0])
+    assert np.linalg.norm(est - _np(out.joints[0]), axis=1).max() < 3e-3
+
+
+# -- appearance -----------------------------------------------------------------------------------
+
+def test_vertex_colors(right):
+    c = right.vertex_colors()
+    assert c.shape == (right.num_vertices, 3) and c.dtype == np.float32
+    assert c.min() >= 0 and c.max() <= 1
+    np.testing.assert_array_equal(c, right.vertex_colors())               # deterministic
+    np.testing.assert_array_equal(right.vertex_colors(rng=4), right.vertex_colors(rng=4))
+    assert not np.array_equal(right.vertex_colors(tone=0), right.vertex_colors(tone=5))
+    lum = c.mean(1)
+    assert lum[right.palmar > 0.8].mean() > lum[right.palmar < 0.2].mean() + 0.03
+    with pytest.raises(ValueError, match="tone"):
+        right.vertex_colors(tone=17)
+
+
+# -- asset ----------------------------------------------------------------------------------------
+
+def test_shipped_asset_equals_a_fresh_build():
+    shipped = H.load_template()
+    fresh = H.build_template()
+    assert shipped.faces.shape == fresh.faces.shape
+    np.testing.assert_array_equal(shipped.faces, fresh.faces)
+    np.testing.assert_array_equal(shipped.tip_ids, fresh.tip_ids)
+    for name in ("vertices", "weights", "rest_joints", "joint_regressor", "shape_dirs",
+                 "joint_shape_dirs", "palmar", "nail", "keypoints"):
+        np.testing.assert_allclose(getattr(shipped, name), getattr(fresh, name), atol=1e-5,
+                                   err_msg=name)
+
+
+def test_load_template_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="open hand asset"):
+        H.load_template(tmp_path / "nope.npz")
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, vertices=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="missing keys"):
+        H.load_template(bad)
+
+
+# -- errors and gradients -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"pose": torch.zeros(1, 14, 3)}, r"pose must have shape \(B,15,3\) or \(B,45\)"),
+    ({"pose": torch.zeros(45)}, "pose must have shape"),
+    ({"shape": torch.zeros(1, 10)}, r"shape must have shape \(B,4\)"),
+    ({"global_orient": torch.zeros(2, 4)}, r"global_orient must have shape \(B,3\)"),
+    ({"transl": torch.zeros(3)}, r"transl must have shape \(B,3\)"),
+    ({"pose": torch.zeros(2, 45), "transl": torch.zeros(3, 3)}, "inconsistent batch sizes"),
+])
+def test_bad_inputs_raise(right, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        right(**kwargs)
+
+
+def test_bad_side_and_pose_name():
+    with pytest.raises(ValueError, match="side must be"):
+        H.HandModel("middle")
+    with pytest.raises(ValueError, match="unknown pose name"):
+        H.example_pose("wave")
+
+
+def test_gradients_flow(right):
+    pose = torch.zeros(2, 15, 3, requires_grad=True)          # at zero: the hardest case
+    shape = torch.zeros(2, 4, requires_grad=True)
+    go = torch.full((2, 3), 0.1, requires_grad=True)
+    tr = torch.zeros(2, 3, requires_grad=True)
+    out = right(pose=pose, shape=shape, global_orient=go, transl=tr)
+    target = torch.randn_like(out.vertices)
+    loss = (out.vertices * target).sum() + out.joints.square().sum()
+    loss.backward()
+    for t in (pose, shape, go, tr):
+        assert t.grad is not None and torch.isfinite(t.grad).all() and t.grad.abs().sum() > 0
+    # finite-difference check of one pose coordinate
+    p = torch.zeros(1, 15, 3, dtype=torch.float64)
+    model64 = right.double()
+    try:
+        p.requires_grad_(True)
+        f = model64(pose=p).vertices[0, right.fingertip_vertex_ids[1], 1]
+        f.backward()
+        eps = 1e-6
+        p2 = torch.zeros(1, 15, 3, dtype=torch.float64)
+        p2[0, 0, 2] = eps
+        fd = (model64(pose=p2).vertices[0, right.fingertip_vertex_ids[1], 1] - f.detach()) / eps
+        assert abs(p.grad[0, 0, 2].item() - fd.item()) < 1e-4
+    finally:
+        right.float()

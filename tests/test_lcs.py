@@ -1,0 +1,329 @@
+"""Tests for handmesh_tutorial.lcs: local coordinate systems, angle conventions and limits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+from handmesh_tutorial import lcs as L
+
+torch.set_num_threads(1)
+MIRROR = np.diag([-1.0, 1.0, 1.0])  # any reflection works for the generic test
+FLIP_Y = np.diag([1.0, -1.0, 1.0])
+
+
+def rodrigues(axis, angle):
+    """Independent rotation matrix about a unit axis (explicit formula)."""
+    k = np.asarray(axis, float) / np.linalg.norm(axis)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
+
+
+def toy_chain():
+    """A bent 3-link chain with an end point; flexion points on the +x side of each link."""
+    joints = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.5, 1.8]])
+    end = np.array([0.0, 1.2, 2.2])
+    children = np.array([joints[1], joints[2], end])
+    flex = joints + np.array([[0.3, 0.1, 0.2], [0.4, -0.2, 0.1], [0.2, 0.05, -0.1]])
+    return joints, children, flex
+
+
+def assert_rotations(frames, atol=1e-9):
+    eye = np.broadcast_to(np.eye(3), frames.shape)
+    np.testing.assert_allclose(np.swapaxes(frames, -1, -2) @ frames, eye, atol=atol)
+    np.testing.assert_allclose(np.linalg.det(frames), 1.0, atol=atol)
+
+
+# ------------------------------------------------------------------------------ generic API
+def test_local_frames_analytic_case():
+    frames = L.local_frames([[1.0, 2.0, 3.0]], [[1.0, 2.0, 5.0]], [[4.0, 2.0, 8.0]])
+    np.testing.assert_allclose(frames[0], np.eye(3), atol=1e-12)  # x=(1,0,0), y=(0,1,0), z
+
+
+def test_local_frames_toy_chain_against_gram_schmidt():
+    joints, children, flex = toy_chain()
+    frames = L.local_frames(joints, children, flex)
+    assert frames.shape == (3, 3, 3)
+    assert_rotations(frames)
+    for i in range(3):
+        z = (children[i] - joints[i]) / np.linalg.norm(children[i] - joints[i])
+        # independent: x = z × ((v - j) × z), normalised (the triple product form of projection)
+        xv = np.cross(z, np.cross(flex[i] - joints[i], z))
+        x = xv / np.linalg.norm(xv)
+        np.testing.assert_allclose(frames[i][:, 2], z, atol=1e-12)
+        np.testing.assert_allclose(frames[i][:, 0], x, atol=1e-12)
+        np.testing.assert_allclose(frames[i][:, 1], np.cross(z, x), atol=1e-12)
+        assert (flex[i] - joints[i]) @ frames[i][:, 0] > 0  # x on the flexion point's side
+    # children given as indices into joints is the same as positions
+    idx = L.local_frames(joints[:2], np.array([1, 0]), flex[:2])
+    np.testing.assert_allclose(idx[0], frames[0], atol=1e-12)
+
+
+def test_local_frames_errors():
+    with pytest.raises(ValueError, match="zero length"):
+        L.local_frames([[0, 0, 0]], [[0, 0, 0]], [[1, 0, 0]])
+    with pytest.raises(ValueError, match="projected off z"):
+        L.local_frames([[0, 0, 0]], [[0, 0, 1]], [[0, 0, 3]])
+    with pytest.raises(ValueError, match=r"flexion_points must have shape \(1, 3\)"):
+        L.local_frames([[0, 0, 0]], [[0, 0, 1]], [[1, 0, 0], [1, 0, 0]])
+
+
+def test_select_flexion_vertices_rule():
+    joints, child, target = [[0.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]]
+    verts = np.array([[0.5, 0.1, 0.0],     # near the cross-section, close to the target
+                      [1.0, 0.0, 0.5],     # exactly the target direction but far along z
+                      [-1.0, 0.0, 0.0],    # opposite side
+                      [0.3, 0.3, 0.1]])
+    assert L.select_flexion_vertices(verts, joints, child, target).tolist() == [0]
+    assert L.select_flexion_vertices(verts, joints, child, target, slab=0.6).tolist() == [1]
+    # skinning restriction: only vertices owned by the joint (1) or its parent (0) qualify
+    weights = np.eye(3)[[2, 2, 1, 1]]
+    got = L.select_flexion_vertices(verts, joints, child, target, weights=weights,
+                                    joint_ids=[1], parents=np.array([-1, 0, 1]), slab=0.6)
+    assert got.tolist() == [3]
+    with pytest.raises(ValueError, match="joint_ids and parents"):
+        L.select_flexion_vertices(verts, joints, child, target, weights=weights)
+
+
+def test_angle_axes_and_signs():
+    joints, children, flex = toy_chain()
+    frames = L.local_frames(joints, children, flex)
+    x, y, z = frames[1].T
+    theta = 0.4
+    for axis, a_idx, moved, want in [
+        ("y flexes z towards x", 1, z, np.cos(theta) * z + np.sin(theta) * x),
+        ("x swings z towards -y", 0, z, np.cos(theta) * z - np.sin(theta) * y),
+        ("z spins x towards y", 2, x, np.cos(theta) * x + np.sin(theta) * y),
+    ]:
+        angles = np.zeros((3, 3))
+        angles[1, a_idx] = theta
+        rot = L.rotation_from_lcs_angles(frames, angles)[1]
+        np.testing.assert_allclose(rot @ moved, want, atol=1e-12, err_msg=axis)
+        np.testing.assert_allclose(rot, rodrigues(frames[1][:, a_idx], theta), atol=1e-12)
+
+
+def test_composition_order_is_y_then_x_then_z():
+    frames = np.eye(3)[None]
+    a = np.array([[0.3, -0.7, 0.2]])
+    want = rodrigues([0, 1, 0], -0.7) @ rodrigues([1, 0, 0], 0.3) @ rodrigues([0, 0, 1], 0.2)
+    np.testing.assert_allclose(L.rotation_from_lcs_angles(frames, a)[0], want, atol=1e-12)
+
+
+def test_pose_round_trip_and_matrix_agreement():
+    rng = np.random.default_rng(0)
+    joints, children, flex = toy_chain()
+    frames = L.local_frames(joints, children, flex)
+    angles = rng.uniform(-1.4, 1.4, size=(20, 3, 3))
+    angles[:, :, 1] = rng.uniform(-2.0, 2.0, size=(20, 3))  # flexion beyond 90 degrees
+    pose = L.lcs_angles_to_pose(frames, angles)
+    np.testing.assert_allclose(Rotation.from_rotvec(pose.reshape(-1, 3)).as_matrix(),
+                               L.rotation_from_lcs_angles(frames, angles).reshape(-1, 3, 3),
+                               atol=1e-12)
+    np.testing.assert_allclose(L.pose_to_lcs_angles(frames, pose), angles, atol=1e-9)
+
+
+def test_forward_kinematics_toy_chain():
+    joints, children, flex = toy_chain()
+    # chain with the end point as a 4th (unarticulated) joint
+    rest = np.vstack([joints, children[2]])
+    parents = np.array([-1, 0, 1, 2])
+    frames = L.local_frames(joints, children, flex)
+    angles = np.zeros((3, 3))
+    angles[1, 1] = 0.5                   # flex the middle joint
+    angles[2, 0] = -0.3                  # abduct the last one
+    local = np.tile(np.eye(3), (4, 1, 1))
+    local[:3] = L.rotation_from_lcs_angles(frames, angles)
+    got = L.forward_kinematics(rest, parents, local)
+    # independent: rotate about world axes through the joints, distal joint first
+    r2 = rodrigues(frames[2][:, 0], -0.3)
+    r1 = rodrigues(frames[1][:, 1], 0.5)
+    end = joints[2] + r2 @ (rest[3] - joints[2])
+    end = joints[1] + r1 @ (end - joints[1])
+    j2 = joints[1] + r1 @ (joints[2] - joints[1])
+    np.testing.assert_allclose(got[2], j2, atol=1e-12)
+    np.testing.assert_allclose(got[3], end, atol=1e-12)
+    np.testing.assert_allclose(got[:2], rest[:2], atol=1e-12)
+    # flexing joint 1 keeps joint 2 in the plane through joint 1 perpendicular to y_1
+    assert abs((got[2] - joints[1]) @ frames[1][:, 1]) < 1e-12
+    assert (got[2] - joints[2]) @ frames[1][:, 0] > 0
+
+
+def test_mirrored_chain_gives_mirrored_frames_and_poses():
+    joints, children, flex = toy_chain()
+    right = L.local_frames(joints, children, flex)
+    left = L.local_frames(joints @ MIRROR, children @ MIRROR, flex @ MIRROR)
+    assert_rotations(left)
+    np.testing.assert_allclose(left, MIRROR @ right @ FLIP_Y, atol=1e-12)
+    a = np.random.default_rng(1).uniform(-0.8, 0.8, size=(3, 3))
+    rot_r = L.rotation_from_lcs_angles(right, a)
+    rot_l = L.rotation_from_lcs_angles(left, L.mirror_angles(a))
+    np.testing.assert_allclose(rot_l, MIRROR @ rot_r @ MIRROR, atol=1e-12)
+
+
+def test_clip_and_within_limits():
+    lower = np.deg2rad([[-10, 0, -5]] * 2)
+    upper = np.deg2rad([[10, 90, 5]] * 2)
+    a = np.deg2rad([[[20, -30, 0], [0, 45, 4]], [[-1, 1, 1], [0, 0, 0]]])
+    assert L.within_limits(a, lower, upper).tolist() == [False, True]
+    clipped = L.clip_angles(a, lower, upper)
+    assert L.within_limits(clipped, lower, upper).all()
+    np.testing.assert_allclose(np.rad2deg(clipped[0, 0]), [10, 0, 0])
+
+
+def make_articulation(limits=None):
+    joints, children, flex = toy_chain()
+    frames = L.local_frames(joints, children, flex)
+    lower, upper = limits if limits is not None else (np.full((3, 3), -0.5), np.full((3, 3), 0.5))
+    return L.Articulation(names=("a", "b", "c"), joints=joints, frames=frames, lower=lower,
+                          upper=upper, child_points=children, flexion_points=flex)
+
+
+def test_random_angles_respect_limits_and_seed():
+    lower = np.deg2rad([[-15, -20, -5], [0, 0, 0], [0, 10, 0]])
+    upper = np.deg2rad([[15, 90, 5], [0, 110, 0], [0, 80, 0]])
+    art = make_articulation((lower, upper))
+    a = art.random_angles(np.random.default_rng(3), n=500)
+    assert a.shape == (500, 3, 3) and art.within_limits(a).all()
+    assert np.all(a[:, 1, [0, 2]] == 0)                      # zero-width ranges stay 0
+    assert a[:, 0, 1].min() < 0 < a[:, 0, 1].max()           # uses both sides of the range
+    b = art.random_angles(3, n=500)
+    assert a.tobytes() == b.tobytes()
+    half = art.random_angles(4, n=500, scale=0.5)
+    assert art.within_limits(half).all()
+    assert np.abs(half[:, 0, 1]).max() <= np.deg2rad(45) + 1e-12
+    # a range not containing 0 shrinks towards its nearest end, never outside
+    assert np.all(art.random_angles(5, n=50, scale=0.0)[:, 2, 1] == lower[2, 1])
+    pose = art.random_pose(6, n=10)
+    assert pose.dtype == np.float32 and art.within_limits(art.from_pose(pose), atol=1e-5).all()
+    with pytest.raises(ValueError, match="scale"):
+        art.random_angles(0, scale=1.5)
+
+
+def test_paper_and_named_limits():
+    lower, upper = L.hand_joint_limits("paper")
+    np.testing.assert_allclose(np.rad2deg(upper), 60.0)
+    np.testing.assert_allclose(np.rad2deg(lower), -60.0)
+    lo, hi = L.hand_joint_limits("anatomical")
+    assert lo.shape == hi.shape == (15, 3) and np.all(lo <= 0) and np.all(hi >= 0)
+    np.testing.assert_allclose(np.rad2deg(hi[1]), [0, 110, 0])  # index PIP
+    np.testing.assert_allclose(np.rad2deg(lo[:, [0, 2]]), -np.rad2deg(hi[:, [0, 2]]))
+    paper = make_articulation().with_limits("paper")
+    assert paper.limits_name == "paper"
+    np.testing.assert_allclose(np.rad2deg(paper.upper), 60.0)
+    with pytest.raises(ValueError, match="15 hand joints"):
+        make_articulation().with_limits("anatomical")
+    with pytest.raises(ValueError, match="'paper' or 'anatomical'"):
+        L.hand_joint_limits("loose")
+
+
+# --------------------------------------------------------------------------------- hand
+@pytest.fixture(scope="module")
+def hand():
+    return pytest.importorskip("handmesh_tutorial.hand")
+
+
+@pytest.fixture(scope="module")
+def right(hand):
+    model = hand.HandModel("right")
+    return model, L.hand_lcs(model)
+
+
+@pytest.fixture(scope="module")
+def left(hand):
+    model = hand.HandModel("left")
+    return model, L.hand_lcs(model)
+
+
+def np_(x):
+    return x.detach().cpu().numpy().astype(np.float64)
+
+
+def test_hand_frames(right):
+    model, art = right
+    assert art.frames.shape == (15, 3, 3) and art.num_joints == 15
+    assert_rotations(art.frames, atol=1e-9)
+    z = art.frames[:, :, 2]
+    to_child = art.child_points - art.joints
+    np.testing.assert_allclose(z, to_child / np.linalg.norm(to_child, axis=1, keepdims=True),
+                               atol=1e-9)
+    verts = np.asarray(model.template_vertices, dtype=np.float64)
+    v = verts[art.flexion_vertex_ids]
+    assert np.all(np.einsum("ja,ja->j", v - art.joints, art.frames[:, :, 0]) > 0)
+    # fingers: x is close to the palm normal (the vertex is on the palmar side)
+    out = model()
+    n = L.palm_normal(np_(out.joints[0]), "right")
+    cos = art.frames[:12, :, 0] @ n
+    assert cos.min() > 0.7, cos
+    assert len(set(art.flexion_vertex_ids.tolist())) == 15
+
+
+def test_positive_flexion_curls_towards_palm(right):
+    model, art = right
+    out0 = model()
+    n = L.palm_normal(np_(out0.joints[0]), "right")
+    j_rest = np_(out0.joints_mano[0])
+    for k in (1, 4, 7, 10):                     # finger MCPs: child = PIP (next MANO joint)
+        angles = np.zeros((15, 3))
+        angles[k - 1, 1] = np.deg2rad(40)
+        pose = torch.as_tensor(art.to_pose(angles))[None]
+        posed = np_(model(pose=pose).joints_mano[0])
+        x, y, _ = art.frames[k - 1].T
+        moved = posed[k + 1] - j_rest[k]
+        predicted = art.rotations(angles)[k - 1] @ (j_rest[k + 1] - j_rest[k])
+        np.testing.assert_allclose(moved, predicted, atol=1e-5)
+        assert abs(moved @ y) < 1e-5                # stays in the plane ⟂ flexion axis
+        assert (posed[k + 1] - j_rest[k + 1]) @ n > 0    # towards the palm
+        assert (posed[k + 1] - j_rest[k + 1]) @ x > 0
+        np.testing.assert_allclose(posed[: k + 1], j_rest[: k + 1], atol=1e-6)
+
+
+def test_distal_flexion_moves_fingertip_in_plane(right):
+    model, art = right
+    tips_rest = np_(model().joints[0])
+    # DIP of index, middle, pinky, ring and the thumb's IP (MANO order) -> FreiHAND tip keypoint
+    for k, tip_id in ((3, 8), (6, 12), (9, 20), (12, 16), (15, 4)):
+        angles = np.zeros((15, 3))
+        angles[k - 1, 1] = np.deg2rad(50)
+        out = model(pose=torch.as_tensor(art.to_pose(angles))[None])
+        tip = np_(out.joints[0])[tip_id]
+        x, y, _ = art.frames[k - 1].T
+        rest_rel = tips_rest[tip_id] - art.joints[k - 1]
+        rel = tip - art.joints[k - 1]
+        assert abs(rel @ y) < 1e-5                   # in the plane ⟂ the flexion axis
+        np.testing.assert_allclose(rel, art.rotations(angles)[k - 1] @ rest_rel, atol=1e-4)
+        moved = (tip - tips_rest[tip_id]) @ x         # towards the flexion side by ~L sin 50°
+        assert moved > 0.9 * np.sin(np.deg2rad(50)) * np.linalg.norm(rest_rel)
+
+
+def test_random_pose_valid_for_hand(right):
+    model, art = right
+    for limits in ("paper", "anatomical"):
+        poses = L.random_pose(art, np.random.default_rng(0), n=16, limits=limits)
+        lim = art.with_limits(limits)
+        assert poses.shape == (16, 15, 3) and poses.dtype == np.float32
+        assert lim.within_limits(lim.from_pose(poses), atol=1e-5).all()
+        out = model(pose=torch.as_tensor(poses))
+        assert torch.isfinite(out.vertices).all()
+    a = L.random_pose(model, 7, n=2)
+    b = L.random_pose(model, 7, n=2)
+    assert a.tobytes() == b.tobytes()
+
+
+def test_left_frames_mirror_right(hand, right, left):
+    (rmodel, rart), (lmodel, lart) = right, left
+    mirror = np.diag(hand.mirror_points(np.ones(3)))   # the library's left = right mirrored
+    rv = np.asarray(rmodel.template_vertices, dtype=np.float64)
+    lv = np.asarray(lmodel.template_vertices, dtype=np.float64)
+    np.testing.assert_allclose(lv, rv @ mirror, atol=1e-6)
+    np.testing.assert_allclose(lart.frames, mirror @ rart.frames @ FLIP_Y, atol=1e-5)
+    assert lart.flexion_vertex_ids.tolist() == rart.flexion_vertex_ids.tolist()
+    # equal flexion, mirrored abduction/twist -> mirrored pose (hand.mirror_axis_angle)
+    a = rart.random_angles(0, n=3)
+    pr = rart.to_pose(a)
+    pl = lart.to_pose(L.mirror_angles(a))
+    np.testing.assert_allclose(pl, hand.mirror_axis_angle(pr), atol=1e-5)
+    out_r = rmodel(pose=torch.as_tensor(pr))
+    out_l = lmodel(pose=torch.as_tensor(pl))
+    np.testing.assert_allclose(np_(out_l.vertices), np_(out_r.vertices) @ mirror, atol=1e-5)
