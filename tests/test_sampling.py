@@ -1,0 +1,324 @@
+"""Mesh hierarchy: vertex subsets, 0/1 down matrices, barycentric up matrices, manifold levels."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from collections import Counter
+
+import numpy as np
+import pytest
+import trimesh
+
+import handmesh_tutorial as hmt
+from handmesh_tutorial.sampling import (
+    barycentric_upsampling,
+    decimate,
+    mesh_hierarchy,
+    selection_matrix,
+    to_torch_sparse,
+    vertex_quadrics,
+)
+
+HAVE_HAND = importlib.util.find_spec("handmesh_tutorial.hand") is not None
+
+
+def grid_patch(n: int = 12, seed: int = 0):
+    """Open, planar, counter-clockwise (normal +z) triangulated n x n grid, slightly jittered."""
+    rng = np.random.default_rng(seed)
+    xs, ys = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float), indexing="xy")
+    v = np.stack([xs.ravel(), ys.ravel(), np.zeros(n * n)], axis=1)
+    v[:, :2] += rng.uniform(-0.15, 0.15, size=(n * n, 2))
+    f = []
+    for r in range(n - 1):
+        for c in range(n - 1):
+            a, b, d, e = r * n + c, r * n + c + 1, (r + 1) * n + c, (r + 1) * n + c + 1
+            f += [[a, b, e], [a, e, d]]
+    return v, np.asarray(f)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    m = trimesh.creation.icosphere(subdivisions=3)  # 642 vertices, unit radius
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+@pytest.fixture(scope="module")
+def sphere_hier(sphere):
+    return mesh_hierarchy(*sphere, use_cache=False)
+
+
+def edge_face_counts(faces):
+    """Undirected edge -> number of faces, and directed edge -> count (independent of the lib)."""
+    und, dire = Counter(), Counter()
+    for a, b, c in np.asarray(faces).tolist():
+        for x, y in ((a, b), (b, c), (c, a)):
+            und[frozenset((x, y))] += 1
+            dire[(x, y)] += 1
+    return und, dire
+
+
+def assert_manifold(vertices, faces, closed: bool):
+    und, dire = edge_face_counts(faces)
+    assert max(dire.values()) == 1, "a directed edge appears twice: orientation broken"
+    assert set(und.values()) <= ({2} if closed else {1, 2}), "non-manifold edge"
+    assert len({frozenset(t) for t in faces.tolist()}) == len(faces), "duplicate face"
+    assert np.array_equal(np.unique(faces), np.arange(len(vertices))), "unused vertex"
+    # Each vertex has a single fan (no pinched vertices): its link is one cycle or one path.
+    for v in range(len(vertices)):
+        link = [(b, c) for a, b, c in
+                (np.roll(t, -list(t).index(v)) for t in faces[(faces == v).any(1)])]
+        succ = dict(link)
+        start = next((x for x in succ if x not in succ.values()), link[0][0])
+        seen, x = [start], succ.get(start)
+        while x is not None and x != start:
+            seen.append(x)
+            x = succ.get(x)
+        assert len(set(seen)) == len(set(succ) | set(succ.values())), f"vertex {v} is pinched"
+    if closed:
+        m = trimesh.Trimesh(vertices, faces, process=False)
+        assert m.is_watertight and m.is_winding_consistent
+        assert m.volume > 0
+
+
+# ----------------------------------------------------------------------------------------------
+# Hierarchy on the icosphere
+# ----------------------------------------------------------------------------------------------
+def test_counts_halve_with_ceil(sphere_hier):
+    assert sphere_hier.num_vertices == [642, 321, 161, 81, 41]
+    for a, b in zip(sphere_hier.num_vertices, sphere_hier.num_vertices[1:], strict=False):
+        assert b == math.ceil(a / 2)
+    assert sphere_hier.num_levels == 5
+    assert len(sphere_hier.down) == len(sphere_hier.up) == 4
+
+
+def test_coarse_vertices_are_exact_rows_of_finer(sphere_hier):
+    for l in range(4):
+        fine, coarse = sphere_hier.vertices[l], sphere_hier.vertices[l + 1]
+        rows = {tuple(r) for r in fine.tolist()}
+        assert all(tuple(r) in rows for r in coarse.tolist())
+        assert np.array_equal(coarse, fine[sphere_hier.kept[l]])  # bit-exact, not approximate
+        assert np.all(np.diff(sphere_hier.kept[l]) > 0)  # kept ids are sorted, distinct
+    orig = sphere_hier.original_index(4)
+    assert np.array_equal(sphere_hier.vertices[4], sphere_hier.vertices[0][orig])
+
+
+def test_down_is_a_selection(sphere_hier):
+    for l, d in enumerate(sphere_hier.down):
+        assert d.shape == (sphere_hier.num_vertices[l + 1], sphere_hier.num_vertices[l])
+        dense = d.toarray()
+        assert set(np.unique(dense)) == {0.0, 1.0}
+        assert np.all((dense == 1).sum(1) == 1)
+        assert np.all((dense == 1).sum(0) <= 1)
+        assert np.array_equal(d @ sphere_hier.vertices[l], sphere_hier.vertices[l + 1])
+
+
+def test_up_rows_are_barycentric(sphere_hier):
+    for l, u in enumerate(sphere_hier.up):
+        assert u.shape == (sphere_hier.num_vertices[l], sphere_hier.num_vertices[l + 1])
+        assert u.data.min() >= 0.0
+        np.testing.assert_allclose(np.asarray(u.sum(1)).ravel(), 1.0, atol=1e-12)
+        assert np.diff(u.indptr).max() <= 3
+        # The non-zeros of a row are corners of one coarse triangle.
+        faces = {frozenset(t) for t in sphere_hier.faces[l + 1].tolist()}
+        for r in range(u.shape[0]):
+            cols = set(u.indices[u.indptr[r]:u.indptr[r + 1]].tolist())
+            assert len(cols) == 1 or any(cols <= t for t in faces)
+
+
+def test_kept_vertices_map_to_themselves(sphere_hier):
+    for l, (u, kept) in enumerate(zip(sphere_hier.up, sphere_hier.kept, strict=True)):
+        rows = u[kept].toarray()
+        np.testing.assert_array_equal(rows, np.eye(sphere_hier.num_vertices[l + 1]))
+
+
+def test_up_equals_closest_point_from_trimesh(sphere_hier):
+    # Independent check: trimesh's rtree-based closest point on the coarse surface.
+    for l in range(4):
+        fine = sphere_hier.vertices[l]
+        coarse = trimesh.Trimesh(sphere_hier.vertices[l + 1], sphere_hier.faces[l + 1],
+                                 process=False)
+        closest, dist, _ = trimesh.proximity.closest_point(coarse, fine)
+        ours = sphere_hier.up[l] @ sphere_hier.vertices[l + 1]
+        np.testing.assert_allclose(np.linalg.norm(ours - fine, axis=1), dist, atol=1e-9)
+        np.testing.assert_allclose(ours, closest, atol=1e-7)
+
+
+def test_up_is_translation_equivariant(sphere_hier):
+    t = np.array([0.3, -2.0, 5.0])
+    for l, u in enumerate(sphere_hier.up):
+        x = sphere_hier.vertices[l + 1]
+        np.testing.assert_allclose(u @ (x + t), u @ x + t, atol=1e-12)
+
+
+def test_reconstruction_error_is_bounded(sphere_hier):
+    errs = sphere_hier.reconstruction_errors()
+    assert len(errs) == 4
+    for l, (mean, mx) in enumerate(errs):
+        v, f = sphere_hier.vertices[l + 1], sphere_hier.faces[l + 1]
+        edge = np.linalg.norm(v[f] - v[np.roll(f, 1, axis=1)], axis=2).mean()
+        assert 0 < mean <= mx < 0.5 * edge  # a fine vertex is within half an edge of the surface
+        # Independent: the error is the distance to the coarse surface.
+        coarse = trimesh.Trimesh(v, f, process=False)
+        _, dist, _ = trimesh.proximity.closest_point(coarse, sphere_hier.vertices[l])
+        assert mean == pytest.approx(dist.mean(), abs=1e-9)
+
+
+def test_levels_stay_closed_manifolds(sphere_hier):
+    for v, f in zip(sphere_hier.vertices, sphere_hier.faces, strict=True):
+        assert_manifold(v, f, closed=True)
+        assert trimesh.Trimesh(v, f, process=False).euler_number == 2
+
+
+def test_deterministic(sphere, sphere_hier):
+    again = mesh_hierarchy(*sphere, use_cache=False)
+    for a, b in zip(sphere_hier.faces, again.faces, strict=True):
+        assert np.array_equal(a, b)
+    for a, b in zip(sphere_hier.up, again.up, strict=True):
+        assert (a != b).nnz == 0
+
+
+def test_to_torch_sparse_matches_dense(sphere_hier):
+    import torch
+
+    u = sphere_hier.up[2]
+    t = to_torch_sparse(u)
+    x = np.random.default_rng(0).normal(size=(u.shape[1], 5))
+    got = torch.sparse.mm(t, torch.from_numpy(x).float()).numpy()
+    np.testing.assert_allclose(got, u @ x, rtol=1e-5, atol=1e-5)
+
+
+# ----------------------------------------------------------------------------------------------
+# Open meshes, custom factors, pieces
+# ----------------------------------------------------------------------------------------------
+def test_open_grid_stays_manifold_and_oriented():
+    v, f = grid_patch(12)
+    h = mesh_hierarchy(v, f, factors=(2, 2, 2), use_cache=False)
+    assert h.num_vertices == [144, 72, 36, 18]
+    for vl, fl in zip(h.vertices, h.faces, strict=True):
+        assert_manifold(vl, fl, closed=False)
+        tri = vl[fl]
+        nz = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])[:, 2]
+        assert np.all(nz > 0), "a face flipped"
+    for l, u in enumerate(h.up):
+        np.testing.assert_allclose(np.asarray(u.sum(1)).ravel(), 1.0, atol=1e-12)
+        # In the plane every fine vertex inside the coarse patch is reproduced exactly.
+        err = np.linalg.norm(u @ h.vertices[l + 1] - h.vertices[l], axis=1)
+        assert np.median(err) < 1e-9
+
+
+def test_custom_factors():
+    m = trimesh.creation.icosphere(subdivisions=2)  # 162 vertices
+    h = mesh_hierarchy(m.vertices, m.faces, factors=(3, 4), use_cache=False)
+    assert h.num_vertices == [162, 54, 14]
+
+
+def test_decimate_and_matrices_alone(sphere):
+    v, f = sphere
+    kept, cf = decimate(v, f, 100)
+    assert len(kept) == 100 and cf.max() == 99
+    d = selection_matrix(kept, len(v))
+    u = barycentric_upsampling(v, v[kept], cf, kept=kept)
+    np.testing.assert_array_equal((u @ d).diagonal()[kept], 1.0)
+
+
+def test_vertex_quadrics_measure_squared_plane_distances(sphere):
+    v, f = sphere
+    q = vertex_quadrics(v, f)
+    x = np.random.default_rng(3).normal(size=3)
+    h = np.append(x, 1.0)
+    for vid in (0, 17, 400):
+        d2 = 0.0
+        for tri in v[f[(f == vid).any(1)]]:
+            n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+            d2 += (np.dot(x - tri[0], n) / np.linalg.norm(n)) ** 2
+        assert h @ q[vid] @ h == pytest.approx(d2, rel=1e-10)
+        assert v[vid] @ q[vid][:3, :3] @ v[vid] + 2 * q[vid][3, :3] @ v[vid] + q[vid][3, 3] \
+            == pytest.approx(0.0, abs=1e-12)  # a vertex lies on all its planes
+
+
+# ----------------------------------------------------------------------------------------------
+# Cache
+# ----------------------------------------------------------------------------------------------
+def test_cache_roundtrip(tmp_path, sphere, sphere_hier):
+    h1 = mesh_hierarchy(*sphere, cache_dir=tmp_path)
+    files = list(tmp_path.glob("hierarchy_*.npz"))
+    assert len(files) == 1 and not list(tmp_path.glob("*.tmp"))
+    with np.load(files[0], allow_pickle=False) as z:  # plain arrays only
+        assert "vertices_0" in z.files and "kept_3" in z.files
+    h2 = mesh_hierarchy(*sphere, cache_dir=tmp_path)
+    for a, b in zip(h1.up + h1.down, h2.up + h2.down, strict=True):
+        assert (a != b).nnz == 0
+    for a, b in zip(sphere_hier.faces, h2.faces, strict=True):
+        assert np.array_equal(a, b)
+    assert h2.factors == (2.0, 2.0, 2.0, 2.0)
+    # A different key (factors) is a different file.
+    mesh_hierarchy(*sphere, factors=(2, 2), cache_dir=tmp_path)
+    assert len(list(tmp_path.glob("hierarchy_*.npz"))) == 2
+
+
+def test_cache_rebuilds_a_corrupt_file(tmp_path, sphere):
+    h1 = mesh_hierarchy(*sphere, factors=(2,), cache_dir=tmp_path)
+    (path,) = tmp_path.glob("hierarchy_*.npz")
+    path.write_bytes(b"not an npz file")
+    h2 = mesh_hierarchy(*sphere, factors=(2,), cache_dir=tmp_path)
+    assert np.array_equal(h1.faces[1], h2.faces[1])
+    with np.load(path, allow_pickle=False) as z:
+        assert "faces_1" in z.files
+
+
+def test_no_cache_writes_nothing(tmp_path, sphere):
+    mesh_hierarchy(*sphere, factors=(2,), cache_dir=tmp_path, use_cache=False)
+    assert not any(tmp_path.iterdir())
+
+
+# ----------------------------------------------------------------------------------------------
+# Errors
+# ----------------------------------------------------------------------------------------------
+def test_bad_inputs(sphere):
+    v, f = sphere
+    with pytest.raises(ValueError, match=r"vertices must have shape \(V, 3\)"):
+        mesh_hierarchy(v[:, :2], f, use_cache=False)
+    with pytest.raises(ValueError, match=r"faces must have shape \(F, 3\)"):
+        mesh_hierarchy(v, f[:, :2], use_cache=False)
+    with pytest.raises(ValueError, match="faces reference vertex ids"):
+        mesh_hierarchy(v[:10], f, use_cache=False)
+    with pytest.raises(ValueError, match="factor"):
+        mesh_hierarchy(v, f, factors=(2, 1), use_cache=False)
+    with pytest.raises(ValueError, match="not used by any face"):
+        mesh_hierarchy(np.vstack([v, [[9.0, 9.0, 9.0]]]), f, use_cache=False)
+    with pytest.raises(ValueError, match="integer"):
+        mesh_hierarchy(v, f.astype(float), use_cache=False)
+    with pytest.raises(ValueError, match="num_vertices"):
+        decimate(v, f, 0)
+
+
+def test_tetrahedron_cannot_shrink():
+    m = trimesh.creation.icosahedron()
+    with pytest.raises(RuntimeError, match="decimation stuck"):
+        mesh_hierarchy(m.vertices, m.faces, factors=(2, 2, 2), use_cache=False)  # 12 -> 6 -> 3
+
+
+# ----------------------------------------------------------------------------------------------
+# The library's hand template
+# ----------------------------------------------------------------------------------------------
+@pytest.mark.skipif(not HAVE_HAND, reason="handmesh_tutorial/hand.py (HandModel) not present yet")
+def test_hand_template_hierarchy(tmp_path):
+    hand = hmt.hand.HandModel("right")
+    v = np.asarray(hand.template_vertices, dtype=np.float64)
+    f = np.asarray(hand.faces)
+    h = mesh_hierarchy(v, f, cache_dir=tmp_path)
+    n = [len(v)]
+    for _ in range(4):
+        n.append(math.ceil(n[-1] / 2))
+    assert h.num_vertices == n
+    if len(v) == 778:
+        assert h.num_vertices == [778, 389, 195, 98, 49]
+    closed = trimesh.Trimesh(v, f, process=False).is_watertight
+    for l in range(5):
+        assert_manifold(h.vertices[l], h.faces[l], closed=closed)
+    for l in range(4):
+        assert np.array_equal(h.down[l] @ h.vertices[l], h.vertices[l + 1])
+        np.testing.assert_allclose(np.asarray(h.up[l].sum(1)).ravel(), 1.0, atol=1e-12)
+    for mean, mx in h.reconstruction_errors():
+        assert mean < 0.004 and mx < 0.02  # metres: 4 mm mean, 2 cm max at the coarsest step
