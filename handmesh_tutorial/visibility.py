@@ -1,0 +1,227 @@
+r"""The visibility ratio (VR) of the paper, its bins, and balanced sampling across the bins.
+
+For a body ``o`` (a hand or an object) of a rendered scene the paper defines
+
+$$
+VR_o = \frac{\sum_{i=1}^N 1_o(M^{scene}_i)}{\sum_{i=1}^N 1_o(M^{alone}_i)}
+$$
+
+where ``M^scene`` is the label mask of the complete scene, ``M^alone`` the mask of ``o`` rendered
+alone with the same camera, ``N`` the number of pixels and ``1_o`` the indicator "this pixel shows
+``o``". ``VR = 1``: nothing hides ``o``; ``VR = 0.5``: half of its pixels are covered by other
+bodies. The masks come from `handmesh_tutorial.render.Renderer` (``labels`` and
+``alone_masks``); both use the same rasterisation, so a body's visible pixels are a subset of its
+alone mask and ``VR`` lies in ``[0, 1]``.
+
+This module is the one place that defines the VR bins of the paper (`VR_BINS`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "VR_BINS",
+    "BalancedVRSampler",
+    "balanced_indices",
+    "visibility_ratio",
+    "visibility_ratios",
+    "vr_bin",
+]
+
+#: The four VR categories of the paper (Table "Results on INTER-SH"): each is ``[low, high)``
+#: except the last, ``[0.95, 1.00]``, which is closed. A VR below 0.40 is in no bin.
+VR_BINS: tuple[tuple[float, float], ...] = ((0.40, 0.60), (0.60, 0.80), (0.80, 0.95), (0.95, 1.00))
+
+_ON_OUTSIDE = ("raise", "warn", "ignore")
+
+
+def _indicator(mask: Any, label: int, name: str) -> np.ndarray:
+    m = np.asarray(mask)
+    if m.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D (H, W) mask, got shape {m.shape}")
+    if m.dtype == np.bool_:
+        return m
+    if not np.issubdtype(m.dtype, np.integer):
+        raise ValueError(f"{name} must be a bool mask or an integer label mask, "
+                         f"got dtype {m.dtype}")
+    return m == label
+
+
+def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
+                     on_outside: str = "raise") -> float:
+    """Visibility ratio of one body: visible pixels in the scene / pixels when rendered alone.
+
+    Args:
+        scene_mask: (H, W) integer label mask of the complete scene (0 = background, each body
+            its label), e.g. ``RenderResult.labels``.
+        alone_mask: (H, W) mask of the body rendered alone: either a bool mask (``True`` = the
+            body) or an integer label mask, whose pixels equal to ``label`` count.
+        label: the body's label (int >= 1).
+        on_outside: what to do when some pixels labelled ``label`` in the scene lie outside the
+            alone mask (impossible for masks from the same camera and rasteriser, so it means a
+            rendering or bookkeeping bug): ``"raise"`` (default) a ValueError, ``"warn"`` a
+            RuntimeWarning, or ``"ignore"``. With ``"warn"``/``"ignore"`` only the visible pixels
+            inside the alone mask are counted, which keeps the result in ``[0, 1]``.
+
+    Returns:
+        VR in ``[0, 1]`` (a Python float).
+
+    Raises:
+        ValueError: a mask is not 2-D, the shapes differ, ``scene_mask`` is not an integer label
+            mask, the alone mask of ``label`` is empty (VR undefined), or visible pixels lie
+            outside the alone mask with ``on_outside="raise"``.
+    """
+    if on_outside not in _ON_OUTSIDE:
+        raise ValueError(f"on_outside must be one of {_ON_OUTSIDE}, got {on_outside!r}")
+    scene = np.asarray(scene_mask)
+    if scene.ndim != 2 or not np.issubdtype(scene.dtype, np.integer) or scene.dtype == np.bool_:
+        raise ValueError(f"scene_mask must be a 2-D integer label mask, got dtype {scene.dtype} "
+                         f"shape {scene.shape}")
+    alone = _indicator(alone_mask, label, "alone_mask")
+    if scene.shape != alone.shape:
+        raise ValueError(f"scene_mask shape {scene.shape} != alone_mask shape {alone.shape} "
+                         f"(label {label})")
+    visible = scene == label
+    denom = int(np.count_nonzero(alone))
+    if denom == 0:
+        raise ValueError(f"alone mask of label {label} is empty: the body is not in view, "
+                         "its visibility ratio is undefined")
+    outside = int(np.count_nonzero(visible & ~alone))
+    if outside:
+        msg = (f"label {label}: {outside} visible scene pixels lie outside its alone mask "
+               "(the masks do not come from the same camera/rasteriser?)")
+        if on_outside == "raise":
+            raise ValueError(msg)
+        if on_outside == "warn":
+            warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    num = int(np.count_nonzero(visible & alone))
+    return num / denom
+
+
+def visibility_ratios(scene_mask: Any, alone_masks: Mapping[int, Any],
+                      on_outside: str = "raise") -> dict[int, float]:
+    """Visibility ratios of several bodies of one scene.
+
+    Args:
+        scene_mask: (H, W) integer label mask of the scene.
+        alone_masks: ``{label: (H, W) mask}`` of each body alone (bool or label masks), e.g.
+            ``RenderResult.alone_masks``.
+        on_outside: as in `visibility_ratio`.
+
+    Returns:
+        ``{label: VR}`` with the same keys as ``alone_masks``.
+    """
+    return {int(lab): visibility_ratio(scene_mask, m, int(lab), on_outside)
+            for lab, m in alone_masks.items()}
+
+
+def vr_bin(vr: float, bins: tuple[tuple[float, float], ...] = VR_BINS) -> int:
+    """Index of the VR bin holding ``vr``, or -1 when it is in none.
+
+    Bins are half open ``[low, high)`` except the last, which is closed ``[low, high]``. Because a
+    VR is a ratio of pixel counts computed in float64, values such as ``3/5`` or ``19/20`` equal
+    the literals ``0.6`` and ``0.95`` exactly and fall in the upper bin.
+
+    Args:
+        vr: a visibility ratio.
+        bins: increasing ``(low, high)`` pairs (default `VR_BINS`).
+
+    Returns:
+        The bin index in ``0 .. len(bins)-1``, or -1 (below 0.40, above 1, or NaN).
+    """
+    v = float(vr)
+    if math.isnan(v):
+        return -1
+    last = len(bins) - 1
+    for i, (lo, hi) in enumerate(bins):
+        if lo <= v < hi or (i == last and v == hi):
+            return i
+    return -1
+
+
+class BalancedVRSampler:
+    """Accept or reject a stream of candidate scenes so that every VR bin gets the same quota.
+
+    The generator draws scenes whose target-hand VR it cannot choose in advance; most land in the
+    high-VR bins. The sampler accepts a candidate when its bin still has room and rejects it
+    otherwise (greedy, first come first served), so the accepted set is balanced as in the paper
+    (equal numbers per bin). The decision depends only on the sequence of VRs offered: the same
+    stream gives the same decisions.
+
+    Args:
+        per_bin: quota of each bin (``> 0``).
+        bins: VR bins (default `VR_BINS`).
+
+    Example:
+        ```python
+        s = BalancedVRSampler(per_bin=1)
+        [s.offer(v) for v in (0.99, 0.97, 0.3, 0.5, 0.7, 0.85)]
+        # [True, False, False, True, True, True]; now s.full is True
+        ```
+    """
+
+    def __init__(self, per_bin: int, bins: tuple[tuple[float, float], ...] = VR_BINS):
+        if int(per_bin) < 1:
+            raise ValueError(f"per_bin must be >= 1, got {per_bin}")
+        self.per_bin = int(per_bin)
+        self.bins = tuple(bins)
+        self.counts = [0] * len(self.bins)
+        self.offered = 0
+
+    def offer(self, vr: float) -> bool:
+        """Decide about one candidate.
+
+        Args:
+            vr: the candidate's visibility ratio.
+
+        Returns:
+            ``True`` (accept; its bin count goes up) or ``False`` (reject: no bin, or bin full).
+        """
+        self.offered += 1
+        b = vr_bin(vr, self.bins)
+        if b < 0 or self.counts[b] >= self.per_bin:
+            return False
+        self.counts[b] += 1
+        return True
+
+    def wants(self, vr: float) -> bool:
+        """Whether `offer` would accept ``vr`` now (no state change)."""
+        b = vr_bin(vr, self.bins)
+        return b >= 0 and self.counts[b] < self.per_bin
+
+    @property
+    def needed(self) -> list[int]:
+        """Remaining places per bin."""
+        return [self.per_bin - c for c in self.counts]
+
+    @property
+    def full(self) -> bool:
+        """``True`` when every bin has reached its quota."""
+        return all(c >= self.per_bin for c in self.counts)
+
+    def __repr__(self) -> str:
+        return (f"BalancedVRSampler(per_bin={self.per_bin}, counts={self.counts}, "
+                f"offered={self.offered})")
+
+
+def balanced_indices(vrs: Iterable[float], per_bin: int,
+                     bins: tuple[tuple[float, float], ...] = VR_BINS) -> list[int]:
+    """Indices of a balanced subset of a list of VRs (the first ``per_bin`` of each bin).
+
+    Args:
+        vrs: candidate visibility ratios, in stream order.
+        per_bin: quota of each bin.
+        bins: VR bins (default `VR_BINS`).
+
+    Returns:
+        Increasing indices of the accepted candidates (fewer than ``per_bin`` in a bin when the
+        stream did not hold enough).
+    """
+    s = BalancedVRSampler(per_bin, bins)
+    return [i for i, v in enumerate(vrs) if s.offer(v)]

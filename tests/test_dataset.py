@@ -1,0 +1,527 @@
+"""INTER-SH storage: round trips, byte determinism, atomic resumable generation, shards, errors.
+
+A synthetic ``make_sample`` (two ray-cast spheres, ``dataset.synthetic_sample``) stands in for the
+renderer, so these tests need no OpenGL.
+"""
+
+import functools
+import hashlib
+import io
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+import types
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from handmesh_tutorial import dataset as D
+
+SIZE = 32
+SEED = 3
+make = functools.partial(D.synthetic_sample, image_size=SIZE, resolution=4)
+
+
+def gen(root, num=6, seed=SEED, fn=make, **kw):
+    kw.setdefault("progress", False)
+    return D.generate_dataset(root, fn, num, seed, "hand-hand", **kw)
+
+
+def tree(root) -> dict:
+    """sha256 of every file under root (relative path -> digest), the writer lock excluded."""
+    root = Path(root)
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file() and p.name != D.LOCK_FILE}
+
+
+def sample_dirs(root) -> list[str]:
+    return sorted(p.name for p in (Path(root) / D.SAMPLES_DIR).iterdir())
+
+
+# ------------------------------------------------------------------ write / read
+def test_round_trip_preserves_values_and_dtypes(tmp_path):
+    s = D.synthetic_sample(5, kind="hand-object", image_size=SIZE, resolution=4)
+    s["alone_images"] = {2: np.full((SIZE, SIZE, 3), 7, np.uint8)}
+    s["depth"] = np.linspace(0, 1, SIZE * SIZE, dtype=np.float32).reshape(SIZE, SIZE)
+    s["camera_name"] = "cam0"
+    s["meshes"][2] = (s["meshes"][2][0].astype(np.float64), s["meshes"][2][1].astype(np.int64))
+    D.write_sample(tmp_path / "x", s)
+    r = D.read_sample(tmp_path / "x")
+
+    assert r["image"].dtype == np.uint8 and np.array_equal(r["image"], s["image"])
+    assert r["scene_mask"].dtype == np.int32 and np.array_equal(r["scene_mask"], s["scene_mask"])
+    assert sorted(r["alone_masks"]) == [1, 2]
+    for lab, m in s["alone_masks"].items():
+        assert r["alone_masks"][lab].dtype == bool and np.array_equal(r["alone_masks"][lab], m)
+    for lab, (v, f) in s["meshes"].items():
+        rv, rf = r["meshes"][lab]
+        # stored as documented: float32 vertices, int32 faces, whatever came in
+        assert rv.dtype == np.float32 and rf.dtype == np.int32
+        assert np.array_equal(rv, v.astype(np.float32)) and np.array_equal(rf, f)
+    for lab, j in s["joints"].items():
+        assert r["joints"][lab].dtype == np.float32 and np.array_equal(r["joints"][lab], j)
+    for lab, p in s["pose"].items():
+        assert np.array_equal(r["pose"][lab], p)
+    assert r["K"].dtype == np.float64 and np.array_equal(r["K"], s["K"])
+    assert r["vr"] == s["vr"]  # exact: JSON floats round-trip
+    for key in ("kind", "target", "sides", "names", "stats"):
+        assert r[key] == s[key], key
+    assert r["index"] is None and r["seed"] is None
+    assert np.array_equal(r["alone_images"][2], s["alone_images"][2])
+    assert r["depth"].dtype == np.float32 and np.array_equal(r["depth"], s["depth"])
+    assert r["camera_name"] == "cam0"
+    with pytest.raises(FileExistsError, match="exists"):
+        D.write_sample(tmp_path / "x", s)
+
+
+def test_large_labels_use_a_16_bit_mask(tmp_path):
+    s = D.synthetic_sample(1, image_size=SIZE, resolution=4)
+    relabel = {1: 300, 2: 7}
+    s["scene_mask"] = np.vectorize(lambda x: relabel.get(x, 0))(s["scene_mask"])
+    for key in ("alone_masks", "meshes", "joints", "pose", "vr", "sides", "names"):
+        s[key] = {relabel[k]: v for k, v in s[key].items()}
+    s["target"] = 300
+    D.write_sample(tmp_path / "x", s)
+    with Image.open(tmp_path / "x" / "scene_mask.png") as im:
+        assert im.mode == "I;16"
+    r = D.read_sample(tmp_path / "x")
+    assert np.array_equal(r["scene_mask"], s["scene_mask"])
+    assert set(np.unique(r["scene_mask"])) <= {0, 7, 300} and r["target"] == 300
+
+
+def test_files_do_not_depend_on_the_wall_clock(tmp_path, monkeypatch):
+    s = D.synthetic_sample(2, image_size=SIZE, resolution=4)
+    now = time.time()
+    monkeypatch.setattr(time, "time", lambda: now)
+
+    def stamped_zip():  # zipfile stamps entries added by name with the clock
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w") as zf:
+            zf.writestr("x.npy", b"data")
+        return buf.getvalue()
+
+    D.write_sample(tmp_path / "a", s)
+    zip_a = stamped_zip()
+    monkeypatch.setattr(time, "time", lambda: now + 3e6)  # a month later
+    D.write_sample(tmp_path / "b", s)
+    assert stamped_zip() != zip_a  # the patched clock does reach zipfile: the check can fail
+    assert tree(tmp_path / "a") == tree(tmp_path / "b")
+    with zipfile.ZipFile(tmp_path / "a" / "annotation.npz") as zf:
+        assert {i.date_time for i in zf.infolist()} == {(1980, 1, 1, 0, 0, 0)}
+
+
+def test_npz_bytes_is_a_plain_npz():
+    arrays = {"b": np.arange(6, dtype=np.int32).reshape(2, 3), "a": np.eye(3)}
+    data = D.npz_bytes(arrays)
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        assert sorted(z.files) == ["a", "b"]
+        for k, v in arrays.items():
+            assert z[k].dtype == v.dtype and np.array_equal(z[k], v)
+    assert D.npz_bytes(dict(reversed(arrays.items()))) == data  # key order does not matter
+    with pytest.raises(ValueError):
+        D.npz_bytes({"o": np.array([{}], dtype=object)})
+
+
+@pytest.mark.parametrize("mutate, pattern", [
+    (lambda s: s["joints"].__setitem__(1, np.zeros((20, 3))),
+     r"sample\['joints_1'\] has shape \(20, 3\), expected \(21, 3\)"),
+    (lambda s: s.__setitem__("image", s["image"].astype(np.float32)), r"'image'.*uint8"),
+    (lambda s: [s.__setitem__("target", 2)] + [s[k].pop(2) for k in ("sides", "joints", "pose")],
+     r"'target'.*not a hand label"),
+    (lambda s: s["vr"].__setitem__(2, 1.5), r"'vr'.*vr of label 2 is 1.5"),
+    (lambda s: s.__setitem__("kind", "hand-foot"), r"'kind'.*hand-foot"),
+    (lambda s: s["alone_masks"].pop(2), r"'alone_masks'.*labels \[1\], expected \[1, 2\]"),
+    (lambda s: s["alone_masks"].__setitem__(1, s["alone_masks"][1] * 3), r"alone_1.*0/1"),
+    (lambda s: s["scene_mask"].__setitem__((0, 0), 9), r"labels \[9\] have no mesh"),
+    (lambda s: s["meshes"].__setitem__(1, (s["meshes"][1][0], s["meshes"][1][1] + 10_000)),
+     r"faces_1.*indices must be in"),
+    (lambda s: s.pop("K"), r"'K'.*missing"),
+    (lambda s: s["joints"][1].__setitem__((0, 0), np.nan), r"joints_1.*non-finite"),
+])
+def test_write_sample_rejects_bad_samples(tmp_path, mutate, pattern):
+    s = D.synthetic_sample(4, image_size=SIZE, resolution=4)
+    mutate(s)
+    with pytest.raises(ValueError, match=pattern):
+        D.write_sample(tmp_path / "x", s)
+    assert not (tmp_path / "x").exists() and not list(tmp_path.glob(".tmp-*"))
+
+
+# ------------------------------------------------------------------ seeds, bins
+def test_sample_seeds_are_distinct_and_json_safe():
+    seeds = {D.sample_seed(SEED, i, a) for i in range(500) for a in range(3)}
+    assert len(seeds) == 1500 and max(seeds) < 2**53
+    assert D.sample_seed(SEED, 7) == D.sample_seed(SEED, 7, 0) != D.sample_seed(SEED + 1, 7)
+    with pytest.raises(ValueError, match="index must be a non-negative"):
+        D.sample_seed(SEED, -1)
+
+
+def test_shard_ranges_partition_the_indices():
+    for num, n in ((10, 3), (7, 2), (3, 5)):
+        parts = [D.shard_range(num, k, n) for k in range(n)]
+        assert [i for p in parts for i in p] == list(range(num))
+    with pytest.raises(ValueError, match="shard"):
+        D.shard_range(10, 2, 2)
+
+
+def test_vr_bins_accept_pairs_or_edges():
+    pairs = D.vr_bins([(0.4, 0.6), (0.6, 1.0)])
+    assert D.vr_bins([0.4, 0.6, 1.0]) == pairs
+    assert D.vr_histogram([0.1, 0.4, 0.6, 0.99, 1.0], pairs) == [1, 3]
+    assert D.vr_histogram([0.6, 0.8, 1.0], [(0.4, 0.6), (0.6, 0.8)]) == [0, 2]  # last bin closed
+    visibility = pytest.importorskip("handmesh_tutorial.visibility")
+    for v in np.r_[np.linspace(0, 1, 101), 0.6, 0.95, 1.0, 3 / 5, 19 / 20]:
+        assert D.vr_bin_index(v, D.PAPER_VR_BINS) == visibility.vr_bin(v), v
+    assert D.vr_bins() == tuple(visibility.VR_BINS)
+    assert len(D.vr_bins()) >= 1
+    with pytest.raises(ValueError, match="VR bins"):
+        D.vr_bins([(0.6, 0.4)])
+
+
+# ------------------------------------------------------------------ generation
+def test_generation_is_deterministic_and_seeded_per_index(tmp_path):
+    a = gen(tmp_path / "a", params={"light": [1, 2]}, image_size=SIZE)
+    gen(tmp_path / "b", params={"light": [1, 2]}, image_size=SIZE)
+    assert a.written == 6 and a.skipped == 0 and a.attempts == 6
+    ta, tb = tree(tmp_path / "a"), tree(tmp_path / "b")
+    assert ta == tb and len(ta) == 1 + 6 * 6  # meta.json + 6 files per sample
+    gen(tmp_path / "c", seed=SEED + 1)
+    tc = tree(tmp_path / "c")
+    assert all(ta[k] != tc[k] for k in ta if k.endswith("image.png"))
+
+    ds = D.InterSHDataset(tmp_path / "a")
+    assert len(ds) == 6 and ds.indices.tolist() == list(range(6)) and ds.missing == []
+    s = ds[4]  # sample 4 is make_sample(sample_seed(seed, 4)), nothing else
+    direct = make(D.sample_seed(SEED, 4))
+    assert s["index"] == 4 and s["seed"] == D.sample_seed(SEED, 4) and s["attempt"] == 0
+    assert np.array_equal(s["image"], direct["image"]) and s["vr"] == direct["vr"]
+    assert ds.meta["params"] == {"light": [1, 2]} and ds.meta["image_size"] == [SIZE, SIZE]
+    assert ds.meta["make_sample"] == "handmesh_tutorial.dataset.synthetic_sample"
+
+
+def test_reader_api(tmp_path):
+    gen(tmp_path / "r", num=5)
+    seen = []
+    ds = D.InterSHDataset(tmp_path / "r", transform=lambda s: seen.append(s["index"]) or s["kind"])
+    assert ds[-1] == "hand-hand" and seen == [4]
+    vr = ds.vr_table()
+    plain = D.InterSHDataset(tmp_path / "r")
+    assert np.array_equal(vr, [plain[i]["vr"][plain[i]["target"]] for i in range(5)])
+    assert plain.annotation(2)["seed"] == D.sample_seed(SEED, 2)
+    with pytest.raises(IndexError, match="out of range"):
+        plain[5]
+    assert "5 samples" in repr(plain)
+
+
+def test_kind_and_image_size_are_checked(tmp_path):
+    with pytest.raises(ValueError, match="kind 'hand-object' is not one of"):
+        D.generate_dataset(tmp_path / "k", functools.partial(make, kind="hand-object"), 2, 0,
+                           "hand-hand", progress=False)
+    with pytest.raises(ValueError, match=r"image size \(32, 32\), expected \(64, 64\)"):
+        gen(tmp_path / "s", image_size=64)
+    with pytest.raises(ValueError, match="kind must be one of"):
+        D.generate_dataset(tmp_path / "x", make, 2, 0, "hand-foot", progress=False)
+
+
+INTERRUPT_AT = None  # index at which _flaky raises KeyboardInterrupt (None: never)
+
+
+def _flaky(seed):
+    if INTERRUPT_AT is not None and seed == D.sample_seed(SEED, INTERRUPT_AT):
+        raise KeyboardInterrupt
+    return make(seed)
+
+
+def test_ctrl_c_then_resume_gives_the_same_bytes(tmp_path, monkeypatch):
+    gen(tmp_path / "ref", num=7, fn=_flaky)
+    monkeypatch.setattr(sys.modules[__name__], "INTERRUPT_AT", 4)
+    with pytest.raises(KeyboardInterrupt):
+        gen(tmp_path / "run", num=7, fn=_flaky)
+    # no half-written sample, no temporary left behind by a clean interrupt
+    assert sample_dirs(tmp_path / "run") == [f"{i:06d}" for i in range(4)]
+    monkeypatch.setattr(sys.modules[__name__], "INTERRUPT_AT", None)
+    summary = gen(tmp_path / "run", num=7, fn=_flaky)
+    assert (summary.written, summary.skipped, summary.stale_removed) == (3, 4, 0)
+    assert tree(tmp_path / "run") == tree(tmp_path / "ref")
+
+
+def test_interrupt_during_a_write_leaves_no_partial_sample(tmp_path, monkeypatch):
+    gen(tmp_path / "ref", num=4)
+    calls = []
+    write_file = D._write_file
+
+    def failing_write(path, data, durable):
+        calls.append(path)
+        if len(calls) == 2 * 6 + 3:  # third file of sample 2
+            raise KeyboardInterrupt
+        write_file(path, data, durable)
+
+    monkeypatch.setattr(D, "_write_file", failing_write)
+    with pytest.raises(KeyboardInterrupt):
+        gen(tmp_path / "run", num=4)
+    assert ".tmp-000002" in str(calls[-1])  # files go to a temporary folder first
+    assert sample_dirs(tmp_path / "run") == ["000000", "000001"]  # no partial 000002, no temp
+    monkeypatch.setattr(D, "_write_file", write_file)
+    gen(tmp_path / "run", num=4)
+    assert tree(tmp_path / "run") == tree(tmp_path / "ref")
+
+
+KILL_SCRIPT = textwrap.dedent("""
+    import os, sys, time
+    from handmesh_tutorial import dataset as D
+
+    def make(seed):
+        return D.synthetic_sample(seed, image_size=32, resolution=4)
+
+    if os.environ.get("SLOW"):  # slow writes, so that the kill most likely lands mid-sample
+        _write_file = D._write_file
+
+        def slow_write(path, data, durable):
+            _write_file(path, data, durable)
+            time.sleep(0.04)
+
+        D._write_file = slow_write
+
+    if __name__ == "__main__":
+        s = D.generate_dataset(sys.argv[1], make, 10, 3, "hand-hand", progress=False)
+        print(s.written, s.skipped, s.stale_removed)
+""")
+
+
+def test_sigkill_then_resume_gives_the_same_bytes(tmp_path):
+    script = tmp_path / "gen_script.py"
+    script.write_text(KILL_SCRIPT)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+    def run(root, **extra):
+        out = subprocess.run([sys.executable, str(script), str(root)], env={**env, **extra},
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stderr
+        return [int(x) for x in out.stdout.split()]
+
+    assert run(tmp_path / "ref") == [10, 0, 0]
+    root = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, str(script), str(root)], env={**env, "SLOW": "1"})
+    deadline = time.time() + 60
+    while time.time() < deadline:
+        done = [p for p in (root / "samples").glob("0*")] if (root / "samples").is_dir() else []
+        if len(done) >= 3:
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    present = sorted(p.name for p in (root / "samples").glob("0*"))
+    assert 3 <= len(present) < 10, present
+    for name in present:  # every visible sample is complete
+        D.read_sample(root / "samples" / name)
+    real_stale = list((root / "samples").glob(".tmp-*"))
+    print(f"killed after {len(present)} samples; {len(real_stale)} half-written temp folder(s)")
+    # what a kill during a write leaves (added in case the kill landed between samples)
+    stale = root / "samples" / ".tmp-000009-999-deadbeef"
+    stale.mkdir(exist_ok=True)
+    (stale / "image.png").write_bytes(b"\x89PNG half")
+    written, skipped, removed = run(root)
+    assert (written, skipped) == (10 - len(present), len(present))
+    assert removed == 1 + len(real_stale) and not list(root.rglob(".tmp-*"))
+    assert tree(root) == tree(tmp_path / "ref")
+
+
+def test_resume_refuses_different_parameters(tmp_path):
+    gen(tmp_path / "r", params={"light": 1})
+    with pytest.raises(ValueError, match=r"differing keys: params\.light, seed") as e:
+        gen(tmp_path / "r", seed=SEED + 1, params={"light": 2})
+    assert "meta.json" in str(e.value) and "on disk" in str(e.value)
+    with pytest.raises(ValueError, match="differing keys: kinds"):
+        D.generate_dataset(tmp_path / "r", make, 6, SEED, "hand-object", progress=False,
+                           params={"light": 1})
+    with pytest.raises(ValueError, match="differing keys: ranges, shards"):
+        gen(tmp_path / "r", params={"light": 1}, shard=(0, 2))
+    again = gen(tmp_path / "r", params={"light": 1})  # same call: nothing to do
+    assert (again.written, again.skipped, again.attempts) == (0, 6, 0)
+
+
+def test_stale_temporaries_are_removed(tmp_path):
+    gen(tmp_path / "r", num=2)
+    (tmp_path / "r" / "samples" / ".tmp-000001-1-ab").mkdir()
+    (tmp_path / "r" / ".tmp-meta.json-1-ab").write_text("{")
+    s = gen(tmp_path / "r", num=2)
+    assert s.stale_removed == 2 and not list((tmp_path / "r").rglob(".tmp-*"))
+
+
+def test_a_second_writer_is_refused(tmp_path):
+    fcntl = pytest.importorskip("fcntl")
+    (tmp_path / "r").mkdir()
+    with open(tmp_path / "r" / D.LOCK_FILE, "a+b") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        with pytest.raises(RuntimeError, match="being written by another process"):
+            gen(tmp_path / "r")
+
+
+def test_shards_merge_into_the_same_bytes_as_one_run(tmp_path):
+    gen(tmp_path / "full", num=7)
+    a = gen(tmp_path / "s0", num=7, shard=(0, 2))
+    b = gen(tmp_path / "s1", num=7, shard=(1, 2))
+    assert (a.indices, b.indices) == ([[0, 3]], [[3, 7]])
+    assert sample_dirs(tmp_path / "s1") == ["000003", "000004", "000005", "000006"]
+    info = D.merge_shards([tmp_path / "s1", tmp_path / "s0"], tmp_path / "m", progress=False)
+    assert info == {"copied": 7, "skipped": 0, "ranges": [[0, 7]], "complete": True}
+    assert tree(tmp_path / "m") == tree(tmp_path / "full")  # meta.json included
+    again = D.merge_shards([tmp_path / "s0", tmp_path / "s1"], tmp_path / "m", progress=False)
+    assert (again["copied"], again["skipped"]) == (0, 7)
+
+    part = D.merge_shards([tmp_path / "s1"], tmp_path / "part", progress=False, link=True)
+    assert part["complete"] is False
+    ds = D.InterSHDataset(tmp_path / "part")
+    assert ds.indices.tolist() == [3, 4, 5, 6] and ds.missing == []
+    assert ds[0]["index"] == 3
+    with pytest.raises(ValueError, match="overlap"):
+        D.merge_shards([tmp_path / "s0", tmp_path / "full"], tmp_path / "bad", progress=False)
+    gen(tmp_path / "other", num=7, seed=SEED + 1, shard=(1, 2))
+    with pytest.raises(ValueError, match="cannot merge.*differing keys: seed"):
+        D.merge_shards([tmp_path / "s0", tmp_path / "other"], tmp_path / "bad", progress=False)
+    (tmp_path / "s1" / "samples" / "000005" / "image.png").unlink()
+    os.rename(tmp_path / "s1" / "samples" / "000005", tmp_path / "s1" / "samples" / "gone")
+    with pytest.raises(ValueError, match=r"s1 is incomplete: 1 samples missing \(first \[5\]\)"):
+        D.merge_shards([tmp_path / "s0", tmp_path / "s1"], tmp_path / "bad2", progress=False)
+
+
+def _mark_worker(folder):
+    Path(folder, str(os.getpid())).touch()
+
+
+def test_workers_give_the_same_bytes(tmp_path):
+    marks1, marks2 = tmp_path / "m1", tmp_path / "m2"
+    marks1.mkdir()
+    marks2.mkdir()
+    gen(tmp_path / "w1", num=4, worker_init=functools.partial(_mark_worker, marks1))
+    s = gen(tmp_path / "w2", num=4, workers=2, worker_init=functools.partial(_mark_worker, marks2))
+    assert s.written == 4
+    assert tree(tmp_path / "w1") == tree(tmp_path / "w2")
+    assert [p.name for p in marks1.iterdir()] == [str(os.getpid())]  # in-process, once
+    pids = [p.name for p in marks2.iterdir()]
+    assert 1 <= len(pids) <= 2 and str(os.getpid()) not in pids
+    with pytest.raises(ValueError, match="picklable"):
+        gen(tmp_path / "w3", num=4, workers=2, fn=lambda seed: make(seed))
+
+
+def test_notebook_functions_are_refused_for_workers(tmp_path, monkeypatch):
+    fake_main = types.ModuleType("__main__")  # a notebook's __main__ has no __file__
+
+    def cell_sample(seed):
+        return make(seed)
+
+    cell_sample.__module__, cell_sample.__qualname__ = "__main__", "cell_sample"
+    fake_main.cell_sample = cell_sample
+    monkeypatch.setitem(sys.modules, "__main__", fake_main)
+    with pytest.raises(ValueError, match="__main__.cell_sample is defined in an interactive"):
+        gen(tmp_path / "nb", num=2, workers=2, fn=cell_sample)
+    assert gen(tmp_path / "nb1", num=2, fn=cell_sample).written == 2  # fine in-process
+
+
+def test_vr_balanced_generation(tmp_path):
+    bins = ((0.0, 0.5), (0.5, 0.9), (0.9, 1.0))
+    s = gen(tmp_path / "b", num=6, balance_vr=bins)
+    assert s.vr_histogram == [2, 2, 2] and s.vr_outside == 0 and s.attempts > 6
+    ds = D.InterSHDataset(tmp_path / "b")
+    assert ds.meta["vr_bins"] == [list(b) for b in bins] and ds.meta["balance_vr"] is True
+    for i in range(6):
+        ann = ds.annotation(i)
+        lo, hi = bins[i % 3]
+        assert lo <= ann["target_vr"] <= hi
+        # the kept candidate is the FIRST attempt whose target VR falls in the bin
+        tries = [make(D.sample_seed(SEED, i, a)) for a in range(ann["attempt"] + 1)]
+        in_bin = [lo <= t["vr"][t["target"]] < hi or (hi == 1.0 == t["vr"][t["target"]])
+                  for t in tries]
+        assert in_bin == [False] * ann["attempt"] + [True]
+        assert ann["seed"] == D.sample_seed(SEED, i, ann["attempt"])
+    s2 = gen(tmp_path / "b2", num=6, balance_vr=bins)
+    assert tree(tmp_path / "b2") == tree(tmp_path / "b")
+    assert s2.attempts == s.attempts
+
+
+def test_accept_filter_and_its_limit(tmp_path):
+    def other_fully_visible(sample):
+        return sample["vr"][2] == 1.0
+
+    gen(tmp_path / "a", num=4, accept=other_fully_visible)
+    ds = D.InterSHDataset(tmp_path / "a")
+    assert all(ds.annotation(i)["vr"][2] == 1.0 for i in range(4))
+    assert ds.meta["accept"].endswith("other_fully_visible")
+    with pytest.raises(RuntimeError, match="sample 0: no candidate accepted in 3 attempts"):
+        gen(tmp_path / "n", num=2, accept=lambda s: False, max_attempts=3)
+    assert sample_dirs(tmp_path / "n") == []
+
+
+# ------------------------------------------------------------------ corrupt files
+@pytest.fixture()
+def small_root(tmp_path):
+    gen(tmp_path / "r", num=3)
+    return tmp_path / "r"
+
+
+def _rewrite_npz(path, **changes):
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays.update(changes)
+    for k, v in changes.items():
+        if v is None:
+            del arrays[k]
+    path.write_bytes(D.npz_bytes(arrays))
+
+
+def _rewrite_json(path, **changes):
+    ann = json.loads(path.read_text())
+    ann.update(changes)
+    path.write_text(json.dumps(ann))
+
+
+@pytest.mark.parametrize("damage, error, pattern", [
+    (lambda d: (d / "scene_mask.png").unlink(), FileNotFoundError,
+     r"000001/scene_mask\.png missing"),
+    (lambda d: (d / "annotation.npz").unlink(), FileNotFoundError,
+     r"000001/annotation\.npz missing"),
+    (lambda d: _rewrite_npz(d / "annotation.npz", joints_1=np.zeros((20, 3), np.float32)),
+     ValueError, r"000001/annotation\.npz: key 'joints_1' has shape \(20, 3\), expected \(21, 3\)"),
+    (lambda d: _rewrite_npz(d / "annotation.npz", faces_2=None), ValueError,
+     r"000001/annotation\.npz: missing key 'faces_2'"),
+    (lambda d: (d / "annotation.npz").write_bytes(b"PK\x03\x04junk"), ValueError,
+     r"000001/annotation\.npz: not a readable npz"),
+    (lambda d: (d / "image.png").write_bytes((d / "image.png").read_bytes()[:60]), ValueError,
+     r"000001/image\.png: not a readable PNG"),
+    (lambda d: Image.fromarray(np.zeros((16, 16), bool)).save(d / "alone_2.png"), ValueError,
+     r"000001/alone_2\.png has shape \(16, 16\), expected \(32, 32\)"),
+    (lambda d: Image.fromarray(np.zeros((32, 32, 3), np.uint8)).save(d / "scene_mask.png"),
+     ValueError, r"000001/scene_mask\.png: PNG mode RGB"),
+    (lambda d: _rewrite_json(d / "annotation.json", vr={"1": 1.5, "2": 0.5}), ValueError,
+     r"000001/annotation\.json: 'vr'.*1\.5"),
+    (lambda d: _rewrite_json(d / "annotation.json", labels=[1]), ValueError,
+     r"000001/scene_mask\.png: labels \[2\] have no mesh"),
+    (lambda d: _rewrite_json(d / "annotation.json", target=5), ValueError,
+     r"000001/annotation\.json: 'target' 5 is not a hand label"),
+    (lambda d: (d / "annotation.json").write_text("{oops"), ValueError,
+     r"000001/annotation\.json: not valid JSON"),
+])
+def test_damaged_files_are_named(small_root, damage, error, pattern):
+    damage(small_root / "samples" / "000001")
+    ds = D.InterSHDataset(small_root)
+    with pytest.raises(error, match=pattern):
+        ds[1]
+    ds[0], ds[2]  # the other samples still load  # noqa: B018
+
+
+def test_dataset_level_errors(small_root, tmp_path):
+    _rewrite_json(small_root / "samples" / "000002" / "annotation.json", index=7)
+    ds = D.InterSHDataset(small_root)
+    with pytest.raises(ValueError, match="index 7 but folder is 000002"):
+        ds[2]
+    with pytest.raises(ValueError, match=re.escape("000002/annotation.json") + ".*do not match"):
+        gen(small_root, num=3)  # resuming checks the samples it skips
+    with pytest.raises(FileNotFoundError, match=r"nothing/meta\.json missing"):
+        D.InterSHDataset(tmp_path / "nothing")

@@ -1,0 +1,255 @@
+"""Tests of handmesh_tutorial.render: EGL offscreen, the NumPy 2 fix, exact label masks, OpenCV
+camera convention, crop camera, backgrounds/lights, determinism."""
+
+from __future__ import annotations
+
+import os
+import types
+
+import numpy as np
+import pytest
+import trimesh
+
+from handmesh_tutorial import render as R
+
+S = 64
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    with R.Renderer(S) as r:
+        yield r
+
+
+def _sphere(center, radius, label, color=(0.8, 0.6, 0.5)):
+    m = trimesh.creation.icosphere(subdivisions=2, radius=radius)
+    v = m.vertices + np.asarray(center)
+    return (v, m.faces, np.tile(color, (len(v), 1)), label)
+
+
+def _box(center, size, label, color=(40, 90, 200)):
+    m = trimesh.creation.box(extents=size)
+    v = m.vertices + np.asarray(center)
+    return (v, m.faces, np.tile(np.asarray(color, np.uint8), (len(v), 1)), label)
+
+
+def _two_bodies():
+    front = _sphere((0.0, 0.0, 0.40), 0.035, 1)
+    back = _box((0.03, 0.02, 0.50), (0.07, 0.07, 0.07), 2)
+    return [front, back]
+
+
+def _K():
+    return R.intrinsics(120.0, 120.0, (S - 1) / 2, (S - 1) / 2)
+
+
+# ---------------------------------------------------------------- EGL + NumPy 2 fix
+
+
+def test_egl_selected_without_display(renderer):
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        pytest.skip("a display exists; EGL is only forced when headless")
+    assert os.environ["PYOPENGL_PLATFORM"] == "egl"
+    from pyrender.platforms.egl import EGLPlatform
+
+    assert isinstance(renderer._r._platform, EGLPlatform)
+
+
+def test_numpy2_fix_formerly_broken_paths(renderer):
+    pr = R.import_pyrender()
+    tm = trimesh.creation.box(extents=(0.1, 0.2, 0.3))
+    tm.apply_translation((0.05, -0.1, 0.6))
+    mesh = pr.Mesh.from_trimesh(tm)
+    np.testing.assert_allclose(mesh.bounds, tm.bounds, atol=1e-6)
+    np.testing.assert_allclose(mesh.centroid, tm.bounds.mean(0), atol=1e-6)
+    scene = pr.Scene()
+    scene.add(mesh)
+    scene.add(pr.IntrinsicsCamera(100, 100, 32, 32), pose=R.CV_TO_GL)
+    scene.add(pr.DirectionalLight(intensity=2.0), pose=R.CV_TO_GL)
+    np.testing.assert_allclose(scene.bounds, tm.bounds, atol=1e-6)
+    np.testing.assert_allclose(scene.centroid, tm.bounds.mean(0), atol=1e-6)
+    assert scene.scale == pytest.approx(np.linalg.norm(tm.extents), rel=1e-6)
+    # directional shadows size their shadow camera from scene.bounds: render with them, offscreen
+    color, depth = renderer._r.render(scene, flags=pr.RenderFlags.SHADOWS_DIRECTIONAL)
+    assert color.shape == (S, S, 3) and (depth > 0).any()
+    if int(np.__version__.split(".")[0]) >= 2:
+        assert not hasattr(np, "infty"), "the fix must not resurrect np.infty globally"
+
+
+def test_patch_is_local_and_idempotent():
+    fake = types.ModuleType("fake_pyrender_mesh")
+    fake.np = np
+    applied = R.patch_pyrender_numpy2(fake)
+    assert applied == (not hasattr(np, "infty"))
+    assert fake.np.infty == np.inf and fake.np.array is np.array
+    assert R.patch_pyrender_numpy2(fake) is False
+
+
+# ---------------------------------------------------------------- label masks and depth
+
+
+def test_label_mask_matches_per_body_depth_comparison(renderer):
+    meshes = _two_bodies()
+    K = _K()
+    out = renderer.render(meshes, K, alone=True)
+    # independent reference: each body alone, its depth; the nearest positive depth wins
+    depths = []
+    for m in meshes:
+        d = renderer.render([m], K, color=False).depth
+        depths.append(np.where(d > 0, d, np.inf))
+    depths = np.stack(depths)
+    ref = np.where(np.isfinite(depths).any(0), np.argmin(depths, 0) + 1, 0)
+    assert (out.labels == ref).all()
+    assert set(np.unique(out.labels)) == {0, 1, 2}
+    # the occluded box's visible pixels = its alone mask minus the sphere's pixels
+    a1, a2 = out.alone_masks[1], out.alone_masks[2]
+    assert (a1 & a2).any(), "the test scene must have an overlap"
+    assert ((out.labels == 2) == (a2 & ~a1)).all()
+    assert ((out.labels == 1) == a1).all()
+    # depth is positive exactly where some body is, and equals the nearest body depth
+    assert ((out.depth > 0) == (out.labels > 0)).all()
+    fg = out.labels > 0
+    np.testing.assert_allclose(out.depth[fg], depths.min(0)[fg], rtol=1e-5)
+
+
+def test_opencv_pixel_convention_rectangle(renderer):
+    # a rectangle at Z = 1 whose edges project to u in [10.3, 20.3], v in [40.3, 50.7];
+    # OpenCV pixel centres are integers, so columns 11..20 and rows 41..50 are covered
+    fx, c = 100.0, 31.5
+    K = R.intrinsics(fx, fx, c, c)
+    u0, u1, v0, v1 = 10.3, 20.3, 40.3, 50.7
+    X0, X1, Y0, Y1 = (u0 - c) / fx, (u1 - c) / fx, (v0 - c) / fx, (v1 - c) / fx
+    v = np.array([[X0, Y0, 1.0], [X1, Y0, 1.0], [X1, Y1, 1.0], [X0, Y1, 1.0]])
+    f = np.array([[0, 2, 1], [0, 3, 2]])  # facing the camera (-z)
+    out = renderer.render([(v, f, np.ones((4, 3)), 7)], K)
+    expected = np.zeros((S, S), bool)
+    expected[41:51, 11:21] = True
+    assert ((out.labels == 7) == expected).all()
+    np.testing.assert_allclose(out.depth[expected], 1.0, rtol=1e-4)
+    # +x right and +y down: the rectangle has X < 0, Y > 0 -> left half, lower half of the image
+    assert X1 < 0 and Y0 > 0
+
+
+def test_point_projects_to_K_X(renderer):
+    X = np.array([0.05, -0.03, 0.5])
+    K = _K()
+    u, v = R.project(X[None], K)[0]
+    out = renderer.render([_sphere(X, 0.004, 3)], K)
+    mask = out.labels == 3
+    assert mask[int(round(v)), int(round(u))]
+    rows, cols = np.nonzero(mask)
+    assert abs(cols.mean() - u) < 0.6 and abs(rows.mean() - v) < 0.6
+    # +x right, -y up
+    assert u > (S - 1) / 2 and v < (S - 1) / 2
+
+
+def test_render_alone_images_and_color(renderer):
+    meshes = _two_bodies()
+    bg = R.random_background(1, S)
+    masks = renderer.render_alone(meshes, _K())
+    both = renderer.render_alone(meshes, _K(), images=True, background=bg)
+    for lab, m in masks.items():
+        mask, img = both[lab]
+        assert (mask == m).all() and img.shape == (S, S, 3) and img.dtype == np.uint8
+        # away from the body (and its anti-aliased rim) the alone image is the background
+        far = ~_dilate(m, 2)
+        assert (img[far] == bg[far]).all()
+        assert (img[m] != bg[m]).any(axis=-1).mean() > 0.9
+
+
+def _dilate(m, k):
+    out = m.copy()
+    for dy in range(-k, k + 1):
+        for dx in range(-k, k + 1):
+            out |= np.roll(np.roll(m, dy, 0), dx, 1)
+    return out
+
+
+def test_determinism_same_seed_same_bytes(renderer):
+    def run(seed):
+        rng = np.random.default_rng(seed)
+        lights = R.random_lights(rng)
+        bg = R.random_background(rng, S)
+        return renderer.render(_two_bodies(), _K(), lights=lights, background=bg).image
+
+    a, b, c = run(5), run(5), run(6)
+    assert a.tobytes() == b.tobytes()
+    assert a.tobytes() != c.tobytes()
+
+
+# ---------------------------------------------------------------- cameras
+
+
+def test_crop_camera_frames_points():
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(200, 3)) * [0.04, 0.03, 0.02] + [0.1, -0.05, 0.6]
+    for margin in (0.0, 0.1, 0.2):
+        K = R.crop_camera(pts, 224, margin)
+        uv = R.project(pts, K)
+        # the image border lies at -0.5 and 223.5 (pixel centres are integers)
+        lo, hi = margin * 224 - 0.5, 223.5 - margin * 224
+        assert uv.min() >= lo - 1e-6 and uv.max() <= hi + 1e-6
+        # tight along at least one axis, box centred on the image centre
+        span = (uv.max(0) - uv.min(0)).max()
+        assert span == pytest.approx((1 - 2 * margin) * 224, rel=1e-9)
+        np.testing.assert_allclose((uv.max(0) + uv.min(0)) / 2, 111.5, atol=1e-9)
+    centre = pts.mean(0)
+    K = R.crop_camera(pts, 224, 0.1, center=centre)
+    np.testing.assert_allclose(R.project(centre[None], K)[0], 111.5, atol=1e-9)
+    assert R.project(pts, K).min() >= 0.1 * 224 - 0.5 - 1e-6
+    f_fit = R.crop_camera(pts, 224, 0.1)[0, 0]
+    K = R.crop_camera(pts, 224, 0.1, focal=0.5 * f_fit)
+    assert K[0, 0] == 0.5 * f_fit
+    with pytest.raises(ValueError, match="largest focal that fits"):
+        R.crop_camera(pts, 224, 0.1, focal=2 * f_fit)
+    with pytest.raises(ValueError, match="Z > 0"):
+        R.crop_camera(pts * [1, 1, -1], 224)
+    with pytest.raises(ValueError, match="shape"):
+        R.crop_camera(pts[:, :2], 224)
+
+
+def test_crop_camera_render_keeps_body_inside(renderer):
+    body = _sphere((0.07, 0.05, 0.45), 0.03, 1)
+    K = R.crop_camera(body[0], S, margin=0.1)
+    labels = renderer.render([body], K, color=False).labels
+    border = int(0.1 * S) - 1
+    assert (labels == 1).any()
+    assert not (labels[:border].any() or labels[-border:].any()
+                or labels[:, :border].any() or labels[:, -border:].any())
+
+
+# ---------------------------------------------------------------- inputs and helpers
+
+
+def test_random_background_kinds_and_determinism():
+    for kind in ("gradient", "noise", "stripes", "checker"):
+        a = R.random_background(3, 40, 50, kind=kind)
+        assert a.shape == (40, 50, 3) and a.dtype == np.uint8
+        assert a.std() > 1.0  # not a flat colour
+        assert (a == R.random_background(3, 40, 50, kind=kind)).all()
+    with pytest.raises(ValueError, match="unknown background kind"):
+        R.random_background(0, 8, kind="photo")
+
+
+def test_random_lights_deterministic_and_valid():
+    a, b = R.random_lights(11), R.random_lights(11)
+    assert a == b and 2 <= len(a) <= 4 and a[0].kind == "directional"
+    for light in a:
+        if light.kind == "directional":
+            assert np.isclose(np.linalg.norm(light.direction), 1) and light.direction[2] > 0
+
+
+def test_bad_inputs_raise(renderer):
+    m = _sphere((0, 0, 0.5), 0.03, 1)
+    with pytest.raises(ValueError, match="duplicate label 1"):
+        renderer.render([m, m], _K())
+    with pytest.raises(ValueError, match="label must be in"):
+        renderer.render([(*m[:3], 0)], _K())
+    with pytest.raises(ValueError, match="colors must have shape"):
+        renderer.render([(m[0], m[1], m[2][:5], 1)], _K())
+    with pytest.raises(ValueError, match=r"K must have shape \(3, 3\)"):
+        renderer.render([m], np.eye(4))
+    with pytest.raises(ValueError, match="background must have shape"):
+        renderer.render([m], _K(), background=np.zeros((S + 1, S, 3), np.uint8))
+    with pytest.raises(ValueError, match="unknown light kind"):
+        renderer.render([m], _K(), lights=[R.Light("spot")])
