@@ -15,9 +15,9 @@ __version__ = "0.1.0"
 
 # One module per concept; see docs/index.md for the data flow between them.
 _SUBMODULES = (
-    "blocks", "budget", "cli", "collision", "dataset", "decoder", "encoder", "hand", "interact",
-    "lcs", "mano", "metrics", "model", "objects", "render", "sampling", "spiral", "train",
-    "visibility", "viz",
+    "augment", "blocks", "budget", "cli", "collision", "dataset", "decoder", "encoder", "freihand",
+    "hand", "interact", "lcs", "mano", "metrics", "model", "objects", "render", "sampling",
+    "spiral", "train", "visibility", "viz",
 )
 
 __all__ = ["Budget", "budget", "__version__", *_SUBMODULES]

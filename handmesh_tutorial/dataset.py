@@ -47,8 +47,6 @@ import numpy as np
 FORMAT_NAME = "INTER-SH"
 FORMAT_VERSION = 1
 KINDS = ("hand-hand", "hand-object", "hand-chain")
-# The paper's four VR categories (Sec. "Evaluation Metrics"); used when visibility.py has none.
-PAPER_VR_BINS = ((0.40, 0.60), (0.60, 0.80), (0.80, 0.95), (0.95, 1.00))
 META_FILE = "meta.json"
 SAMPLES_DIR = "samples"
 TMP_PREFIX = ".tmp-"
@@ -115,20 +113,13 @@ def index_width(num: int) -> int:
 
 
 def vr_bins(bins: Sequence | None = None) -> tuple[tuple[float, float], ...]:
-    """VR bins as ``((lo, hi), ...)``: ``bins`` if given, else ``visibility.VR_BINS``.
+    """VR bins as ``((lo, hi), ...)``: ``bins`` if given, else the paper's ``visibility.VR_BINS``.
 
-    Accepts pairs ``[(lo, hi), ...]`` or bin edges ``[e0, e1, ..., en]``. Falls back to the paper's
-    bins ``[0.40, 0.60), [0.60, 0.80), [0.80, 0.95), [0.95, 1.00]`` when ``visibility.py`` does not
-    define ``VR_BINS``.
+    Accepts pairs ``[(lo, hi), ...]`` or bin edges ``[e0, e1, ..., en]``.
     """
-    if bins is None:
-        try:  # lazily: visibility.py is optional for the storage layer
-            from . import visibility
+    from .visibility import VR_BINS  # numpy-only module; the one place the bins are defined
 
-            bins = visibility.VR_BINS
-        except (ImportError, AttributeError):
-            bins = PAPER_VR_BINS
-    seq = list(bins)
+    seq = list(VR_BINS if bins is None else bins)
     if seq and all(np.ndim(b) == 0 for b in seq):  # edges
         seq = list(zip(seq[:-1], seq[1:], strict=True))
     out = tuple((float(lo), float(hi)) for lo, hi in seq)
@@ -138,15 +129,10 @@ def vr_bins(bins: Sequence | None = None) -> tuple[tuple[float, float], ...]:
 
 
 def vr_bin_index(vr: float, bins: Sequence[tuple[float, float]]) -> int:
-    """Index of the bin holding ``vr``, -1 if none: ``[lo, hi)``, the last bin ``[lo, hi]``.
+    """Index of the bin holding ``vr``, -1 if none (the rule of ``visibility.vr_bin``)."""
+    from .visibility import vr_bin
 
-    The same rule as ``visibility.vr_bin`` (kept here so the storage layer imports nothing else).
-    """
-    v = float(vr)
-    for i, (lo, hi) in enumerate(bins):
-        if lo <= v < hi or (i == len(bins) - 1 and v == hi):
-            return i
-    return -1
+    return vr_bin(vr, tuple(bins))
 
 
 def vr_histogram(values: Sequence[float], bins: Sequence[tuple[float, float]]) -> list[int]:

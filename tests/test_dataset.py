@@ -178,7 +178,7 @@ def test_vr_bins_accept_pairs_or_edges():
     assert D.vr_histogram([0.6, 0.8, 1.0], [(0.4, 0.6), (0.6, 0.8)]) == [0, 2]  # last bin closed
     visibility = pytest.importorskip("handmesh_tutorial.visibility")
     for v in np.r_[np.linspace(0, 1, 101), 0.6, 0.95, 1.0, 3 / 5, 19 / 20]:
-        assert D.vr_bin_index(v, D.PAPER_VR_BINS) == visibility.vr_bin(v), v
+        assert D.vr_bin_index(v, visibility.VR_BINS) == visibility.vr_bin(v), v
     assert D.vr_bins() == tuple(visibility.VR_BINS)
     assert len(D.vr_bins()) >= 1
     with pytest.raises(ValueError, match="VR bins"):
