@@ -300,6 +300,45 @@ def plot_vr_table(ax, rows: list, metric: str = "auc", label: str | None = None,
     return bars
 
 
+def plot_error_vs_vr(ax, vr, errors, bins=None, label: str = "error", unit: str = "mm",
+                     color=None):
+    """Scatter of a per-sample error against the target hand's visibility ratio, with bin means.
+
+    Args:
+        ax: a matplotlib ``Axes``.
+        vr: (N,) visibility ratios in [0, 1] (NaN samples are skipped).
+        errors: (N,) per-sample errors (e.g. PA-MPJPE in mm).
+        bins: VR bins drawn as shaded bands with their mean error (default the paper's
+            ``visibility.VR_BINS``).
+        label: legend / y-axis label of the error.
+        unit: unit shown on the y axis.
+        color: point colour.
+
+    Returns:
+        The scatter ``PathCollection``.
+    """
+    from .visibility import VR_BINS
+
+    bins = VR_BINS if bins is None else bins
+    v, e = np.asarray(_to_numpy(vr), float).ravel(), np.asarray(_to_numpy(errors), float).ravel()
+    ok = np.isfinite(v) & np.isfinite(e)
+    pts = ax.scatter(v[ok], e[ok], s=10, alpha=0.6, color=color, label=f"{label} per sample")
+    for k, (lo, hi) in enumerate(bins):
+        last = k == len(bins) - 1
+        sel = ok & (v >= lo) & ((v <= hi) if last else (v < hi))
+        ax.axvspan(lo, hi, color="0.5" if k % 2 else "0.8", alpha=0.15, lw=0)
+        if sel.any():
+            m = float(e[sel].mean())
+            ax.hlines(m, lo, hi, colors="k", lw=2, label="bin mean" if k == 0 else None)
+            ax.annotate(f"n={int(sel.sum())}", ((lo + hi) / 2, m), ha="center", va="bottom",
+                        fontsize="x-small")
+    ax.set_xlabel("visibility ratio of the target hand")
+    ax.set_ylabel(f"{label} ({unit})")
+    ax.set_xlim(min(0.0, np.nanmin(v[ok]) if ok.any() else 0.0), 1.0)
+    ax.legend(fontsize="small")
+    return pts
+
+
 def save_figure(fig, path: str | os.PathLike, dpi: int = 100) -> Path:
     """Save a matplotlib figure atomically (temp file + rename) and return its path."""
     path = Path(path)
