@@ -323,18 +323,21 @@ def plot_error_vs_vr(ax, vr, errors, bins=None, label: str = "error", unit: str 
     v, e = np.asarray(_to_numpy(vr), float).ravel(), np.asarray(_to_numpy(errors), float).ravel()
     ok = np.isfinite(v) & np.isfinite(e)
     pts = ax.scatter(v[ok], e[ok], s=10, alpha=0.6, color=color, label=f"{label} per sample")
+    labelled = False
     for k, (lo, hi) in enumerate(bins):
         last = k == len(bins) - 1
         sel = ok & (v >= lo) & ((v <= hi) if last else (v < hi))
         ax.axvspan(lo, hi, color="0.5" if k % 2 else "0.8", alpha=0.15, lw=0)
         if sel.any():
             m = float(e[sel].mean())
-            ax.hlines(m, lo, hi, colors="k", lw=2, label="bin mean" if k == 0 else None)
+            ax.hlines(m, lo, hi, colors="k", lw=2, label=None if labelled else "bin mean")
+            labelled = True
             ax.annotate(f"n={int(sel.sum())}", ((lo + hi) / 2, m), ha="center", va="bottom",
                         fontsize="x-small")
     ax.set_xlabel("visibility ratio of the target hand")
     ax.set_ylabel(f"{label} ({unit})")
-    ax.set_xlim(min(0.0, np.nanmin(v[ok]) if ok.any() else 0.0), 1.0)
+    low = min(bins[0][0], float(v[ok].min()) if ok.any() else 1.0) - 0.05
+    ax.set_xlim(max(low, 0.0), 1.02)
     ax.legend(fontsize="small")
     return pts
 

@@ -1,0 +1,1308 @@
+"""Training and evaluating MSMR-Net: config, loop, checkpoints, exact resume, DDP, evaluation.
+
+Paper, Sec. "Training": the loss is the L1 distance between predicted and ground-truth mesh
+vertices, the vertices translated so that the middle MCP joint (keypoint 9) is at the origin;
+Adam with learning rate ``1e-4`` for 200 epochs, halved every 50 epochs; batch size 32; images
+normalised with mean 0.5 and standard deviation 1.0; random crops and transformations. Those are
+the defaults of :class:`TrainConfig`. Our loss is the mean absolute error over vertices *and*
+coordinates, i.e. the paper's per-vertex L1 norm divided by 3 (a constant factor that Adam
+ignores).
+
+A notebook trains and evaluates in a few lines::
+
+    cfg = hmt.train.TrainConfig.from_budget(data="runs/intersh", out_dir="runs/train")
+    result = hmt.train.train(cfg)                 # tqdm bar, metrics.csv, checkpoints
+    report = hmt.train.evaluate(result.checkpoint, "runs/intersh_test", out_dir="runs/eval")
+    print(report["table"])                        # scores per visibility-ratio bin
+
+What the loop guarantees:
+
+* **Determinism.** Model initialisation uses ``torch.manual_seed(seed)``; the sample order of
+  epoch ``e`` is ``numpy.random.default_rng([seed, e]).permutation``; augmentation draws come from
+  ``(seed, epoch, index)`` (see :mod:`handmesh_tutorial.augment`). No global RNG is touched by the
+  data pipeline.
+* **Exact resume.** ``checkpoint_last.pt`` (written atomically after every
+  ``checkpoint_every`` epochs) holds the model, optimiser, scheduler, epoch, step, the torch /
+  numpy / python RNG states, the history and the config; ``train(cfg, resume=True)`` continues
+  from it and ends with the same weights as an uninterrupted run (same threads, CPU).
+  Everything is stored as tensors, lists and numbers: ``torch.load(..., weights_only=True)``
+  reads it.
+* **Batches and DDP.** ``batch_size`` is the *global* batch. Launched with ``torchrun`` (env
+  vars ``WORLD_SIZE``, ``RANK``, ``LOCAL_RANK``, ``MASTER_ADDR``, ``MASTER_PORT``), every
+  global batch is cut into ``world_size * micro_batches`` equal consecutive chunks; rank ``r``
+  processes chunks ``r * micro_batches ... (r + 1) * micro_batches - 1`` (gradient accumulation
+  within a rank), each chunk's mean loss counts equally, so DDP on ``W`` processes computes the
+  same update as one process with ``micro_batches = W`` (BatchNorm statistics are per chunk in
+  both cases). A last, incomplete global batch is filled up with the epoch's first samples, so
+  every step sees exactly ``batch_size`` samples. Backend ``gloo`` on CPU, ``nccl`` on CUDA.
+  Only rank 0 validates and writes files.
+* **Failure.** A NaN or infinite loss stops training with ``FloatingPointError`` naming the epoch
+  and step (before the optimiser step, so the last checkpoint stays good).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import math
+import os
+import random
+import tempfile
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from . import augment as A
+from . import metrics as M
+
+__all__ = [
+    "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
+    "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
+    "resolve_template", "save_template", "template_hash", "vertex_loss", "toy_sample",
+    "CHECKPOINT_FORMAT", "METRIC_COLUMNS",
+]
+
+#: ``format`` entry of every checkpoint written by :func:`save_checkpoint`.
+CHECKPOINT_FORMAT = "handmesh_tutorial.checkpoint/1"
+#: Columns of ``metrics.csv``, in order (empty cells where a value does not exist).
+METRIC_COLUMNS = ("epoch", "step", "train_loss", "lr", "seconds", "val_loss", "val_mpjpe",
+                  "val_mpvpe", "val_pa_mpjpe", "val_pa_mpvpe", "val_auc_joints", "val_auc_verts",
+                  "val_f_at_5mm", "val_f_at_15mm")
+_VAL_KEYS = ("mpjpe", "mpvpe", "pa_mpjpe", "pa_mpvpe", "auc_joints", "auc_verts", "f_at_5mm",
+             "f_at_15mm")
+# config keys that define the network: they must match when resuming or loading
+_ARCH_KEYS = ("encoder", "decoder", "attention", "channels", "latent_channels", "model_kwargs")
+
+
+# --------------------------------------------------------------------------------------------
+# configuration
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run needs; the defaults are the paper's recipe.
+
+    Attributes:
+        data: training data root (INTER-SH root, or FreiHAND root with ``dataset="freihand"``).
+            May be ``None`` when datasets are passed to :func:`train` directly.
+        dataset: ``"intersh"`` or ``"freihand"``.
+        val_data: separate validation root (INTER-SH root; FreiHAND root whose ``evaluation``
+            split is used). ``None``: hold out ``val_fraction`` of ``data``.
+        val_fraction: share of ``data`` held out for validation (seeded; FreiHAND holds out
+            whole unique samples, all their versions). 0 = no validation.
+        image_size: network input side, pixels (paper: 224).
+        augment: random crop / scale / rotation / colour jitter on training crops.
+        cache_data: keep decoded training samples in memory (per process; pays off with
+            ``num_workers=0``, since worker processes are restarted every epoch).
+        epochs: training epochs (paper: 200).
+        batch_size: global batch size (paper: 32); split over ranks and micro-batches.
+        lr: Adam learning rate (paper: 1e-4).
+        lr_step: epochs between learning-rate decays (paper: 50).
+        lr_gamma: decay factor (paper: 0.5).
+        weight_decay: Adam weight decay (paper: none).
+        micro_batches: gradient-accumulation chunks per rank and step.
+        encoder: encoder name (``resnet18``, ``resnet34``, ``resnet50``, ``hrnet18``).
+        decoder: ``"multi"`` (MSMR) or ``"single"`` (baseline).
+        attention: transformer on the coarse mesh.
+        channels: decoder channels per level, finest first (``None``: model defaults).
+        latent_channels: channels per coarse-mesh token.
+        model_kwargs: further :func:`~handmesh_tutorial.model.build_model` arguments
+            (``spiral_length``, ``num_blocks``, ``num_heads``, ...).
+        template: ``None`` = the open right hand; else a ``.npz`` path written by
+            :func:`save_template` (``vertices``, ``faces``, ``joint_regressor``).
+        out_dir: output folder (checkpoints, ``metrics.csv``, ``steps.csv``, ``config.json``).
+        seed: seed of initialisation, data order, split and augmentation.
+        device: ``"auto"`` (CUDA when available), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``.
+        threads: ``torch.set_num_threads`` value (``None``: leave as is).
+        num_workers: DataLoader worker processes.
+        val_every: validate every this many epochs (and after the last).
+        checkpoint_every: write ``checkpoint_last.pt`` every this many epochs (and after the
+            last).
+        val_batch_size: batch size of validation (``None``: ``batch_size``).
+        box_scale: crop margin around the projected target mesh (INTER-SH).
+        progress: show tqdm bars (rank 0).
+        durable: fsync checkpoints and logs before renaming them into place.
+    """
+
+    data: str | None = None
+    dataset: str = "intersh"
+    val_data: str | None = None
+    val_fraction: float = 0.1
+    image_size: int = 224
+    augment: bool = True
+    cache_data: bool = False
+    epochs: int = 200
+    batch_size: int = 32
+    lr: float = 1e-4
+    lr_step: int = 50
+    lr_gamma: float = 0.5
+    weight_decay: float = 0.0
+    micro_batches: int = 1
+    encoder: str = "resnet18"
+    decoder: str = "multi"
+    attention: bool = True
+    channels: tuple[int, ...] | None = None
+    latent_channels: int = 16
+    model_kwargs: dict = field(default_factory=dict)
+    template: str | None = None
+    out_dir: str = "runs/train"
+    seed: int = 0
+    device: str = "auto"
+    threads: int | None = None
+    num_workers: int = 0
+    val_every: int = 1
+    checkpoint_every: int = 1
+    val_batch_size: int | None = None
+    box_scale: float = 1.5
+    progress: bool = True
+    durable: bool = True
+
+    def __post_init__(self):
+        for name in ("data", "val_data", "template"):
+            v = getattr(self, name)
+            if v is not None:
+                setattr(self, name, str(v))
+        self.out_dir = str(self.out_dir)
+        if self.channels is not None:
+            self.channels = tuple(int(c) for c in self.channels)
+        self.model_kwargs = dict(self.model_kwargs or {})
+        if self.dataset not in ("intersh", "freihand"):
+            raise ValueError(f"dataset must be 'intersh' or 'freihand', got {self.dataset!r}")
+        for name in ("epochs", "batch_size", "lr_step", "micro_batches", "image_size",
+                     "val_every", "checkpoint_every"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if not 0.0 <= self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be positive, got {self.lr}")
+        if self.num_workers < 0:
+            raise ValueError(f"num_workers must be >= 0, got {self.num_workers}")
+
+    @classmethod
+    def from_budget(cls, budget=None, **overrides) -> TrainConfig:
+        """A config sized by a run-size tier.
+
+        ``epochs``, ``batch_size``, ``image_size`` and ``threads`` come from the budget; the
+        learning rate decays four times per run (``lr_step = max(1, round(epochs / 4))``: 50 at
+        the ``full`` tier's 200 epochs, as in the paper).
+
+        Args:
+            budget: a :class:`~handmesh_tutorial.budget.Budget` (default ``hmt.budget()``).
+            **overrides: any field of :class:`TrainConfig`.
+
+        Returns:
+            The config.
+        """
+        if budget is None:
+            from .budget import budget as _budget
+
+            budget = _budget()
+        sized = {"epochs": budget.epochs, "batch_size": budget.batch_size,
+                 "image_size": budget.image_size, "threads": budget.threads,
+                 "lr_step": max(1, round(budget.epochs / 4))}
+        if "epochs" in overrides and "lr_step" not in overrides:
+            sized["lr_step"] = max(1, round(overrides["epochs"] / 4))
+        sized.update(overrides)
+        return cls(**sized)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (tuples become lists)."""
+        d = asdict(self)
+        d["channels"] = None if self.channels is None else list(self.channels)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> TrainConfig:
+        """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown TrainConfig keys {unknown}")
+        return cls(**dict(d))
+
+    def architecture(self) -> dict:
+        """The entries that define the network (compared when resuming or loading)."""
+        d = self.to_dict()
+        return {k: d[k] for k in _ARCH_KEYS}
+
+
+@dataclass
+class TrainResult:
+    """What :func:`train` returns.
+
+    Attributes:
+        out_dir: the output folder.
+        checkpoint: ``checkpoint_last.pt`` (``None`` on ranks other than 0).
+        best_checkpoint: ``checkpoint_best.pt`` (lowest validation PA-MPVPE; model weights
+            and config, no optimiser state), or ``None``.
+        metrics_csv: ``metrics.csv`` (one row per epoch; columns :data:`METRIC_COLUMNS`).
+        history: the rows of ``metrics.csv`` as dicts (NaN where missing).
+        step_losses: training loss of every step so far (mean over ranks), metres.
+        final: the last row of ``history``.
+        epochs: epochs completed.
+        steps: optimiser steps completed.
+        seconds: wall time of this call.
+        model: the trained network (unwrapped from DDP), on the training device.
+        rank: this process's rank.
+        world_size: the number of processes.
+    """
+
+    out_dir: Path
+    checkpoint: Path | None
+    best_checkpoint: Path | None
+    metrics_csv: Path | None
+    history: list
+    step_losses: list
+    final: dict
+    epochs: int
+    steps: int
+    seconds: float
+    model: nn.Module
+    rank: int = 0
+    world_size: int = 1
+
+
+# --------------------------------------------------------------------------------------------
+# templates and models
+
+
+def resolve_template(spec=None):
+    """The mesh template of a run.
+
+    Args:
+        spec: ``None`` (the open right hand), a path to a ``.npz`` with ``vertices``,
+            ``faces``, ``joint_regressor`` (see :func:`save_template`), or anything
+            :func:`~handmesh_tutorial.model.as_template` accepts.
+
+    Returns:
+        A :class:`~handmesh_tutorial.model.MeshTemplate`.
+
+    Raises:
+        FileNotFoundError: the ``.npz`` does not exist.
+        ValueError: it lacks a key or has bad shapes.
+    """
+    from .model import as_template
+
+    if isinstance(spec, str | os.PathLike):
+        path = Path(spec)
+        if not path.is_file():
+            raise FileNotFoundError(f"template file not found: {path}")
+        with np.load(path, allow_pickle=False) as z:
+            missing = {"vertices", "faces", "joint_regressor"} - set(z.files)
+            if missing:
+                raise ValueError(f"{path}: template lacks keys {sorted(missing)}")
+            spec = {k: z[k] for k in ("vertices", "faces", "joint_regressor")}
+    return as_template(spec)
+
+
+def save_template(path: str | os.PathLike, template) -> Path:
+    """Write a template as ``.npz`` (``vertices`` (V,3) m, ``faces`` (F,3), ``joint_regressor``
+    (21,V)) atomically, for ``TrainConfig(template=path)``.
+
+    Args:
+        path: output file.
+        template: anything :func:`resolve_template` accepts.
+
+    Returns:
+        The path.
+    """
+    t = resolve_template(template)
+    path = Path(path)
+    buf = io.BytesIO()
+    np.savez(buf, vertices=t.vertices, faces=t.faces, joint_regressor=t.joint_regressor)
+    _atomic_write_bytes(path, buf.getvalue())
+    return path
+
+
+def template_hash(template) -> str:
+    """Short SHA-256 of a template's vertices, faces and joint regressor (float64/int64 bytes)."""
+    t = resolve_template(template)
+    h = hashlib.sha256()
+    for a, dt in ((t.vertices, np.float64), (t.faces, np.int64), (t.joint_regressor, np.float64)):
+        a = np.ascontiguousarray(a, dtype=dt)
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
+    """The network described by a config (weights freshly initialised from torch's global RNG).
+
+    Args:
+        config: the run's :class:`TrainConfig`.
+        template: overrides ``config.template`` (a template object or path).
+
+    Returns:
+        An :class:`~handmesh_tutorial.model.MSMRNet` on the CPU.
+    """
+    from .model import build_model
+
+    tmpl = resolve_template(config.template if template is None else template)
+    return build_model(encoder=config.encoder, decoder=config.decoder,
+                       attention=config.attention, template=tmpl, channels=config.channels,
+                       latent_channels=config.latent_channels, **config.model_kwargs)
+
+
+def vertex_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """The paper's L1 vertex loss, as a mean over vertices and coordinates.
+
+    Args:
+        pred: ``(B, V, 3)`` predicted vertices, metres.
+        target: ``(B, V, 3)`` ground truth (root-centred), metres.
+
+    Returns:
+        Scalar tensor: ``mean |pred - target|`` (metres).
+    """
+    if pred.shape != target.shape:
+        raise ValueError(f"pred {tuple(pred.shape)} and target {tuple(target.shape)} differ")
+    return (pred - target).abs().mean()
+
+
+# --------------------------------------------------------------------------------------------
+# data
+
+
+class EpochBatchSampler(torch.utils.data.Sampler):
+    """Global batches of a seeded permutation per epoch; yields this rank's share of each.
+
+    Epoch ``e`` orders the ``n`` items by ``numpy.random.default_rng([seed, e]).permutation(n)``
+    (``shuffle=False``: ``0..n-1``) and cuts that order into global batches of ``batch_size``.
+    A shorter last batch is filled up with the first items of the order (wrapping around), so
+    every batch has exactly ``batch_size`` items (as ``DistributedSampler`` pads; it also avoids
+    a last batch of one sample, which BatchNorm rejects). Rank ``r`` gets the ``r``-th of
+    ``world_size`` equal consecutive slices of every global batch.
+
+    Args:
+        n: dataset length.
+        batch_size: global batch size (a multiple of ``world_size * micro_batches``).
+        seed: order seed.
+        rank: this process's rank.
+        world_size: number of processes.
+        micro_batches: accumulation chunks per rank (checked: ``batch_size`` must split).
+        shuffle: permute (``False``: keep the dataset order).
+
+    Raises:
+        ValueError: ``batch_size`` is not divisible by ``world_size * micro_batches`` or
+            ``n`` is 0.
+    """
+
+    def __init__(self, n: int, batch_size: int, seed: int = 0, rank: int = 0,
+                 world_size: int = 1, micro_batches: int = 1, shuffle: bool = True):
+        chunks = world_size * micro_batches
+        if n < 1:
+            raise ValueError("the training set is empty")
+        if batch_size % chunks:
+            raise ValueError(f"batch_size {batch_size} must be divisible by world_size x "
+                             f"micro_batches = {world_size} x {micro_batches} = {chunks}")
+        self.n, self.batch_size, self.seed = n, batch_size, seed
+        self.rank, self.world_size, self.chunks = rank, world_size, chunks
+        self.shuffle = shuffle
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the order of ``epoch``."""
+        self.epoch = int(epoch)
+
+    def global_batches(self, epoch: int | None = None) -> list[list[int]]:
+        """All global batches of an epoch (padded), as lists of dataset positions."""
+        e = self.epoch if epoch is None else epoch
+        order = (np.random.default_rng([self.seed, e]).permutation(self.n) if self.shuffle
+                 else np.arange(self.n)).tolist()
+        out = []
+        for start in range(0, self.n, self.batch_size):
+            b = order[start:start + self.batch_size]
+            b = b + [order[k % self.n] for k in range(self.batch_size - len(b))]
+            out.append(b)
+        return out
+
+    def __iter__(self):
+        for b in self.global_batches():
+            per = len(b) // self.world_size
+            yield b[self.rank * per:(self.rank + 1) * per]
+
+    def __len__(self) -> int:
+        return math.ceil(self.n / self.batch_size)
+
+
+def _split(n: int, fraction: float, seed: int) -> tuple[list[int], list[int]]:
+    if fraction <= 0 or n < 2:
+        return list(range(n)), []
+    n_val = min(n - 1, max(1, round(n * fraction)))
+    perm = np.random.default_rng([seed, 7919]).permutation(n)  # 7919: its own stream
+    return sorted(perm[n_val:].tolist()), sorted(perm[:n_val].tolist())
+
+
+def make_datasets(config: TrainConfig):
+    """Training and validation torch datasets of a config.
+
+    Returns:
+        ``(train_dataset, val_dataset or None)``:
+        :class:`~handmesh_tutorial.augment.InterSHTorchDataset` or
+        :class:`~handmesh_tutorial.augment.FreiHANDTorchDataset`; validation without
+        augmentation.
+
+    Raises:
+        ValueError: ``config.data`` is not set.
+    """
+    if config.data is None:
+        raise ValueError("TrainConfig.data is None: give a data root or pass dataset= to train()")
+    common = {"image_size": config.image_size, "seed": config.seed, "cache": config.cache_data}
+    if config.dataset == "intersh":
+        from .dataset import InterSHDataset
+
+        src = InterSHDataset(config.data)
+
+        def make(source, idx, train):
+            return A.InterSHTorchDataset(source, train=train, augment=config.augment and train,
+                                         indices=idx, box_scale=config.box_scale, **common)
+
+        if config.val_data is not None:
+            return make(src, None, True), make(InterSHDataset(config.val_data), None, False)
+        tr, va = _split(len(src), config.val_fraction, config.seed)
+        return make(src, tr, True), (make(src, va, False) if va else None)
+
+    from .freihand import FreiHAND
+
+    src = FreiHAND(config.data, "training")
+
+    def make_fh(source, idx, train):
+        return A.FreiHANDTorchDataset(source, train=train, augment=config.augment and train,
+                                      indices=idx, **common)
+
+    if config.val_data is not None:
+        return make_fh(src, None, True), make_fh(FreiHAND(config.val_data, "evaluation"), None,
+                                                 False)
+    nu = src.num_unique
+    tr_u, va_u = _split(nu, config.val_fraction, config.seed)
+    reps = len(src) // nu
+    tr = [u + nu * r for r in range(reps) for u in tr_u]
+    va = [u + nu * r for r in range(reps) for u in va_u]
+    return make_fh(src, tr, True), (make_fh(src, va, False) if va else None)
+
+
+# --------------------------------------------------------------------------------------------
+# files
+
+
+def _atomic_write_bytes(path: Path, data: bytes, durable: bool = True) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            if durable:  # on disk before the rename: a crash leaves the old or the new file
+                fh.flush()
+                os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def _write_csv(path: Path, rows: Sequence[Mapping], columns: Sequence[str],
+               durable: bool = True) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(columns)
+    for r in rows:
+        cells = []
+        for c in columns:
+            v = r.get(c)
+            cells.append("" if v is None or (isinstance(v, float) and math.isnan(v)) else
+                         (repr(v) if isinstance(v, float) else v))
+        w.writerow(cells)
+    _atomic_write_bytes(path, buf.getvalue().encode(), durable)
+
+
+def _json_safe(obj):
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _json_safe(obj.tolist())
+    if isinstance(obj, np.generic):
+        return _json_safe(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def _write_json(path: Path, obj) -> None:
+    text = json.dumps(_json_safe(obj), indent=1, sort_keys=True, allow_nan=False)
+    _atomic_write_bytes(path, (text + "\n").encode())
+
+
+# --------------------------------------------------------------------------------------------
+# checkpoints
+
+
+def _rng_state() -> dict:
+    name, keys, pos, has_gauss, cached = np.random.get_state()  # noqa: NPY002 - global state
+    version, state, gauss_next = random.getstate()
+    out = {
+        "torch": torch.get_rng_state(),
+        "numpy": {"name": name, "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
+                  "has_gauss": int(has_gauss), "cached_gaussian": float(cached)},
+        "python": {"version": int(version), "state": torch.tensor(state, dtype=torch.int64),
+                   "gauss_next": gauss_next},
+    }
+    if torch.cuda.is_available():
+        out["cuda"] = torch.cuda.get_rng_state_all()
+    return out
+
+
+def _set_rng_state(s: Mapping) -> None:
+    torch.set_rng_state(s["torch"].cpu())
+    n = s["numpy"]
+    np.random.set_state((n["name"], n["keys"].numpy().astype(np.uint32), n["pos"],  # noqa: NPY002
+                         n["has_gauss"], n["cached_gaussian"]))
+    p = s["python"]
+    random.setstate((p["version"], tuple(int(x) for x in p["state"].tolist()), p["gauss_next"]))
+    if "cuda" in s and torch.cuda.is_available() and len(s["cuda"]) == torch.cuda.device_count():
+        torch.cuda.set_rng_state_all([t.cpu() for t in s["cuda"]])
+
+
+def save_checkpoint(path: str | os.PathLike, *, model: nn.Module, config: TrainConfig,
+                    template_id: str, optimizer=None, scheduler=None, epoch: int = 0,
+                    step: int = 0, history: Sequence[Mapping] = (), step_losses=(),
+                    best: float = math.inf, extra: Mapping | None = None,
+                    durable: bool = True) -> Path:
+    """Write a checkpoint atomically (temporary file in the same folder, then ``os.replace``).
+
+    Args:
+        path: output file (``.pt``).
+        model: the network (a DDP wrapper is unwrapped).
+        config: the run's config (stored as a dict).
+        template_id: :func:`template_hash` of the template.
+        optimizer: its ``state_dict`` is stored when given.
+        scheduler: its ``state_dict`` is stored when given.
+        epoch: completed epochs.
+        step: completed optimiser steps.
+        history: rows of ``metrics.csv``.
+        step_losses: per-step losses.
+        best: best validation PA-MPVPE so far (mm).
+        extra: more weights-only-safe entries.
+        durable: fsync before the rename.
+
+    Returns:
+        The path. The file loads with ``torch.load(path, weights_only=True)``.
+    """
+    net = model.module if hasattr(model, "module") else model
+    ck = {
+        "format": CHECKPOINT_FORMAT,
+        "model": {k: v.detach().cpu() for k, v in net.state_dict().items()},
+        "optimizer": optimizer.state_dict() if optimizer is not None else None,
+        "scheduler": scheduler.state_dict() if scheduler is not None else None,
+        "epoch": int(epoch), "step": int(step),
+        "rng": _rng_state(),
+        "config": config.to_dict(),
+        "template_hash": template_id,
+        "num_vertices": int(net.joint_regressor.shape[1]) if hasattr(net, "joint_regressor")
+        else None,
+        "history": [dict(r) for r in history],
+        "step_losses": torch.tensor(list(step_losses), dtype=torch.float64),
+        "best": float(best),
+        "torch_version": str(torch.__version__),
+        **dict(extra or {}),
+    }
+    buf = io.BytesIO()
+    torch.save(ck, buf)
+    path = Path(path)
+    _atomic_write_bytes(path, buf.getvalue(), durable)
+    return path
+
+
+def _read_checkpoint(path: str | os.PathLike, map_location="cpu") -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    ck = torch.load(path, map_location=map_location, weights_only=True)
+    if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT:
+        got = ck.get("format") if isinstance(ck, dict) else type(ck).__name__
+        raise ValueError(f"{path}: not a handmesh_tutorial checkpoint (format {got!r}, "
+                         f"expected {CHECKPOINT_FORMAT!r})")
+    return ck
+
+
+def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
+                    template=None) -> tuple[nn.Module, dict]:
+    """Rebuild the network of a checkpoint and load its weights (``weights_only=True``).
+
+    Args:
+        path: a file written by :func:`train` / :func:`save_checkpoint`.
+        device: where the model goes (``map_location`` too).
+        template: the mesh template (default: the config's ``template``, i.e. the open hand
+            unless a template file was used); its hash must equal the checkpoint's.
+
+    Returns:
+        ``(model, checkpoint)``: the network in eval mode, and the checkpoint dict (``config``,
+        ``epoch``, ``step``, ``history``...).
+
+    Raises:
+        FileNotFoundError: no such file (or template file).
+        ValueError: not a checkpoint, a different template, or weights that do not fit the
+            architecture (the message names the mismatching keys).
+    """
+    device = _resolve_device(device)
+    ck = _read_checkpoint(path, map_location=device)
+    cfg = TrainConfig.from_dict(ck["config"])
+    tmpl = resolve_template(cfg.template if template is None else template)
+    got = template_hash(tmpl)
+    if got != ck["template_hash"]:
+        raise ValueError(
+            f"{path}: trained with template {ck['template_hash']} "
+            f"({ck.get('num_vertices')} vertices), but the template given has hash {got} "
+            f"({len(tmpl.vertices)} vertices); pass template= the training template")
+    net = build_model_from_config(cfg, tmpl)
+    try:
+        net.load_state_dict(ck["model"], strict=True)
+    except RuntimeError as e:
+        raise ValueError(f"{path}: weights do not fit the architecture "
+                         f"{cfg.architecture()}: {e}") from None
+    return net.to(device).eval(), ck
+
+
+# --------------------------------------------------------------------------------------------
+# distributed helpers
+
+
+def _resolve_device(device: str | torch.device, local_rank: int = 0) -> torch.device:
+    if isinstance(device, torch.device):
+        return device
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    if device == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError("device 'cuda' requested but torch.cuda.is_available() is False")
+        return torch.device("cuda", local_rank)
+    return torch.device(device)
+
+
+def _init_distributed(device: torch.device) -> tuple[int, int, bool]:
+    """``(rank, world_size, initialised_here)``; initialises from torchrun's env vars."""
+    import torch.distributed as dist
+
+    if dist.is_available() and dist.is_initialized():
+        return dist.get_rank(), dist.get_world_size(), False
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return 0, 1, False
+    if not dist.is_available():
+        raise RuntimeError("WORLD_SIZE > 1 but torch.distributed is not available")
+    backend = "nccl" if device.type == "cuda" else "gloo"
+    dist.init_process_group(backend=backend, init_method="env://")
+    return dist.get_rank(), dist.get_world_size(), True
+
+
+def _barrier(world: int) -> None:
+    if world > 1:
+        import torch.distributed as dist
+
+        dist.barrier()
+
+
+def _mean_over_ranks(value: float, world: int, device: torch.device) -> float:
+    if world == 1:
+        return value
+    import torch.distributed as dist
+
+    t = torch.tensor([value], dtype=torch.float64, device=device)
+    dist.all_reduce(t)
+    return float(t.item()) / world
+
+
+# --------------------------------------------------------------------------------------------
+# prediction and validation
+
+
+def predict(model: nn.Module, images, batch_size: int = 32,
+            device: str | torch.device | None = None) -> dict:
+    """Run the network on crops, in eval mode, without gradients.
+
+    Args:
+        model: an :class:`~handmesh_tutorial.model.MSMRNet`.
+        images: ``(B, 3, S, S)`` normalised float tensor (as the datasets return), or uint8
+            ``(B, S, S, 3)`` / ``(S, S, 3)`` RGB crops (normalised here).
+        batch_size: images per forward pass.
+        device: default: the model's device.
+
+    Returns:
+        dict with ``vertices`` ``(B, V, 3)`` and ``joints`` ``(B, 21, 3)`` CPU float32 tensors:
+        right-hand, root-relative network frame (see :func:`~handmesh_tutorial.augment.to_camera`
+        to go back to the camera).
+    """
+    if not isinstance(images, torch.Tensor) or images.dtype == torch.uint8:
+        arr = images if isinstance(images, torch.Tensor) else np.asarray(images)
+        if arr.dtype not in (np.uint8, torch.uint8):
+            raise ValueError(f"array images must be uint8 RGB (B, S, S, 3), got {arr.dtype}")
+        images = A.normalize_image(arr)
+    if images.dim() == 3:
+        images = images[None]
+    if images.dim() != 4 or images.shape[1] != 3:
+        raise ValueError(f"images must be (B, 3, S, S), got {tuple(images.shape)}")
+    dev = next(model.parameters()).device if device is None else _resolve_device(device)
+    was_training = model.training
+    model.eval()
+    outs = []
+    try:
+        with torch.no_grad():
+            for s in range(0, images.shape[0], batch_size):
+                o = model(images[s:s + batch_size].to(dev))
+                outs.append({k: o[k].float().cpu() for k in ("vertices", "joints")})
+    finally:
+        model.train(was_training)
+    return {k: torch.cat([o[k] for o in outs]) for k in ("vertices", "joints")}
+
+
+def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.device,
+                 num_workers: int = 0, progress: bool = False, desc: str = "eval") -> dict:
+    from tqdm.auto import tqdm
+
+    loader = torch.utils.data.DataLoader(dataset, batch_size=batch_size, shuffle=False,
+                                         num_workers=num_workers)
+    keys = ("vertices", "joints", "root", "R", "mirrored", "vr", "index", "K")
+    acc: dict[str, list] = {k: [] for k in (*keys, "pred_vertices", "pred_joints")}
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            for batch in tqdm(loader, desc=desc, disable=not progress, leave=False):
+                out = model(batch["image"].to(device))
+                acc["pred_vertices"].append(out["vertices"].float().cpu())
+                acc["pred_joints"].append(out["joints"].float().cpu())
+                for k in keys:
+                    acc[k].append(batch[k])
+    finally:
+        model.train(was_training)
+    return {k: torch.cat(v) for k, v in acc.items()}
+
+
+def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
+             progress: bool = False) -> dict:
+    """Loss and FreiHAND-style scores of a model on a (non-augmented) dataset.
+
+    Errors are computed in the root-centred network frame (ground-truth root; mirroring and
+    rotation do not change distances).
+
+    Args:
+        model: the network.
+        dataset: a :class:`~handmesh_tutorial.augment.HandCropDataset` (``train=False``).
+        batch_size: evaluation batch size.
+        device: default: the model's device.
+        progress: tqdm bar.
+
+    Returns:
+        dict: ``loss`` (metres) and the keys of
+        :func:`~handmesh_tutorial.metrics.freihand_scores` (mm, AUCs, F-scores).
+    """
+    dev = next(model.parameters()).device if device is None else _resolve_device(device)
+    r = _run_dataset(model, dataset, batch_size, dev, progress=progress, desc="validate")
+    scores = M.freihand_scores(pred_joints=r["pred_joints"], gt_joints=r["joints"],
+                               pred_verts=r["pred_vertices"], gt_verts=r["vertices"])
+    scores["loss"] = float(vertex_loss(r["pred_vertices"], r["vertices"]))
+    return scores
+
+
+# --------------------------------------------------------------------------------------------
+# training
+
+
+def _train_step(net, batch: dict, chunks: int, device: torch.device, ddp: bool) -> float:
+    """Forward/backward over ``chunks`` equal micro-batches; returns the mean chunk loss."""
+    import contextlib
+
+    images, target = batch["image"], batch["vertices"]
+    n = images.shape[0]
+    if n % chunks:
+        raise RuntimeError(f"batch of {n} not divisible into {chunks} micro-batches")
+    per = n // chunks
+    total = 0.0
+    for c in range(chunks):
+        sl = slice(c * per, (c + 1) * per)
+        sync = (not ddp) or c == chunks - 1
+        ctx = contextlib.nullcontext() if sync else net.no_sync()
+        with ctx:
+            out = net(images[sl].to(device, non_blocking=True))
+            loss = vertex_loss(out["vertices"], target[sl].to(device, non_blocking=True))
+            (loss / chunks).backward()
+        total += float(loss.detach()) / chunks
+    return total
+
+
+def train(config: TrainConfig, *, resume: bool = False, dataset=None, val_dataset=None,
+          template=None, callback: Callable[[dict], None] | None = None) -> TrainResult:
+    """Train MSMR-Net (single process, or one rank of a ``torchrun`` job).
+
+    Args:
+        config: the run (see :class:`TrainConfig`).
+        resume: continue from ``out_dir/checkpoint_last.pt`` (must exist); the architecture
+            and template must match; ``epochs`` may be larger than before.
+        dataset: a training dataset to use instead of ``config.data`` (items as
+            :class:`~handmesh_tutorial.augment.HandCropDataset` returns; ``set_epoch`` is called
+            when it exists).
+        val_dataset: a validation dataset (with ``dataset``), or ``None``.
+        template: overrides ``config.template`` (object or path; only its hash is stored).
+        callback: called on every rank after each epoch with that epoch's metrics row.
+
+    Returns:
+        A :class:`TrainResult`.
+
+    Raises:
+        FloatingPointError: the loss became NaN or infinite (message names epoch and step).
+        FileNotFoundError: ``resume`` without a checkpoint, or missing data.
+        ValueError: inconsistent config, template/data vertex counts that differ, or a
+            checkpoint of another architecture.
+    """
+    from tqdm.auto import tqdm
+
+    t_start = time.perf_counter()
+    if config.threads is not None:
+        torch.set_num_threads(int(config.threads))
+    local_rank = int(os.environ.get("LOCAL_RANK", "0"))
+    device = _resolve_device(config.device, local_rank)
+    if device.type == "cuda":
+        torch.cuda.set_device(device)
+    rank, world, owns_pg = _init_distributed(device)
+    try:
+        return _train(config, resume, dataset, val_dataset, template, callback, device, rank,
+                      world, t_start, tqdm)
+    finally:
+        if owns_pg:
+            import torch.distributed as dist
+
+            dist.destroy_process_group()
+
+
+def _train(config, resume, dataset, val_dataset, template, callback, device, rank, world,
+           t_start, tqdm) -> TrainResult:
+    out = Path(config.out_dir)
+    is_main = rank == 0
+    if is_main:
+        out.mkdir(parents=True, exist_ok=True)
+    tmpl = resolve_template(config.template if template is None else template)
+    t_id = template_hash(tmpl)
+
+    last, best_path = out / "checkpoint_last.pt", out / "checkpoint_best.pt"
+    ck = None
+    if resume:  # check before building anything
+        ck = _read_checkpoint(last, map_location=device)
+        if ck["template_hash"] != t_id:
+            raise ValueError(f"{last}: trained with template {ck['template_hash']}, this run "
+                             f"uses {t_id}")
+        old = TrainConfig.from_dict(ck["config"]).architecture()
+        if old != config.architecture():
+            diff = {k: (old[k], config.architecture()[k]) for k in old
+                    if old[k] != config.architecture()[k]}
+            raise ValueError(f"{last}: architecture differs from the config (checkpoint, "
+                             f"config): {diff}")
+
+    torch.manual_seed(config.seed)
+    np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it
+    random.seed(config.seed)
+    net = build_model_from_config(config, tmpl).to(device)
+    opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    sched = torch.optim.lr_scheduler.StepLR(opt, step_size=config.lr_step, gamma=config.lr_gamma)
+
+    start_epoch, step, history, step_losses, best = 0, 0, [], [], math.inf
+    rng_to_restore = None
+    if ck is not None:
+        net.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["optimizer"])
+        sched.load_state_dict(ck["scheduler"])
+        # the config's schedule wins (a resumed run may change epochs / lr_step)
+        sched.step_size, sched.gamma = config.lr_step, config.lr_gamma
+        start_epoch, step = int(ck["epoch"]), int(ck["step"])
+        history = [dict(r) for r in ck["history"]]
+        step_losses = [float(x) for x in ck["step_losses"].tolist()]
+        best = float(ck["best"])
+        rng_to_restore = ck["rng"]
+
+    if dataset is None:
+        train_ds, val_ds = make_datasets(config)
+    else:
+        train_ds, val_ds = dataset, val_dataset
+    n_vert = int(net.joint_regressor.shape[1])
+    got = tuple(train_ds[0]["vertices"].shape)
+    if got != (n_vert, 3):
+        raise ValueError(f"training targets have vertices {got}, the template has ({n_vert}, 3):"
+                         " train with the template of the data (TrainConfig.template)")
+
+    model = net
+    if world > 1:
+        from torch.nn.parallel import DistributedDataParallel as DDP  # noqa: N817
+
+        model = DDP(net, device_ids=[device.index] if device.type == "cuda" else None)
+    if rng_to_restore is not None:
+        _set_rng_state(rng_to_restore)
+    if is_main:
+        _write_json(out / "config.json", {"config": config.to_dict(), "template_hash": t_id,
+                                          "world_size": world})
+    sampler = EpochBatchSampler(len(train_ds), config.batch_size, config.seed, rank, world,
+                                config.micro_batches)
+    val_bs = config.val_batch_size or config.batch_size
+
+    for epoch in range(start_epoch, config.epochs):
+        t_epoch = time.perf_counter()
+        sampler.set_epoch(epoch)
+        if hasattr(train_ds, "set_epoch"):
+            train_ds.set_epoch(epoch)
+        loader = torch.utils.data.DataLoader(
+            train_ds, batch_sampler=sampler, num_workers=config.num_workers,
+            pin_memory=device.type == "cuda",
+            generator=torch.Generator().manual_seed(config.seed * 100003 + epoch))
+        model.train()
+        lr = opt.param_groups[0]["lr"]
+        losses = []
+        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}",
+                   disable=not (config.progress and is_main), leave=False)
+        for batch in bar:
+            opt.zero_grad(set_to_none=True)
+            loss = _train_step(model, batch, config.micro_batches, device, world > 1)
+            loss = _mean_over_ranks(loss, world, device)
+            if not math.isfinite(loss):
+                raise FloatingPointError(
+                    f"loss is {loss} at epoch {epoch + 1} (1-based), step {step + 1} (global, "
+                    f"1-based), batch {len(losses) + 1} of the epoch; the optimiser step was "
+                    f"not taken. Check the data for NaN/inf targets or lower lr ({lr:g}).")
+            opt.step()
+            step += 1
+            losses.append(loss)
+            step_losses.append(loss)
+            bar.set_postfix(loss_mm=f"{1000 * loss:.2f}", lr=f"{lr:.2g}")
+        bar.close()
+        sched.step()
+        row = {c: math.nan for c in METRIC_COLUMNS}
+        row.update(epoch=epoch + 1, step=step, train_loss=float(np.mean(losses)), lr=lr,
+                   seconds=time.perf_counter() - t_epoch)
+        last_epoch = epoch + 1 == config.epochs
+        if val_ds is not None and ((epoch + 1) % config.val_every == 0 or last_epoch):
+            if is_main:
+                v = validate(net, val_ds, val_bs, device)
+                row["val_loss"] = v["loss"]
+                row.update({f"val_{k}": float(v[k]) for k in _VAL_KEYS})
+            row = _broadcast_row(row, world)
+        history.append(row)
+        improved = math.isfinite(row["val_pa_mpvpe"]) and row["val_pa_mpvpe"] < best
+        if improved:
+            best = row["val_pa_mpvpe"]
+        if is_main:
+            _write_csv(out / "metrics.csv", history, METRIC_COLUMNS, config.durable)
+            _write_csv(out / "steps.csv",
+                       [{"step": i + 1, "loss": x} for i, x in enumerate(step_losses)],
+                       ("step", "loss"), config.durable)
+            kw = dict(model=net, config=config, template_id=t_id, epoch=epoch + 1, step=step,
+                      history=history, step_losses=step_losses, best=best,
+                      durable=config.durable)
+            if (epoch + 1) % config.checkpoint_every == 0 or last_epoch:
+                save_checkpoint(last, optimizer=opt, scheduler=sched, **kw)
+            if improved:  # weights only (no optimiser state): for evaluation, not for resuming
+                save_checkpoint(best_path, **kw)
+        if callback is not None:
+            callback(dict(row))
+        _barrier(world)
+
+    done = len(history)
+    return TrainResult(
+        out_dir=out, checkpoint=last if is_main and last.exists() else None,
+        best_checkpoint=best_path if is_main and best_path.exists() else None,
+        metrics_csv=out / "metrics.csv" if is_main and history else None,
+        history=history, step_losses=step_losses, final=dict(history[-1]) if history else {},
+        epochs=done, steps=step, seconds=time.perf_counter() - t_start, model=net, rank=rank,
+        world_size=world)
+
+
+def _broadcast_row(row: dict, world: int) -> dict:
+    """Rank 0's validation numbers to every rank (so callbacks and results agree)."""
+    if world == 1:
+        return row
+    import torch.distributed as dist
+
+    obj = [row]
+    dist.broadcast_object_list(obj, src=0)
+    return obj[0]
+
+
+# --------------------------------------------------------------------------------------------
+# evaluation
+
+
+def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None = None,
+             split: str = "evaluation", image_size: int | None = None, batch_size: int = 16,
+             device: str = "auto", out_dir: str | os.PathLike | None = None,
+             camera_frame: bool = True, num_samples: int | None = None, template=None,
+             progress: bool = True, threads: int | None = None) -> dict:
+    """Evaluate a trained network: FreiHAND-style scores, per-sample errors, VR table, figures.
+
+    Every item is the deterministic crop of its target hand (no augmentation); errors are
+    measured in the root-centred frame with the ground-truth root (FreiHAND's protocol reports
+    aligned and root-relative numbers; mirroring is undone for the predictions only where
+    ``camera_frame`` asks for it, distances do not change).
+
+    Args:
+        checkpoint_or_model: a checkpoint path, or a network (then give ``image_size``).
+        data: INTER-SH root (``kind="intersh"``) or FreiHAND root (``kind="freihand"``, split
+            ``split``).
+        dataset: a ready :class:`~handmesh_tutorial.augment.HandCropDataset` instead of
+            ``data``.
+        kind: ``"intersh"`` or ``"freihand"`` (default: the checkpoint's ``dataset``, else
+            ``"intersh"``).
+        split: FreiHAND split.
+        image_size: crop side (default: the checkpoint's ``image_size``).
+        batch_size: evaluation batch size.
+        device: ``"auto"``, ``"cpu"``, ``"cuda"``.
+        out_dir: when given, writes ``eval.json``, ``predictions.npz``, ``pck.png``,
+            ``vr.png``.
+        camera_frame: predictions un-mirrored and moved back to the source camera frame
+            (ground-truth root added); ``False``: the network's root-centred right-hand frame.
+        num_samples: evaluate only the first ``num_samples`` items.
+        template: template for loading a checkpoint (see :func:`load_checkpoint`).
+        progress: tqdm bar.
+        threads: ``torch.set_num_threads`` value.
+
+    Returns:
+        dict with ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`: mm, AUC,
+        F-scores), ``per_sample`` (``index``, ``vr``, ``mirrored`` and per-sample ``mpjpe``,
+        ``mpvpe``, ``pa_mpjpe``, ``pa_mpvpe`` in mm, ``f_at_5mm``, ``f_at_15mm``; (N,) arrays),
+        ``errors`` (:func:`~handmesh_tutorial.metrics.per_sample_scores`, metres),
+        ``vr_table`` (rows of :func:`~handmesh_tutorial.metrics.scores_by_vr_bin` over the
+        target hands' VR; empty when no sample has a VR), ``table`` (markdown),
+        ``predictions`` (``vertices`` (N, V, 3), ``joints`` (N, 21, 3) numpy, metres),
+        ``num_samples`` and ``files`` (paths written).
+    """
+    if threads is not None:
+        torch.set_num_threads(int(threads))
+    dev = _resolve_device(device)
+    source = None
+    if isinstance(checkpoint_or_model, str | os.PathLike):
+        source = str(checkpoint_or_model)
+        net, ck = load_checkpoint(checkpoint_or_model, dev, template)
+        cfg = ck["config"]
+        image_size = image_size or cfg["image_size"]
+        box_scale = cfg.get("box_scale", 1.5)
+        kind = kind or cfg.get("dataset", "intersh")
+    else:
+        net = checkpoint_or_model.to(dev)
+        box_scale = 1.5
+    if dataset is None:
+        if data is None:
+            raise ValueError("give data (a data root) or dataset")
+        if image_size is None:
+            raise ValueError("image_size is needed when evaluating a model object")
+        kind = kind or "intersh"
+        if kind == "intersh":
+            dataset = A.InterSHTorchDataset(data, image_size, train=False, box_scale=box_scale)
+        elif kind == "freihand":
+            dataset = A.FreiHANDTorchDataset(data, split, image_size, train=False)
+        else:
+            raise ValueError(f"kind must be 'intersh' or 'freihand', got {kind!r}")
+        if num_samples is not None:
+            dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
+    elif num_samples is not None:
+        dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
+    if len(dataset) == 0:
+        raise ValueError("the evaluation set is empty")
+
+    r = _run_dataset(net, dataset, batch_size, dev, progress=progress, desc="evaluate")
+    errors = M.per_sample_scores(pred_joints=r["pred_joints"], gt_joints=r["joints"],
+                                 pred_verts=r["pred_vertices"], gt_verts=r["vertices"])
+    scores = M.freihand_scores(pred_joints=r["pred_joints"], gt_joints=r["joints"],
+                               pred_verts=r["pred_vertices"], gt_verts=r["vertices"])
+    vr = r["vr"].double().numpy()
+    per_sample = {
+        "index": r["index"].numpy(), "vr": vr, "mirrored": r["mirrored"].numpy(),
+        "mpjpe": 1000 * errors["joint_err"].mean(1), "mpvpe": 1000 * errors["vert_err"].mean(1),
+        "pa_mpjpe": 1000 * errors["joint_err_pa"].mean(1),
+        "pa_mpvpe": 1000 * errors["vert_err_pa"].mean(1),
+        "f_at_5mm": errors["fscore"][:, 0], "f_at_15mm": errors["fscore"][:, 1],
+    }
+    has_vr = bool(np.isfinite(vr).any())
+    vr_table = M.scores_by_vr_bin(errors, vr) if has_vr else []
+    overall = {"bin": "all", "count": len(vr), "mpjpe": scores["mpjpe"],
+               "rr_mpjpe": 1000 * float(errors["joint_err_rr"].mean()),
+               "pa_mpjpe": scores["pa_mpjpe"], "auc": scores["auc_joints_20mm"],
+               "pa_mpvpe": scores["pa_mpvpe"], "f_at_5mm": scores["f_at_5mm"],
+               "f_at_15mm": scores["f_at_15mm"]}
+    table = M.format_table([*vr_table, overall])
+    if camera_frame:
+        batch = {"root": r["root"], "R": r["R"], "mirrored": r["mirrored"]}
+        pv, pj = A.to_camera(r["pred_vertices"], batch), A.to_camera(r["pred_joints"], batch)
+    else:
+        pv, pj = r["pred_vertices"], r["pred_joints"]
+    result = {
+        "scores": scores, "per_sample": per_sample, "errors": errors, "vr_table": vr_table,
+        "table": table, "num_samples": int(len(vr)),
+        "predictions": {"vertices": pv.numpy(), "joints": pj.numpy(),
+                        "frame": "camera" if camera_frame else "network"},
+        "files": {},
+    }
+    if out_dir is not None:
+        result["files"] = _write_eval(Path(out_dir), result, source, errors)
+    return result
+
+
+def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
+    import matplotlib.pyplot as plt
+
+    from . import viz
+
+    out.mkdir(parents=True, exist_ok=True)
+    files = {}
+    summary = {"checkpoint": source, "scores": res["scores"], "vr_table": res["vr_table"],
+               "num_samples": res["num_samples"],
+               "per_sample": {k: v.tolist() for k, v in res["per_sample"].items()},
+               "predictions_frame": res["predictions"]["frame"]}
+    files["json"] = out / "eval.json"
+    _write_json(files["json"], summary)
+    buf = io.BytesIO()
+    p = res["predictions"]
+    np.savez(buf, vertices=p["vertices"].astype(np.float32), joints=p["joints"].astype(np.float32),
+             index=res["per_sample"]["index"], vr=res["per_sample"]["vr"],
+             mirrored=res["per_sample"]["mirrored"])
+    files["predictions"] = out / "predictions.npz"
+    _atomic_write_bytes(files["predictions"], buf.getvalue())
+
+    fig, ax = plt.subplots(figsize=(5, 3.6))
+    viz.plot_pck_curves(ax, {"joints (PA)": errors["joint_err_pa"],
+                             "vertices (PA)": errors["vert_err_pa"],
+                             "joints (root-rel.)": errors["joint_err_rr"]})
+    ax.set_title(f"3D PCK, {res['num_samples']} samples")
+    files["pck"] = viz.save_figure(fig, out / "pck.png", dpi=90)
+    plt.close(fig)
+    if res["vr_table"]:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+        viz.plot_error_vs_vr(axes[0], res["per_sample"]["vr"], res["per_sample"]["pa_mpjpe"],
+                             label="PA-MPJPE")
+        viz.plot_vr_table(axes[1], res["vr_table"], metric="pa_mpjpe")
+        axes[1].set_ylabel("PA-MPJPE (mm)")
+        files["vr"] = viz.save_figure(fig, out / "vr.png", dpi=90)
+        plt.close(fig)
+    return files
+
+
+# --------------------------------------------------------------------------------------------
+# a toy data source
+
+
+_TOY_HANDS: dict = {}
+
+
+def _toy_hand(side: str):
+    if side not in _TOY_HANDS:
+        from .hand import HandModel
+
+        hm = HandModel(side)
+        _TOY_HANDS[side] = (hm, hm.vertex_colors())
+    return _TOY_HANDS[side]
+
+
+def _splat(points, colors, K, size):
+    """Nearest-point z-buffer of 3D points (P, 3) with colours; returns depth, colour, mask."""
+    uvw = points @ K.T
+    uv = np.round(uvw[:, :2] / uvw[:, 2:]).astype(np.int64)
+    ok = (uv[:, 0] >= 0) & (uv[:, 0] < size) & (uv[:, 1] >= 0) & (uv[:, 1] < size) & \
+        (points[:, 2] > 0)
+    pix = uv[ok, 1] * size + uv[ok, 0]
+    z = points[ok, 2]
+    depth = np.full(size * size, np.inf)
+    np.minimum.at(depth, pix, z)
+    win = z <= depth[pix]
+    col = np.zeros((size * size, 3))
+    col[pix[win]] = colors[ok][win]
+    return depth.reshape(size, size), col.reshape(size, size, 3)
+
+
+def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict:
+    """A fast stand-in INTER-SH ``hand-hand`` sample: two posed open hands, point-splatted.
+
+    No OpenGL: the faces of both meshes are sampled at 10 points each, projected and z-buffered
+    (shaded by the face normal), over a random colour gradient. Masks, VR, meshes and joints are
+    mutually consistent, so it trains, evaluates and stratifies by VR like the real data (just
+    simpler images). Use it with :func:`~handmesh_tutorial.dataset.generate_dataset` for
+    tests and quick demos; the real scenes come from ``interact``.
+
+    Args:
+        seed: sample seed (same seed -> same sample).
+        image_size: image side, pixels.
+        side: side of the target hand (label 1); ``None`` = random. The other hand (label 2)
+            is of the opposite side and a little nearer the camera.
+
+    Returns:
+        A sample dict for :func:`~handmesh_tutorial.dataset.write_sample`.
+    """
+    from scipy.spatial.transform import Rotation
+
+    from .hand import random_pose
+
+    rng = np.random.default_rng(seed)
+    if side is None:
+        side = "left" if rng.random() < 0.5 else "right"
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left', 'right' or None, got {side!r}")
+    other = "right" if side == "left" else "left"
+    s = int(image_size)
+    f = 1.6 * s
+    c = (s - 1) / 2.0
+    K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
+    centre1 = np.array([*rng.uniform(-0.03, 0.03, 2), rng.uniform(0.45, 0.55)])
+    ang = rng.uniform(0, 2 * np.pi)
+    off = rng.uniform(0.03, 0.14)
+    centre2 = centre1 + np.array([off * np.cos(ang), off * np.sin(ang), -rng.uniform(0.03, 0.1)])
+    bary = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [.5, .5, 0], [0, .5, .5], [.5, 0, .5],
+                     [1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6],
+                     [1 / 6, 1 / 6, 2 / 3]])
+    meshes, joints, poses, layers = {}, {}, {}, {}
+    for lab, sd, centre in ((1, side, centre1), (2, other, centre2)):
+        hm, colors = _toy_hand(sd)
+        pose = random_pose(rng, 1, sd, max_flexion_deg=70.0)
+        orient = Rotation.random(random_state=rng).as_rotvec()[None].astype(np.float32)
+        shape = rng.uniform(-0.5, 0.5, (1, 4)).astype(np.float32)
+        with torch.no_grad():
+            o = hm(pose=pose, shape=shape, global_orient=orient)
+        v, j = o.vertices[0].double().numpy(), o.joints[0].double().numpy()
+        shift = centre - v.mean(0)
+        v, j = v + shift, j + shift
+        meshes[lab], joints[lab], poses[lab] = (v, hm.faces), j, pose[0]
+        tri = v[hm.faces]  # (F, 3, 3)
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
+        view = tri.mean(1) / np.linalg.norm(tri.mean(1), axis=1, keepdims=True)
+        shade = 0.35 + 0.65 * np.abs((n * view).sum(1))
+        pts = np.einsum("kc,fcd->fkd", bary, tri).reshape(-1, 3)
+        col = (colors[hm.faces].mean(1) * shade[:, None])[:, None].repeat(len(bary), 1)
+        layers[lab] = _splat(pts, col.reshape(-1, 3), K, s)
+    depth = np.stack([layers[1][0], layers[2][0]])
+    alone = np.isfinite(depth)
+    scene = np.where(alone.any(0), depth.argmin(0) + 1, 0).astype(np.int32)
+    yy, xx = np.mgrid[0:s, 0:s] / max(s - 1, 1)
+    c0, c1 = rng.uniform(0.1, 0.9, 3), rng.uniform(0.1, 0.9, 3)
+    t = (0.5 * (xx + yy))[..., None]
+    image = (1 - t) * c0 + t * c1
+    for lab in (1, 2):
+        image = np.where((scene == lab)[..., None], layers[lab][1], image)
+    image = np.clip(255 * image + rng.normal(0, 3, image.shape), 0, 255).astype(np.uint8)
+    vr = {lab: float((scene == lab).sum() / alone[lab - 1].sum()) if alone[lab - 1].any()
+          else 0.0 for lab in (1, 2)}
+    return {
+        "image": image, "scene_mask": scene,
+        "alone_masks": {1: alone[0], 2: alone[1]},
+        "meshes": {lab: (m[0].astype(np.float32), m[1]) for lab, m in meshes.items()},
+        "joints": {lab: jj.astype(np.float32) for lab, jj in joints.items()},
+        "pose": {lab: p.astype(np.float32) for lab, p in poses.items()},
+        "K": K, "vr": vr, "kind": "hand-hand", "target": 1, "sides": {1: side, 2: other},
+        "names": {1: f"{side}_hand", 2: f"{other}_hand"},
+        "stats": {"stop": "toy"},
+    }

@@ -1,0 +1,301 @@
+"""Tests of handmesh_tutorial.train: loop, checkpoints, resume, NaN stop, DDP, evaluate, CLI."""
+
+import csv
+import functools
+import math
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+import torch
+
+from handmesh_tutorial import augment as A
+from handmesh_tutorial import train as T
+from handmesh_tutorial.budget import budget
+from handmesh_tutorial.cli import main as cli_main
+from handmesh_tutorial.dataset import InterSHDataset, generate_dataset, synthetic_sample
+
+torch.set_num_threads(1)
+
+TINY = {"image_size": 32, "channels": (4, 4, 8, 8, 8), "latent_channels": 8, "threads": 1,
+        "progress": False, "durable": False}
+
+
+@pytest.fixture(scope="module")
+def samples():
+    return [T.toy_sample(i, image_size=64) for i in range(8)]
+
+
+@pytest.fixture(scope="module")
+def toy_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("toy_intersh")
+    generate_dataset(root, functools.partial(T.toy_sample, image_size=64), num=8, seed=11,
+                     kind="hand-hand", progress=False, durable=False)
+    return root
+
+
+def _data(samples, n_train=4, n_val=2, augment=False):
+    tr = A.InterSHTorchDataset(samples[:n_train], 32, train=True, augment=augment)
+    va = A.InterSHTorchDataset(samples[n_train:n_train + n_val], 32, train=False)
+    return tr, va
+
+
+def _params(model):
+    return {k: v.detach().clone() for k, v in model.named_parameters()}
+
+
+def test_config_defaults_budget_and_dict_round_trip():
+    c = T.TrainConfig()
+    assert (c.lr, c.lr_step, c.lr_gamma, c.batch_size, c.epochs) == (1e-4, 50, 0.5, 32, 200)
+    full = T.TrainConfig.from_budget(budget("full"))
+    assert (full.epochs, full.lr_step, full.batch_size, full.image_size) == (200, 50, 32, 224)
+    s = T.TrainConfig.from_budget(budget("default"), out_dir="x")
+    b = budget("default")
+    assert (s.epochs, s.batch_size, s.image_size, s.threads) == (b.epochs, b.batch_size,
+                                                                 b.image_size, b.threads)
+    assert s.lr_step == max(1, round(b.epochs / 4))
+    assert T.TrainConfig.from_budget(budget("smoke"), epochs=8).lr_step == 2
+    d = T.TrainConfig(channels=[4, 4, 8, 8, 8], model_kwargs={"num_blocks": 2}).to_dict()
+    assert T.TrainConfig.from_dict(d).to_dict() == d and d["channels"] == [4, 4, 8, 8, 8]
+    with pytest.raises(ValueError, match="unknown TrainConfig keys"):
+        T.TrainConfig.from_dict({**d, "learning_rate": 1})
+    with pytest.raises(ValueError, match="epochs must be a positive integer"):
+        T.TrainConfig(epochs=0)
+    with pytest.raises(ValueError, match="dataset must be"):
+        T.TrainConfig(dataset="coco")
+
+
+def test_epoch_batch_sampler_slices_pad_and_order():
+    s0 = T.EpochBatchSampler(6, 4, seed=3, rank=0, world_size=2)
+    s1 = T.EpochBatchSampler(6, 4, seed=3, rank=1, world_size=2)
+    g = s0.global_batches()
+    assert [len(b) for b in g] == [4, 4]  # 2 left over, filled up with the first two
+    order = np.random.default_rng([3, 0]).permutation(6).tolist()
+    assert g[0] == order[:4] and g[1] == order[4:] + order[:2]
+    for b, r0, r1 in zip(g, s0, s1, strict=True):
+        assert r0 + r1 == b
+    s0.set_epoch(1)
+    assert s0.global_batches() != g and len(s0) == 2
+    with pytest.raises(ValueError, match="divisible"):
+        T.EpochBatchSampler(8, 6, world_size=4)
+
+
+def test_loss_decreases_when_overfitting_four_samples(samples, tmp_path):
+    tr, _ = _data(samples)
+    cfg = T.TrainConfig(out_dir=str(tmp_path), epochs=12, batch_size=4, lr=1e-3,
+                        checkpoint_every=100, **TINY)
+    res = T.train(cfg, dataset=tr)
+    losses = res.step_losses
+    assert len(losses) == 12 and res.steps == 12
+    assert np.mean(losses[-3:]) < 0.5 * losses[0], losses
+    with open(res.metrics_csv) as fh:
+        rows = list(csv.DictReader(fh))
+    assert tuple(rows[0]) == T.METRIC_COLUMNS and len(rows) == 12
+    assert rows[0]["val_pa_mpjpe"] == ""  # no validation set
+    assert float(rows[-1]["train_loss"]) == pytest.approx(losses[-1])
+
+
+def test_resume_continues_exactly(samples, tmp_path):
+    tr, va = _data(samples, n_train=4)
+    kw = dict(batch_size=2, lr=1e-3, augment=True, **TINY)
+    straight = T.train(T.TrainConfig(out_dir=str(tmp_path / "a"), epochs=2, **kw),
+                       dataset=A.InterSHTorchDataset(samples[:4], 32, seed=5), val_dataset=va)
+    first = T.train(T.TrainConfig(out_dir=str(tmp_path / "b"), epochs=1, **kw),
+                    dataset=A.InterSHTorchDataset(samples[:4], 32, seed=5), val_dataset=va)
+    resumed = T.train(T.TrainConfig(out_dir=str(tmp_path / "b"), epochs=2, **kw), resume=True,
+                      dataset=A.InterSHTorchDataset(samples[:4], 32, seed=5), val_dataset=va)
+    assert first.steps == 2 and resumed.steps == straight.steps == 4
+    pa, pb = straight.model.state_dict(), resumed.model.state_dict()
+    assert pa.keys() == pb.keys()
+    assert all(torch.equal(pa[k], pb[k]) for k in pa), [k for k in pa if not torch.equal(pa[k],
+                                                                                       pb[k])]
+    assert not torch.equal(_params(first.model)["latent_to_mesh.weight"],
+                           _params(resumed.model)["latent_to_mesh.weight"])
+    assert resumed.step_losses == straight.step_losses
+    strip = [{k: v for k, v in r.items() if k != "seconds"} for r in straight.history]
+    assert [{k: v for k, v in r.items() if k != "seconds"} for r in resumed.history] == strip
+    ck = torch.load(resumed.checkpoint, weights_only=True)
+    assert ck["epoch"] == 2 and ck["step"] == 4 and ck["scheduler"]["last_epoch"] == 2
+    with pytest.raises(ValueError, match="architecture differs"):
+        T.train(T.TrainConfig(out_dir=str(tmp_path / "b"), epochs=3, decoder="single",
+                              **{**kw, "channels": None}), resume=True, dataset=tr)
+    with pytest.raises(FileNotFoundError, match="checkpoint not found"):
+        T.train(T.TrainConfig(out_dir=str(tmp_path / "none"), epochs=1, **kw), resume=True,
+                dataset=tr)
+
+
+class _NaNAt(torch.utils.data.Dataset):
+    def __init__(self, base, bad):
+        self.base, self.bad = base, bad
+
+    def __len__(self):
+        return len(self.base)
+
+    def __getitem__(self, i):
+        item = dict(self.base[i])
+        if i == self.bad:
+            item["vertices"] = item["vertices"].clone()
+            item["vertices"][0, 0] = float("nan")
+        return item
+
+
+def test_nan_loss_stops_with_epoch_and_step(samples, tmp_path):
+    tr, _ = _data(samples)
+    cfg = T.TrainConfig(out_dir=str(tmp_path), epochs=3, batch_size=2, **TINY)
+    # sample 1 is in the second global batch of epoch 1 with this seed? find where it lands
+    order = T.EpochBatchSampler(4, 2, seed=0).global_batches(0)
+    step = next(k for k, b in enumerate(order) if 1 in b) + 1
+    with pytest.raises(FloatingPointError, match=rf"epoch 1 .*step {step} .*not taken"):
+        T.train(cfg, dataset=_NaNAt(tr, 1))
+
+
+def test_checkpoint_weights_only_load_and_mismatch_errors(samples, tmp_path):
+    tr, va = _data(samples)
+    cfg = T.TrainConfig(out_dir=str(tmp_path), epochs=1, batch_size=4, **TINY)
+    res = T.train(cfg, dataset=tr, val_dataset=va)
+    ck = torch.load(res.checkpoint, weights_only=True)
+    for key in ("model", "optimizer", "scheduler", "epoch", "step", "rng", "config",
+                "template_hash"):
+        assert key in ck, key
+    assert isinstance(ck["rng"]["torch"], torch.Tensor) and ck["rng"]["numpy"]["keys"].numel() \
+        == 624 and ck["rng"]["python"]["state"].numel() == 625
+    assert res.best_checkpoint is not None and res.best_checkpoint.exists()
+    assert not list(tmp_path.glob(".*.tmp"))  # atomic writes left no temp files
+    net, info = T.load_checkpoint(res.checkpoint)
+    x = torch.stack([va[i]["image"] for i in range(2)])
+    torch.testing.assert_close(T.predict(net, x)["vertices"], T.predict(res.model, x)["vertices"])
+    assert info["config"]["channels"] == [4, 4, 8, 8, 8]
+    # a different template: clear error naming both hashes and vertex counts
+    sv, sf = synthetic_sample(0)["meshes"][1]
+    other = (sv.astype(np.float64), sf, np.full((21, len(sv)), 1.0 / len(sv)))
+    with pytest.raises(ValueError, match=r"trained with template .*799 vertices.*114 vertices"):
+        T.load_checkpoint(res.checkpoint, template=other)
+    # same template, other architecture
+    ck["config"]["channels"] = [4, 4, 8, 8, 16]
+    bad = tmp_path / "bad.pt"
+    torch.save(ck, bad)
+    with pytest.raises(ValueError, match="weights do not fit the architecture"):
+        T.load_checkpoint(bad)
+    torch.save({"model": {}}, bad)
+    with pytest.raises(ValueError, match="not a handmesh_tutorial checkpoint"):
+        T.load_checkpoint(bad)
+
+
+def test_template_file_round_trip_and_data_mismatch(tmp_path):
+    sv, sf = synthetic_sample(0)["meshes"][1]
+    jr = np.random.default_rng(0).random((21, len(sv)))
+    jr /= jr.sum(1, keepdims=True)
+    path = T.save_template(tmp_path / "sphere.npz", (sv.astype(np.float64), sf, jr))
+    t = T.resolve_template(str(path))
+    assert t.vertices.shape == (114, 3) and T.template_hash(path) == T.template_hash(t)
+    assert T.template_hash(path) != T.template_hash(None)
+    with pytest.raises(FileNotFoundError, match="template file not found"):
+        T.resolve_template(str(tmp_path / "missing.npz"))
+    spheres = [synthetic_sample(i) for i in range(2)]
+    ds = A.InterSHTorchDataset(spheres, 32, augment=False)
+    with pytest.raises(ValueError, match=r"vertices \(114, 3\), the template has \(799, 3\)"):
+        T.train(T.TrainConfig(out_dir=str(tmp_path / "o"), epochs=1, batch_size=2, **TINY),
+                dataset=ds)
+
+
+def test_ddp_two_processes_match_micro_batch_semantics(toy_root, tmp_path):
+    """torchrun, gloo, 2 ranks: identical weights on both ranks, equal to 1 process x 2 chunks."""
+    script = tmp_path / "ddp_train.py"
+    script.write_text(textwrap.dedent(f"""
+        import os, sys, torch
+        from handmesh_tutorial import train as T
+        cfg = T.TrainConfig(data={str(toy_root)!r}, out_dir=sys.argv[1], epochs=1, batch_size=4,
+                            val_fraction=0.25, lr=1e-3, device="cpu", **{TINY!r})
+        res = T.train(cfg)
+        torch.save({{"params": {{k: v.detach() for k, v in res.model.named_parameters()}},
+                    "world": res.world_size,
+                    "steps": res.steps}}, os.path.join(sys.argv[1], f"rank{{res.rank}}.pt"))
+    """))
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "ddp"
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2",
+         "--master_addr=127.0.0.1", f"--master_port={port}", str(script), str(out)],
+        capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    d0 = torch.load(out / "rank0.pt", weights_only=True)
+    d1 = torch.load(out / "rank1.pt", weights_only=True)
+    assert (d0["world"], d0["steps"], d1["world"], d1["steps"]) == (2, 2, 2, 2)
+    r0, r1 = d0["params"], d1["params"]
+    assert all(torch.equal(r0[k], r1[k]) for k in r0)
+    single_cfg = T.TrainConfig(data=str(toy_root), out_dir=str(tmp_path / "one"), epochs=1,
+                               batch_size=4, micro_batches=2, val_fraction=0.25, lr=1e-3,
+                               device="cpu", **TINY)
+    single = T.train(single_cfg)
+    ref = {k: v.detach() for k, v in single.model.named_parameters()}
+    worst = max(float((r0[k] - ref[k]).abs().max()) for k in r0)
+    assert worst < 1e-5, worst
+    torch.manual_seed(single_cfg.seed)  # the initial weights of both runs
+    init = dict(T.build_model_from_config(single_cfg).named_parameters())
+    assert max(float((r0[k] - init[k].detach()).abs().max()) for k in r0) > 1e-4  # it trained
+    with open(out / "metrics.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 1 and rows[-1]["val_pa_mpjpe"] != ""
+
+
+def test_evaluate_vr_table_predictions_and_files(toy_root, tmp_path):
+    cfg = T.TrainConfig(data=str(toy_root), out_dir=str(tmp_path / "run"), epochs=1,
+                        batch_size=4, val_fraction=0.25, **TINY)
+    res = T.train(cfg)
+    ev = T.evaluate(res.checkpoint, toy_root, out_dir=tmp_path / "eval", progress=False,
+                    batch_size=3)
+    raw = InterSHDataset(toy_root)
+    vr = raw.vr_table()
+    bins = ((0.40, 0.60), (0.60, 0.80), (0.80, 0.95), (0.95, 1.00))
+    expected = [int(((vr >= lo) & ((vr <= hi) if k == 3 else (vr < hi))).sum())
+                for k, (lo, hi) in enumerate(bins)]
+    assert [r["count"] for r in ev["vr_table"]] == expected
+    assert [(r["lo"], r["hi"]) for r in ev["vr_table"]] == list(bins)
+    assert ev["num_samples"] == 8 and "| VR |" in ev["table"] and "| all |" in ev["table"]
+    for k in ("pa_mpjpe", "pa_mpvpe", "mpjpe", "f_at_5mm", "auc_joints"):
+        assert math.isfinite(ev["scores"][k])
+    # predictions are back in each image's camera frame: per-sample errors against the raw
+    # (unmirrored, unrotated) ground truth equal the network-frame errors
+    pj = ev["predictions"]["joints"]
+    for i in range(len(raw)):
+        s = raw[i]
+        gt = s["joints"][s["target"]]
+        err = 1000 * np.linalg.norm(pj[i] - gt, axis=1).mean()
+        assert err == pytest.approx(ev["per_sample"]["mpjpe"][i], rel=1e-4, abs=1e-3)
+    assert ev["per_sample"]["mirrored"].tolist() == [raw[i]["sides"][raw[i]["target"]] == "left"
+                                                     for i in range(len(raw))]
+    np.testing.assert_allclose(ev["per_sample"]["vr"], vr, atol=1e-6)
+    assert np.mean(ev["per_sample"]["pa_mpjpe"]) == pytest.approx(ev["scores"]["pa_mpjpe"])
+    for name in ("eval.json", "predictions.npz", "pck.png", "vr.png"):
+        assert (tmp_path / "eval" / name).stat().st_size > 0, name
+    net, _ = T.load_checkpoint(res.checkpoint)
+    ev2 = T.evaluate(net, toy_root, image_size=32, camera_frame=False, num_samples=3,
+                     progress=False)
+    assert ev2["num_samples"] == 3 and ev2["predictions"]["frame"] == "network"
+    np.testing.assert_allclose(ev2["per_sample"]["pa_mpjpe"], ev["per_sample"]["pa_mpjpe"][:3],
+                               rtol=1e-5)
+
+
+def test_cli_train_and_evaluate(toy_root, tmp_path, capsys):
+    out = tmp_path / "cli"
+    code = cli_main(["train", "--data", str(toy_root), "--out", str(out), "--epochs", "1",
+                     "--batch-size", "4", "--image-size", "32", "--channels", "4,4,8,8,8",
+                     "--latent-channels", "8", "--threads", "1", "--no-progress",
+                     "--no-fsync"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "checkpoint" in text and (out / "checkpoint_last.pt").exists()
+    assert (out / "metrics.csv").exists() and (out / "config.json").exists()
+    code = cli_main(["evaluate", "--checkpoint", str(out / "checkpoint_last.pt"), "--data",
+                     str(toy_root), "--out", str(tmp_path / "ev"), "--no-progress"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "PA-MPJPE" in text and "[0.95, 1.00]" in text
+    assert (tmp_path / "ev" / "eval.json").exists()
