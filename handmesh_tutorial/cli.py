@@ -20,6 +20,94 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _shard(text: str) -> tuple[int, int]:
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--shard must look like K/N (e.g. 0/4), got {text!r}") from None
+    if n < 1 or not 0 <= k < n:
+        raise argparse.ArgumentTypeError(f"--shard K/N needs 0 <= K < N, got {text!r}")
+    return k, n
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from . import interact
+
+    s = interact.generate_interactions(
+        args.out, args.kind, args.num, args.seed, image_size=args.image_size,
+        workers=args.workers, balance_vr=args.balance_vr, shard=args.shard, limits=args.limits,
+        durable=not args.no_fsync, progress=not args.quiet)
+    print(f"handmesh generate: {s.written} samples written, {s.skipped} already present "
+          f"(skipped), {s.attempts} candidates, {s.samples_per_second:.2f} samples/s, "
+          f"{s.seconds:.1f} s -> {s.root}")
+    print("target-hand VR histogram:")
+    for (lo, hi), n in zip(s.vr_bins, s.vr_histogram, strict=True):
+        print(f"  [{lo:.2f}, {hi:.2f}{']' if hi >= 1 else ')'}: {n}")
+    print(f"  outside the bins (VR < {s.vr_bins[0][0]:.2f}): {s.vr_outside}")
+    return 0
+
+
+def _channels(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--channels must be comma-separated integers (e.g. 16,24,32,48,64), got {text!r}"
+        ) from None
+
+
+_TRAIN_OPTIONS = ("data", "dataset", "val_data", "val_fraction", "epochs", "batch_size",
+                  "image_size", "lr", "lr_step", "micro_batches", "encoder", "decoder",
+                  "channels", "latent_channels", "template", "seed", "device", "threads",
+                  "num_workers", "val_every", "checkpoint_every")
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from . import train
+    from .budget import budget
+
+    overrides = {k: getattr(args, k) for k in _TRAIN_OPTIONS if getattr(args, k) is not None}
+    overrides.update(out_dir=args.out, attention=not args.no_attention,
+                     augment=not args.no_augment, progress=not args.no_progress,
+                     durable=not args.no_fsync)
+    cfg = train.TrainConfig.from_budget(budget(args.budget), **overrides)
+    res = train.train(cfg, resume=args.resume)
+    if res.rank != 0:
+        return 0
+    print(f"handmesh train: {res.epochs} epochs, {res.steps} steps, {res.seconds:.1f} s, "
+          f"world size {res.world_size}")
+    print(f"{'epoch':>5} {'loss (mm)':>10} {'val PA-MPJPE':>13} {'val PA-MPVPE':>13} {'lr':>9}")
+    for r in res.history[-10:]:
+        print(f"{r['epoch']:>5} {1000 * r['train_loss']:>10.2f} {r['val_pa_mpjpe']:>13.2f} "
+              f"{r['val_pa_mpvpe']:>13.2f} {r['lr']:>9.2g}")
+    print(f"checkpoint: {res.checkpoint}")
+    if res.best_checkpoint is not None:
+        print(f"best checkpoint (val PA-MPVPE): {res.best_checkpoint}")
+    print(f"metrics: {res.metrics_csv}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from . import train
+
+    ev = train.evaluate(args.checkpoint, args.data, kind=args.kind, split=args.split,
+                        image_size=args.image_size, batch_size=args.batch_size,
+                        device=args.device, out_dir=args.out, num_samples=args.num,
+                        template=args.template, progress=not args.no_progress,
+                        threads=args.threads, camera_frame=not args.network_frame)
+    sc = ev["scores"]
+    print(f"handmesh evaluate: {ev['num_samples']} samples of {args.data}")
+    print(f"PA-MPJPE {sc['pa_mpjpe']:.2f} mm, PA-MPVPE {sc['pa_mpvpe']:.2f} mm, "
+          f"MPJPE {sc['mpjpe']:.2f} mm, MPVPE {sc['mpvpe']:.2f} mm (targets centred at joint 9)")
+    print(f"AUC joints {sc['auc_joints']:.3f}, AUC vertices {sc['auc_verts']:.3f} (0-50 mm), "
+          f"F@5mm {sc['f_at_5mm']:.3f}, F@15mm {sc['f_at_15mm']:.3f}")
+    print(ev["table"])
+    for name, path in ev["files"].items():
+        print(f"{name}: {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of the ``handmesh`` command (sub-commands included)."""
     parser = argparse.ArgumentParser(
@@ -32,6 +120,84 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
     demo.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     demo.set_defaults(func=_cmd_demo)
+
+    gen = sub.add_parser("generate", help="generate (or resume) an INTER-SH dataset of rendered "
+                         "hand-hand / hand-object / hand-chain interactions")
+    gen.add_argument("--kind", required=True,
+                     choices=("hand-hand", "hand-object", "hand-chain", "mixed"),
+                     help="scene kind; mixed draws one per sample")
+    gen.add_argument("--num", type=int, required=True, help="samples in the whole dataset")
+    gen.add_argument("--seed", type=int, default=0, help="base seed (default: 0)")
+    gen.add_argument("--out", required=True, help="output folder (rerun to resume)")
+    gen.add_argument("--image-size", type=int, default=224, help="image side in pixels "
+                     "(default: 224)")
+    gen.add_argument("--workers", type=int, default=1, help="worker processes (default: 1)")
+    gen.add_argument("--balance-vr", action="store_true",
+                     help="equal numbers of samples per VR bin of the target hand")
+    gen.add_argument("--shard", type=_shard, default=None, metavar="K/N",
+                     help="make only shard K of N (merge with dataset.merge_shards)")
+    gen.add_argument("--limits", choices=("paper", "anatomical"), default="paper",
+                     help="joint limits: paper (+-60 deg per LCS axis) or anatomical")
+    gen.add_argument("--no-fsync", action="store_true",
+                     help="skip fsync of every file (faster, not safe against power cuts)")
+    gen.add_argument("--quiet", action="store_true", help="no progress bar")
+    gen.set_defaults(func=_cmd_generate)
+
+    tr = sub.add_parser("train", help="train MSMR-Net on an INTER-SH (or FreiHAND) root; "
+                        "sizes default to the HANDMESH_BUDGET tier; works under torchrun")
+    tr.add_argument("--data", help="training data root")
+    tr.add_argument("--dataset", choices=("intersh", "freihand"), help="data format "
+                    "(default: intersh)")
+    tr.add_argument("--val-data", help="separate validation root (default: hold out "
+                    "--val-fraction of --data)")
+    tr.add_argument("--val-fraction", type=float, help="held-out share (default: 0.1)")
+    tr.add_argument("--out", default="runs/train", help="output folder (default: runs/train)")
+    tr.add_argument("--budget", choices=("smoke", "default", "full"), default=None,
+                    help="size tier for epochs / batch / image size / threads (default: "
+                    "HANDMESH_BUDGET)")
+    tr.add_argument("--epochs", type=int)
+    tr.add_argument("--batch-size", type=int, help="global batch size")
+    tr.add_argument("--image-size", type=int)
+    tr.add_argument("--lr", type=float, help="Adam learning rate (default: 1e-4)")
+    tr.add_argument("--lr-step", type=int, help="epochs between halvings (default: epochs/4)")
+    tr.add_argument("--micro-batches", type=int, help="gradient-accumulation chunks per rank")
+    tr.add_argument("--encoder", help="resnet18 | resnet34 | resnet50 | hrnet18")
+    tr.add_argument("--decoder", choices=("multi", "single"))
+    tr.add_argument("--no-attention", action="store_true", help="no coarse-mesh transformer")
+    tr.add_argument("--channels", type=_channels, help="decoder channels, finest first")
+    tr.add_argument("--latent-channels", type=int)
+    tr.add_argument("--template", help=".npz template (default: the open hand)")
+    tr.add_argument("--seed", type=int)
+    tr.add_argument("--device", help="auto | cpu | cuda")
+    tr.add_argument("--threads", type=int, help="torch threads")
+    tr.add_argument("--workers", dest="num_workers", type=int, help="DataLoader workers")
+    tr.add_argument("--val-every", type=int, help="validate every N epochs")
+    tr.add_argument("--checkpoint-every", type=int, help="checkpoint every N epochs")
+    tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint_last.pt")
+    tr.add_argument("--no-augment", action="store_true", help="no data augmentation")
+    tr.add_argument("--no-progress", action="store_true", help="no progress bars")
+    tr.add_argument("--no-fsync", action="store_true",
+                    help="skip fsync of checkpoints and logs (faster, not safe against power cuts)")
+    tr.set_defaults(func=_cmd_train)
+
+    ev = sub.add_parser("evaluate", help="evaluate a checkpoint: FreiHAND-style scores and the "
+                        "table per visibility-ratio bin")
+    ev.add_argument("--checkpoint", required=True, help="a checkpoint_*.pt of handmesh train")
+    ev.add_argument("--data", required=True, help="INTER-SH root (or FreiHAND root)")
+    ev.add_argument("--kind", choices=("intersh", "freihand"), default=None,
+                    help="data format (default: the checkpoint's training data format)")
+    ev.add_argument("--split", default="evaluation", help="FreiHAND split (default: evaluation)")
+    ev.add_argument("--out", default=None, help="write eval.json, predictions.npz and figures")
+    ev.add_argument("--image-size", type=int, default=None, help="default: the checkpoint's")
+    ev.add_argument("--batch-size", type=int, default=16)
+    ev.add_argument("--num", type=int, default=None, help="only the first N samples")
+    ev.add_argument("--device", default="auto")
+    ev.add_argument("--threads", type=int, default=None)
+    ev.add_argument("--template", default=None, help="template .npz used for training")
+    ev.add_argument("--network-frame", action="store_true",
+                    help="store predictions in the network frame, not the camera frame")
+    ev.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ev.set_defaults(func=_cmd_evaluate)
     return parser
 
 

@@ -1,0 +1,220 @@
+"""Tests of the interaction generator (handmesh_tutorial.interact)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+import handmesh_tutorial as hmt
+from handmesh_tutorial import dataset, interact, visibility
+
+torch.set_num_threads(1)
+S = 64  # image side of the rendered samples in these tests
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    """One scene per kind (with its step history)."""
+    return {k: interact.build_scene(k, 7, record=True) for k in interact.KINDS}
+
+
+@pytest.fixture(scope="module")
+def samples():
+    """One rendered sample per kind."""
+    return {k: interact.make_sample(11, k, S) for k in interact.KINDS}
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry helpers, checked against independent computations
+# ---------------------------------------------------------------------------------------------
+def test_closest_points_on_triangles_matches_dense_sampling():
+    rng = np.random.default_rng(0)
+    a, b, c = rng.normal(size=(3, 3))
+    p = rng.normal(size=(200, 3)) * 2
+    q, region = interact.closest_points_on_triangles(p, a, b, c)
+    u, v = np.meshgrid(np.linspace(0, 1, 301), np.linspace(0, 1, 301))
+    ok = u + v <= 1
+    dense = a + u[ok, None] * (b - a) + v[ok, None] * (c - a)  # points of the triangle
+    best = np.sqrt(((p[:, None] - dense[None]) ** 2).sum(-1)).min(1)
+    d = np.linalg.norm(q - p, axis=1)
+    assert np.all(d <= best + 1e-12)               # never worse than any triangle point
+    assert np.all(best - d < 0.02)                 # and the grid gets within its spacing
+    assert set(np.unique(region)) <= set(range(7))
+    corner = {4: a, 5: b, 6: c}
+    for code, pt in corner.items():
+        assert np.allclose(q[region == code], pt)
+
+
+def test_signed_distance_matches_trimesh_on_a_hand():
+    model = hmt.hand.HandModel("right")
+    out = model(pose=torch.as_tensor(hmt.hand.example_pose("fist")[None]))
+    v, f = out.vertices[0].numpy().astype(float), model.faces
+    rng = np.random.default_rng(1)
+    pts = v[rng.integers(len(v), size=300)] + rng.normal(size=(300, 3)) * 0.004
+    mine = interact.signed_distance(pts, v, f)
+    ref = trimesh.proximity.signed_distance(trimesh.Trimesh(v, f, process=False), pts)
+    # trimesh: positive inside; ours: negative inside. Signs agree everywhere, and our exact
+    # search is never farther than trimesh's closest point
+    assert np.array_equal(np.sign(mine), -np.sign(ref))
+    assert np.all(np.abs(mine) <= np.abs(ref) + 1e-12)
+    assert np.abs(np.abs(mine) - np.abs(ref)).max() < 1e-4
+    assert (mine < 0).sum() > 50  # the test covers inside points
+
+
+def test_mesh_contact_of_two_spheres():
+    s = trimesh.creation.icosphere(4, radius=0.02)
+    v, f = np.asarray(s.vertices), np.asarray(s.faces)
+    apart = interact.mesh_contact(v, f, v + [0.043, 0, 0], f)
+    assert apart["penetration_mm"] == 0 and apart["inside"] == 0
+    assert apart["contact_mm"] == pytest.approx(3.0, abs=0.1)  # 43 - 2 * 20 mm
+    deep = interact.mesh_contact(v, f, v + [0.036, 0, 0], f)
+    assert deep["contact_mm"] == 0 and deep["inside"] > 0
+    assert deep["penetration_mm"] == pytest.approx(4.0, abs=0.1)  # 40 - 36 mm
+    shifted = interact.mesh_contact(v, f, v + [0.036, 0, 0], f, a_shift=[-0.007, 0, 0])
+    assert shifted["contact_mm"] == pytest.approx(3.0, abs=0.1)
+
+
+# ---------------------------------------------------------------------------------------------
+# scenes
+# ---------------------------------------------------------------------------------------------
+def _independent_contact(a, b):
+    """Mesh gap and penetration (mm) of two bodies with trimesh only (all vertices near b)."""
+    mb = trimesh.Trimesh(b.vertices, b.faces, process=False)
+    lo, hi = b.vertices.min(0) - 0.01, b.vertices.max(0) + 0.01
+    pts = a.vertices[((a.vertices >= lo) & (a.vertices <= hi)).all(1)]
+    sd = trimesh.proximity.signed_distance(mb, pts)  # positive inside
+    return -sd.max(), max(sd.max(), 0.0)
+
+
+@pytest.mark.parametrize("kind", interact.KINDS)
+def test_scene_is_a_close_interaction(scenes, kind):
+    sc = scenes[kind]
+    assert [b.label for b in sc.bodies] == [1, 2]
+    a, b = sc.bodies
+    gap1, pen1 = _independent_contact(a, b)
+    gap2, pen2 = _independent_contact(b, a)
+    gap_mm, pen_mm = 1e3 * min(gap1, gap2), 1e3 * max(pen1, pen2)
+    assert gap_mm <= 3.0, f"{kind}: bodies {gap_mm:.2f} mm apart, expected contact"
+    assert pen_mm <= 2.0, f"{kind}: meshes interpenetrate by {pen_mm:.2f} mm"
+    # the stats report the same numbers (ours are exact, trimesh's closest point is not)
+    assert sc.stats["penetration_mm"] == pytest.approx(pen_mm, abs=0.05)
+    assert sc.stats["contact_mm"] <= max(gap_mm, 0) + 0.05
+    assert sc.stats["stop"] in interact.STOP_REASONS
+    assert 1 <= sc.stats["rounds"] <= interact.InteractionConfig().max_rounds
+
+
+@pytest.mark.parametrize("kind", interact.KINDS)
+def test_hand_cylinders_follow_the_hand_model(scenes, kind):
+    """The generator's fast rig (numpy FK) agrees with the torch hand model's joints."""
+    for b in scenes[kind].bodies:
+        if b.kind != "hand":
+            continue
+        for f in range(5):
+            for s in range(3):
+                k = 3 * f + s
+                assert np.allclose(b.cylinders.p0[k], b.joints[1 + 4 * f + s], atol=2e-5)
+                # fingertips are skinned mesh vertices (blended), joints are rigid: 1 mm
+                tol = 1e-3 if s == 2 else 2e-5
+                assert np.allclose(b.cylinders.p1[k], b.joints[2 + 4 * f + s], atol=tol)
+
+
+def test_hand_angles_respect_the_limits(scenes):
+    for kind, sc in scenes.items():
+        for b in sc.bodies:
+            if b.kind == "hand":
+                assert np.abs(b.angles).max() <= np.deg2rad(60) + 1e-9, kind
+    sc = interact.build_scene("hand-hand", 3, limits="anatomical")
+    for b in sc.bodies:
+        lo, hi = hmt.lcs.hand_joint_limits("anatomical")
+        assert hmt.lcs.within_limits(b.angles, lo, hi)
+
+
+def test_no_self_collision_of_the_hands(scenes):
+    for sc in scenes.values():
+        for b in sc.bodies:
+            if b.kind == "hand":
+                # the settle step only translates, so the final cylinders are collision-free
+                assert len(hmt.collision.self_collisions(b.cylinders)[0]) == 0
+
+
+def test_history_records_the_steps(scenes):
+    steps = [h["step"] for h in scenes["hand-hand"].history]
+    assert steps[:3] == ["1", "2", "3"] and steps[-1] == "5b" and "4" in steps
+    assert set(scenes["hand-hand"].history[2]["bodies"]) == {1, 2}
+
+
+def test_scene_is_deterministic():
+    a = interact.build_scene("hand-chain", 5)
+    b = interact.build_scene("hand-chain", 5)
+    c = interact.build_scene("hand-chain", 6)
+    for x, y in zip(a.bodies, b.bodies, strict=True):
+        assert np.array_equal(x.vertices, y.vertices)
+    assert a.stats == b.stats
+    assert not np.array_equal(a.bodies[0].vertices, c.bodies[0].vertices)
+
+
+def test_impossible_configuration_raises_a_clear_error():
+    # an aim point 1 m outside the hand: the second hand always misses the centre body
+    with pytest.raises(interact.InteractionError, match=r"'hand-object'.*seed 4.*missed"):
+        interact.build_scene("hand-object", 4, lateral_offset=1.0, max_attempts=3)
+    with pytest.raises(ValueError, match="kind must be one of"):
+        interact.build_scene("hand-foot", 0)
+    with pytest.raises(ValueError, match="unknown InteractionConfig fields"):
+        interact.build_scene("hand-hand", 0, speed=3)
+    with pytest.raises(ValueError, match="limits must be"):
+        interact.InteractionConfig(limits="none")
+
+
+# ---------------------------------------------------------------------------------------------
+# rendered samples
+# ---------------------------------------------------------------------------------------------
+def test_sample_bytes_are_deterministic(samples):
+    again = interact.make_sample(11, "hand-object", S)
+    assert dataset.encode_sample(again) == dataset.encode_sample(samples["hand-object"])
+    other = interact.make_sample(12, "hand-object", S)
+    assert dataset.encode_sample(other) != dataset.encode_sample(again)
+
+
+@pytest.mark.parametrize("kind", interact.KINDS)
+def test_vr_masks_and_joints(samples, kind, tmp_path):
+    smp = samples[kind]
+    dataset.write_sample(tmp_path / "s", smp)
+    back = dataset.read_sample(tmp_path / "s")
+    assert back["kind"] == kind
+    for lab, alone in back["alone_masks"].items():
+        visible = back["scene_mask"] == lab
+        assert not (visible & ~alone).any()        # visible pixels lie inside the alone mask
+        assert back["vr"][lab] == visible.sum() / alone.sum()  # VR by counting pixels
+        assert back["vr"][lab] == visibility.visibility_ratio(back["scene_mask"], alone, lab)
+    t = back["target"]
+    assert back["sides"][t] in ("left", "right")
+    if kind == "hand-hand":
+        assert back["sides"][t] == "left" and back["names"][t] == "left_hand"
+    j = back["joints"][t] @ back["K"].T
+    uv = j[:, :2] / j[:, 2:]
+    assert (j[:, 2] > 0).all()
+    assert (uv >= -0.5).all() and (uv <= S - 0.5).all()  # the target hand is in the image
+    # the target's mesh projects where its alone mask is (silhouette vertices may fall in the
+    # pixel next to the mask: dilate by one pixel)
+    from scipy.ndimage import binary_dilation
+
+    v = back["meshes"][t][0] @ back["K"].T
+    px = np.round(v[:, :2] / v[:, 2:]).astype(int)
+    mask = binary_dilation(back["alone_masks"][t], iterations=1)
+    inside = mask[px[:, 1].clip(0, S - 1), px[:, 0].clip(0, S - 1)]
+    assert inside.mean() > 0.99
+
+
+def test_mixed_kind_is_drawn_from_the_seed():
+    kinds = {interact._choose_kind(s) for s in range(40)}
+    assert kinds == set(interact.KINDS)
+    assert interact._choose_kind(123) == interact._choose_kind(123)
+
+
+def test_make_sample_rejects_bad_arguments():
+    with pytest.raises(ValueError, match="kind must be one of"):
+        interact.make_sample(0, "hand-chair", S)
+    with pytest.raises(ValueError, match="renderer is 64x64"):
+        interact.make_sample(0, "hand-hand", 32, renderer=interact.get_renderer(S))
