@@ -24,7 +24,7 @@ def _source(cell: dict) -> str:
 
 def test_notebook_names_are_numbered():
     for nb in NOTEBOOKS:
-        assert re.fullmatch(r"\d\d_[a-z0-9_]+\.ipynb", nb.name), f"{nb.name}: expected NN_name.ipynb"
+        assert re.fullmatch(r"\d\d_[a-z0-9_]+\.ipynb", nb.name), f"{nb.name}: want NN_name.ipynb"
 
 
 def test_every_notebook_is_in_the_docs_nav():
@@ -35,7 +35,7 @@ def test_every_notebook_is_in_the_docs_nav():
 
 def test_docs_reach_the_notebooks():
     link = ROOT / "docs" / "notebooks"
-    assert link.resolve() == (ROOT / "notebooks").resolve(), "docs/notebooks must point at notebooks/"
+    assert link.resolve() == (ROOT / "notebooks").resolve(), "docs/notebooks must link notebooks/"
 
 
 @pytest.mark.parametrize("nb", NOTEBOOKS, ids=[nb.name for nb in NOTEBOOKS])
