@@ -72,7 +72,6 @@ __all__ = [
     "render_scene",
     "scene_lights",
     "signed_distance",
-    "srgb_to_linear",
 ]
 
 #: Scene kinds of the generator (``"mixed"`` in :func:`make_sample` draws one per sample).
@@ -459,26 +458,16 @@ class Scene:
         raise ValueError(f"no body with label {label}; labels are "
                          f"{[b.label for b in self.bodies]}")
 
-    def render_meshes(self, R=None, t=None, linear: bool = True) -> list[tuple]:
-        """``(vertices, faces, colors, label)`` per body, optionally moved ``x -> R x + t``.
+    def render_meshes(self, R=None, t=None) -> list[tuple]:
+        """``(vertices, faces, sRGB colors, label)`` per body, optionally moved ``x -> R x + t``.
 
         Args:
             R: (3, 3) rotation (default identity).
             t: (3,) translation, metres (default zero).
-            linear: convert the sRGB vertex colours to linear RGB (:func:`srgb_to_linear`).
-                pyrender multiplies the lit colour by the vertex colour and gamma-encodes the
-                result, i.e. it expects *linear* vertex colours; sRGB colours come out washed out.
         """
         R = np.eye(3) if R is None else np.asarray(R, float)
         t = np.zeros(3) if t is None else np.asarray(t, float)
-        return [(b.vertices @ R.T + t, b.faces,
-                 srgb_to_linear(b.colors) if linear else b.colors, b.label) for b in self.bodies]
-
-
-def srgb_to_linear(colors) -> np.ndarray:
-    """sRGB colours in [0, 1] -> linear RGB (the IEC 61966-2-1 transfer function), same shape."""
-    c = np.clip(np.asarray(colors, float), 0.0, 1.0)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        return [(b.vertices @ R.T + t, b.faces, b.colors, b.label) for b in self.bodies]
 
 
 class _Hand:

@@ -407,7 +407,8 @@ class RenderMesh(NamedTuple):
     Attributes:
         vertices: (V, 3) float, metres, OpenCV camera frame.
         faces: (F, 3) int vertex indices, counter-clockwise seen from outside.
-        colors: (V, 3) or (V, 4) vertex colours, float in [0, 1] or uint8 in [0, 255].
+        colors: (V, 3) or (V, 4) sRGB vertex colours, float in [0, 1] or uint8 in [0, 255]
+            (linearised for pyrender by `srgb_to_linear`).
         label: int >= 1, unique in the scene; its value in the label mask.
     """
 
@@ -478,6 +479,17 @@ def _as_meshes(meshes: Sequence[Any]) -> list[RenderMesh]:
         c = c[:, :3].astype(np.float64) / 255.0 if c.dtype == np.uint8 else c[:, :3].astype(float)
         out.append(RenderMesh(v, f.astype(np.int64), np.clip(c, 0.0, 1.0), label))
     return out
+
+
+def srgb_to_linear(colors) -> np.ndarray:
+    """sRGB colours in [0, 1] -> linear RGB (the IEC 61966-2-1 transfer function), same shape.
+
+    pyrender multiplies the lit colour by the vertex colour and gamma-encodes the result
+    (``shaders/mesh.frag``), so it expects *linear* vertex colours; the library's colours (skin
+    tones, object palettes) are sRGB, and `Renderer.render` converts them with this function.
+    """
+    c = np.clip(np.asarray(colors, float), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -559,7 +571,8 @@ class Renderer:
             prim = pr.Primitive(positions=m.vertices.astype(np.float32),
                                 normals=_vertex_normals(m.vertices, m.faces).astype(np.float32),
                                 indices=m.faces.astype(np.uint32),
-                                color_0=np.concatenate([m.colors, np.ones((len(m.colors), 1))],
+                                color_0=np.concatenate([srgb_to_linear(m.colors),
+                                                        np.ones((len(m.colors), 1))],
                                                        1).astype(np.float32),
                                 material=material)
             nodes[m.label] = scene.add(pr.Mesh([prim]), name=f"body{m.label}")
