@@ -1,0 +1,297 @@
+"""MSMR-Net: image encoder -> FC -> coarse mesh -> transformer -> mesh decoder -> vertices, joints.
+
+Paper section "Multi-path Mesh Decoder" (architecture figure) and Table 3 (ablation). The model:
+
+1. ``encoder`` (ResNet / HRNet, :mod:`handmesh_tutorial.encoder`): image ``(B, 3, H, W)`` to a
+   global feature ``(B, D)``;
+2. ``latent_to_mesh`` (the FC of the intermediate module): ``(B, D)`` to ``(B, V_c * C)``, reshaped
+   to one ``C``-channel token per coarsest-mesh vertex, ``(B, V_c, C)``;
+3. ``transformer`` (:class:`~handmesh_tutorial.blocks.CoarseMeshTransformer`, or identity when
+   ``attention=False``): long-range interactions between the coarse vertices;
+4. ``decoder`` (:mod:`handmesh_tutorial.decoder`, single- or multi-path) to ``(B, V, 3)``;
+5. joints ``(B, J, 3)`` = the template's joint regressor ``(J, V)`` applied to the vertices.
+
+The FC is kept modest by a small coarse width ``C`` (``latent_channels``, default 16); in CMR
+the FC is ~73% of the decoder's parameters; with a ResNet-18, the open hand (50 coarse vertices)
+and the default channels ours is 410k parameters, 0.76 of the single-path decoder and 0.61 of the
+multi-path one. :func:`parameter_table` prints the split.
+
+Everything topological (hierarchy, spirals, up/down maps, joint regressor) comes from the template
+and is rebuilt by :func:`build_model`; the state dict holds only learned weights.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from .blocks import CoarseMeshTransformer
+from .decoder import MultiPathDecoder, SinglePathDecoder, hierarchy_spirals
+from .encoder import build_encoder
+from .sampling import mesh_hierarchy
+
+__all__ = ["MeshTemplate", "as_template", "MSMRNet", "build_model", "parameter_counts",
+           "parameter_table", "DEFAULT_SINGLE_CHANNELS", "DEFAULT_MULTI_CHANNELS",
+           "DEFAULT_LATENT_CHANNELS"]
+
+#: Per-level decoder channels of the single-path baseline, finest level first.
+DEFAULT_SINGLE_CHANNELS = (32, 32, 64, 64, 128)
+#: Per-level branch channels of the multi-path decoder, finest first. Narrower than the
+#: single path because level ``l`` (0 = finest) runs in ``L - l`` stages; with these widths the
+#: multi-path decoder plus transformer has ~20-25% more parameters than the single path at the
+#: same depth (``benchmarks/model.py`` prints the ratio).
+DEFAULT_MULTI_CHANNELS = (16, 24, 32, 48, 64)
+#: Channels per coarse-mesh token (output of the FC, width of the transformer).
+DEFAULT_LATENT_CHANNELS = 16
+
+
+@dataclass
+class MeshTemplate:
+    """A template mesh with a joint regressor: all the model needs to know about the hand.
+
+    Attributes:
+        vertices: ``(V, 3)`` float64 rest positions, metres.
+        faces: ``(F, 3)`` int64 triangles.
+        joint_regressor: ``(J, V)`` float64; joints = ``joint_regressor @ vertices``.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    joint_regressor: np.ndarray
+
+
+def as_template(template=None) -> MeshTemplate:
+    """Normalise a template argument.
+
+    Args:
+        template: ``None`` (the library's open right hand, ``hmt.hand.HandModel("right")``); a
+            :class:`MeshTemplate`; a mapping with keys ``vertices``, ``faces``,
+            ``joint_regressor``; a ``(vertices, faces, joint_regressor)`` tuple; or any object
+            with attributes ``faces``, ``joint_regressor`` and ``template_vertices`` or
+            ``vertices`` (e.g. a ``HandModel`` or a user's MANO model).
+
+    Returns:
+        A validated :class:`MeshTemplate`.
+
+    Raises:
+        ValueError: wrong shapes, face ids out of range, or a missing field.
+    """
+    if template is None:
+        from .hand import HandModel  # lazy: the hand is built only when needed
+
+        template = HandModel("right")
+    if isinstance(template, MeshTemplate):
+        v, f, jr = template.vertices, template.faces, template.joint_regressor
+    elif isinstance(template, Mapping):
+        missing = {"vertices", "faces", "joint_regressor"} - set(template)
+        if missing:
+            raise ValueError(f"template mapping lacks keys {sorted(missing)}")
+        v, f, jr = template["vertices"], template["faces"], template["joint_regressor"]
+    elif isinstance(template, tuple | list):
+        if len(template) != 3:
+            raise ValueError("a template tuple must be (vertices, faces, joint_regressor), got "
+                             f"{len(template)} items")
+        v, f, jr = template
+    else:
+        v = getattr(template, "template_vertices", None)
+        if v is None:
+            v = getattr(template, "vertices", None)
+        f = getattr(template, "faces", None)
+        jr = getattr(template, "joint_regressor", None)
+        if v is None or f is None or jr is None:
+            raise ValueError("template object needs attributes faces, joint_regressor and "
+                             f"template_vertices (or vertices); got {type(template).__name__}")
+    v, f, jr = (np.asarray(_numpy(x)) for x in (v, f, jr))
+    v = v.astype(np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"template vertices must be (V, 3), got {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
+        raise ValueError(f"template faces must be (F, 3) integers, got {f.shape} {f.dtype}")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"template face ids must lie in [0, {len(v)}), got [{f.min()}, "
+                         f"{f.max()}]")
+    jr = jr.astype(np.float64)
+    if jr.ndim != 2 or jr.shape[1] != len(v):
+        raise ValueError(f"joint_regressor must be (J, {len(v)}), got {jr.shape}")
+    return MeshTemplate(v, f.astype(np.int64), jr)
+
+
+def _numpy(x):
+    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else x
+
+
+class MSMRNet(nn.Module):
+    """The full model: ``encoder -> latent_to_mesh -> transformer -> decoder`` (+ joints).
+
+    Build it with :func:`build_model`.
+
+    Args:
+        encoder: module ``(B, 3, H, W) -> (B, D)`` with attribute ``out_features`` (``D``).
+        decoder: :class:`~handmesh_tutorial.decoder.SinglePathDecoder` or
+            :class:`~handmesh_tutorial.decoder.MultiPathDecoder` with input width
+            ``latent_channels``.
+        coarse_vertices: ``V_c``, vertices of the coarsest mesh.
+        latent_channels: ``C``, channels per coarse vertex.
+        joint_regressor: ``(J, V)`` array or tensor.
+        transformer: module on ``(B, V_c, C)`` or ``None`` (no attention).
+        output_scale: metres per decoder output unit (the decoder's layer-normalised features
+            give O(1) outputs; 0.1 m puts them at hand size).
+        faces: ``(F, 3)`` faces of the output mesh (kept for plotting and export).
+
+    Shapes:
+        ``images (B, 3, H, W)`` -> ``{"vertices": (B, V, 3), "joints": (B, J, 3)}``, metres.
+    """
+
+    def __init__(self, encoder: nn.Module, decoder: nn.Module, coarse_vertices: int,
+                 latent_channels: int, joint_regressor, transformer: nn.Module | None = None,
+                 output_scale: float = 0.1, faces=None):
+        super().__init__()
+        self.encoder = encoder
+        self.coarse_vertices = coarse_vertices
+        self.latent_channels = latent_channels
+        self.latent_to_mesh = nn.Linear(encoder.out_features, coarse_vertices * latent_channels)
+        self.transformer = transformer if transformer is not None else nn.Identity()
+        self.decoder = decoder
+        self.output_scale = float(output_scale)
+        self.faces = None if faces is None else np.asarray(faces)
+        jr = torch.as_tensor(np.asarray(_numpy(joint_regressor)), dtype=torch.float32)
+        self.register_buffer("joint_regressor", jr, persistent=False)
+
+    def decode(self, features: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Everything after the encoder.
+
+        Args:
+            features: global image features ``(B, D)``.
+
+        Returns:
+            dict with ``vertices`` ``(B, V, 3)`` and ``joints`` ``(B, J, 3)``, metres.
+        """
+        if features.dim() != 2 or features.shape[1] != self.latent_to_mesh.in_features:
+            raise ValueError(f"expected features (B, {self.latent_to_mesh.in_features}), got "
+                             f"{tuple(features.shape)}")
+        tokens = self.latent_to_mesh(features).reshape(-1, self.coarse_vertices,
+                                                       self.latent_channels)
+        vertices = self.decoder(self.transformer(tokens)) * self.output_scale
+        joints = torch.einsum("jv,bvc->bjc", self.joint_regressor.to(vertices.dtype), vertices)
+        return {"vertices": vertices, "joints": joints}
+
+    def forward(self, images: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Args: images ``(B, 3, H, W)`` float. Returns ``{"vertices", "joints"}`` (metres)."""
+        return self.decode(self.encoder(images))
+
+
+def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
+                attention: bool = True, template=None, channels: Sequence[int] | None = None,
+                latent_channels: int = DEFAULT_LATENT_CHANNELS, spiral_length: int = 9,
+                dilation: int = 1, num_blocks: int = 1,
+                factors: Sequence[float] = (2, 2, 2, 2), num_heads: int = 2,
+                transformer_layers: int = 1, fuse_head: bool = False,
+                output_scale: float = 0.1, hierarchy=None) -> MSMRNet:
+    """Build MSMR-Net (or the single-path / no-attention ablations of the paper's Table 3).
+
+    Args:
+        encoder: encoder name (``resnet18``, ``resnet34``, ``resnet50``, ``hrnet18``) or a module
+            ``(B, 3, H, W) -> (B, D)`` with attribute ``out_features``.
+        decoder: ``"multi"`` (MSMR multi-path) or ``"single"`` (coarse-to-fine baseline).
+        attention: put the transformer on the coarse-mesh tokens.
+        template: see :func:`as_template`; default the open right hand.
+        channels: decoder channels per hierarchy level, finest first (default
+            :data:`DEFAULT_MULTI_CHANNELS` or :data:`DEFAULT_SINGLE_CHANNELS`).
+        latent_channels: channels per coarse-mesh token (FC output, transformer width).
+        spiral_length: spiral length ``L``.
+        dilation: spiral dilation.
+        num_blocks: residual spiral blocks per level (single) or per branch and stage (multi);
+            equal values give equal depth.
+        factors: reduction factors of the hierarchy (len + 1 levels = stages).
+        num_heads: attention heads (must divide ``latent_channels``).
+        transformer_layers: transformer blocks.
+        fuse_head: multi-path only; head on all branches upsampled and concatenated.
+        output_scale: metres per decoder output unit.
+        hierarchy: a precomputed :class:`~handmesh_tutorial.sampling.MeshHierarchy` of the
+            template (default: computed, cached on disk by ``mesh_hierarchy``).
+
+    Returns:
+        :class:`MSMRNet` with submodules ``encoder``, ``latent_to_mesh``, ``transformer``,
+        ``decoder``, and attributes ``hierarchy`` and ``spirals``.
+
+    Raises:
+        ValueError: unknown encoder or decoder, bad template, channel count mismatch.
+    """
+    tmpl = as_template(template)
+    if decoder not in ("multi", "single"):
+        raise ValueError(f"decoder must be 'multi' or 'single', got {decoder!r}")
+    if hierarchy is None:
+        hierarchy = mesh_hierarchy(tmpl.vertices, tmpl.faces, factors)
+    if len(hierarchy.vertices[0]) != len(tmpl.vertices):
+        raise ValueError(f"hierarchy has {len(hierarchy.vertices[0])} finest vertices, the "
+                         f"template {len(tmpl.vertices)}")
+    spirals = hierarchy_spirals(hierarchy, spiral_length, dilation)
+    if channels is None:
+        channels = DEFAULT_MULTI_CHANNELS if decoder == "multi" else DEFAULT_SINGLE_CHANNELS
+        channels = tuple(channels)[:len(spirals)] if len(spirals) <= len(channels) else None
+        if channels is None:
+            raise ValueError(f"{len(spirals)} levels: pass channels (one per level)")
+    enc = build_encoder(encoder) if isinstance(encoder, str) else encoder
+    if not hasattr(enc, "out_features"):
+        raise ValueError("a custom encoder needs an attribute out_features (its output width D)")
+    if decoder == "multi":
+        dec = MultiPathDecoder(hierarchy, spirals, channels, num_blocks, fuse_head=fuse_head,
+                               in_channels=latent_channels)
+    else:
+        dec = SinglePathDecoder(hierarchy, spirals, channels, num_blocks,
+                                in_channels=latent_channels)
+    coarse = len(spirals[-1])
+    transformer = (CoarseMeshTransformer(coarse, latent_channels, num_heads, transformer_layers)
+                   if attention else None)
+    model = MSMRNet(enc, dec, coarse, latent_channels, tmpl.joint_regressor, transformer,
+                    output_scale, faces=tmpl.faces)
+    model.hierarchy = hierarchy
+    model.spirals = spirals
+    return model
+
+
+def _count(module: nn.Module) -> int:
+    return sum(p.numel() for p in module.parameters())
+
+
+def parameter_counts(model: MSMRNet) -> dict[str, int]:
+    """Trainable parameters per part.
+
+    Args:
+        model: an :class:`MSMRNet`.
+
+    Returns:
+        dict ``encoder``, ``latent_to_mesh``, ``transformer``, ``decoder``, ``total``.
+    """
+    parts = {name: _count(getattr(model, name))
+             for name in ("encoder", "latent_to_mesh", "transformer", "decoder")}
+    parts["total"] = _count(model)
+    return parts
+
+
+def parameter_table(model: MSMRNet) -> str:
+    """A text table of parameters per part, with shares.
+
+    Columns: part, parameters, share of the whole model, share of the mesh part (everything
+    after the encoder: FC + transformer + decoder). The last line gives FC / decoder, the ratio
+    that DESIGN.md measures as ~0.73 in CMR.
+
+    Args:
+        model: an :class:`MSMRNet`.
+
+    Returns:
+        The table as a string (print it).
+    """
+    c = parameter_counts(model)
+    mesh = c["latent_to_mesh"] + c["transformer"] + c["decoder"]
+    lines = [f"{'part':<16}{'parameters':>12}{'% model':>9}{'% mesh':>9}"]
+    for name in ("encoder", "latent_to_mesh", "transformer", "decoder"):
+        share_mesh = "" if name == "encoder" else f"{100 * c[name] / max(mesh, 1):8.1f}%"
+        lines.append(f"{name:<16}{c[name]:>12,}{100 * c[name] / c['total']:8.1f}%{share_mesh:>9}")
+    lines.append(f"{'total':<16}{c['total']:>12,}")
+    lines.append(f"FC / decoder = {c['latent_to_mesh'] / max(c['decoder'], 1):.2f}")
+    return "\n".join(lines)

@@ -1,0 +1,142 @@
+"""Tests of handmesh_tutorial.model: MSMRNet assembly, outputs, templates, state-dict round trip."""
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from handmesh_tutorial import model as M
+from handmesh_tutorial.blocks import CoarseMeshTransformer
+from handmesh_tutorial.decoder import MultiPathDecoder, SinglePathDecoder
+from handmesh_tutorial.sampling import mesh_hierarchy
+
+torch.set_num_threads(1)
+
+SMALL = (4, 4, 8, 8, 8)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    """An icosphere template with a random row-stochastic 21-joint regressor, and its hierarchy."""
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    rng = np.random.default_rng(0)
+    jr = rng.random((21, len(mesh.vertices)))
+    jr /= jr.sum(1, keepdims=True)
+    tmpl = M.MeshTemplate(np.asarray(mesh.vertices) * 0.05, np.asarray(mesh.faces), jr)
+    h = mesh_hierarchy(tmpl.vertices, tmpl.faces, use_cache=False)
+    return tmpl, h
+
+
+def _build(sphere, **kw):
+    tmpl, h = sphere
+    kw.setdefault("channels", SMALL)
+    kw.setdefault("latent_channels", 8)
+    return M.build_model(template=tmpl, hierarchy=h, **kw)
+
+
+@pytest.mark.parametrize("decoder,attention", [("multi", True), ("single", False)])
+def test_model_forward_shapes_joints_and_names(sphere, decoder, attention):
+    torch.manual_seed(0)
+    net = _build(sphere, decoder=decoder, attention=attention).eval()
+    names = dict(net.named_children())
+    assert {"encoder", "latent_to_mesh", "transformer", "decoder"} <= set(names)
+    assert isinstance(net.decoder, MultiPathDecoder if decoder == "multi" else SinglePathDecoder)
+    assert isinstance(net.transformer, CoarseMeshTransformer if attention else torch.nn.Identity)
+    with torch.no_grad():
+        out = net(torch.randn(2, 3, 64, 64))
+        big = net(torch.randn(1, 3, 224, 224))
+    v = len(sphere[0].vertices)
+    assert out["vertices"].shape == (2, v, 3) and out["joints"].shape == (2, 21, 3)
+    assert big["vertices"].shape == (1, v, 3) and big["joints"].shape == (1, 21, 3)
+    jr = torch.from_numpy(sphere[0].joint_regressor).float()
+    torch.testing.assert_close(out["joints"], torch.einsum("jv,bvc->bjc", jr, out["vertices"]))
+    assert torch.isfinite(out["vertices"]).all()
+
+
+def test_model_backward_reaches_every_part(sphere):
+    net = _build(sphere)
+    out = net(torch.randn(2, 3, 64, 64))
+    (out["vertices"].abs().mean() + out["joints"].abs().mean()).backward()
+    for part in ("encoder", "latent_to_mesh", "transformer", "decoder"):
+        grads = [p.grad for p in getattr(net, part).parameters()]
+        assert all(g is not None and torch.isfinite(g).all() for g in grads), part
+
+
+def test_fc_output_matches_coarse_mesh(sphere):
+    tmpl, h = sphere
+    net = _build(sphere)
+    assert net.coarse_vertices == h.num_vertices[-1]
+    assert net.latent_to_mesh.out_features == h.num_vertices[-1] * 8
+    assert net.latent_to_mesh.in_features == net.encoder.out_features == 512
+
+
+def test_weights_only_state_dict_round_trip(sphere, tmp_path):
+    torch.manual_seed(0)
+    net = _build(sphere).eval()
+    path = tmp_path / "model.pt"
+    torch.save(net.state_dict(), path)
+    sd = torch.load(path, weights_only=True)
+    assert not any("index" in k or "indices" in k or "joint_regressor" in k for k in sd)
+    torch.manual_seed(1)
+    other = _build(sphere).eval()
+    x = torch.randn(1, 3, 64, 64)
+    with torch.no_grad():
+        assert not torch.allclose(other(x)["vertices"], net(x)["vertices"])
+        other.load_state_dict(sd)
+        torch.testing.assert_close(other(x)["vertices"], net(x)["vertices"])
+
+
+def test_parameter_table_and_counts(sphere):
+    net = _build(sphere)
+    c = M.parameter_counts(net)
+    assert c["total"] == sum(p.numel() for p in net.parameters())
+    assert c["encoder"] + c["latent_to_mesh"] + c["transformer"] + c["decoder"] == c["total"]
+    assert c["latent_to_mesh"] == 512 * net.coarse_vertices * 8 + net.coarse_vertices * 8
+    table = M.parameter_table(net)
+    for part in ("encoder", "latent_to_mesh", "transformer", "decoder", "total", "FC / decoder"):
+        assert part in table
+    assert f"{c['decoder']:,}" in table
+    no_att = M.parameter_counts(_build(sphere, attention=False))
+    assert no_att["transformer"] == 0 and no_att["decoder"] == c["decoder"]
+
+
+def test_templates_in_every_form(sphere):
+    tmpl, h = sphere
+    as_dict = {"vertices": tmpl.vertices, "faces": tmpl.faces,
+               "joint_regressor": tmpl.joint_regressor}
+    for form in (as_dict, (tmpl.vertices, tmpl.faces, tmpl.joint_regressor)):
+        t = M.as_template(form)
+        np.testing.assert_array_equal(t.faces, tmpl.faces)
+    with pytest.raises(ValueError, match="lacks keys"):
+        M.as_template({"vertices": tmpl.vertices})
+    with pytest.raises(ValueError, match=r"joint_regressor must be \(J, 642\)"):
+        M.as_template((tmpl.vertices, tmpl.faces, tmpl.joint_regressor[:, :10]))
+    with pytest.raises(ValueError, match="face ids"):
+        M.as_template((tmpl.vertices, tmpl.faces + 1000, tmpl.joint_regressor))
+    with pytest.raises(ValueError, match="decoder must be 'multi' or 'single'"):
+        _build(sphere, decoder="double")
+
+
+def test_custom_encoder_module(sphere):
+    class Tiny(torch.nn.Module):
+        out_features = 6
+
+        def forward(self, x):
+            return x.mean((2, 3)).repeat(1, 2)
+
+    net = _build(sphere, encoder=Tiny())
+    assert net(torch.randn(2, 3, 32, 32))["vertices"].shape == (2, 642, 3)
+    with pytest.raises(ValueError, match="out_features"):
+        _build(sphere, encoder=torch.nn.Identity())
+
+
+def test_default_template_is_the_open_hand():
+    from handmesh_tutorial.hand import HandModel
+
+    hand = HandModel("right")
+    net = M.build_model(channels=SMALL, latent_channels=8).eval()
+    assert net.faces.shape == hand.faces.shape
+    with torch.no_grad():
+        out = net(torch.randn(1, 3, 64, 64))
+    assert out["vertices"].shape == (1, hand.num_vertices, 3)
+    assert out["joints"].shape == (1, 21, 3)
