@@ -15,7 +15,8 @@ __version__ = "0.1.0"
 
 # One module per concept; see docs/index.md for the data flow between them.
 _SUBMODULES = (
-    "augment", "blocks", "budget", "cli", "collision", "dataset", "decoder", "encoder", "freihand",
+    "augment", "blocks", "budget", "cli", "collision", "dataset", "decoder", "demo", "encoder",
+    "freihand",
     "hand", "interact", "lcs", "mano", "metrics", "model", "objects", "render", "sampling",
     "spiral", "train", "visibility", "viz",
 )

@@ -94,6 +94,10 @@ class InteractionError(RuntimeError):
         self.kind, self.seed, self.reason = kind, seed, reason
         super().__init__(f"cannot generate a {kind!r} scene for seed {seed}: {reason}")
 
+    def __reduce__(self):
+        # Rebuild from the three fields: a worker process raising it must reach the parent intact.
+        return (type(self), (self.kind, self.seed, self.reason))
+
 
 @dataclass(frozen=True)
 class InteractionConfig:

@@ -440,3 +440,73 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
             if names:
                 ax.text(*(0.5 * (p0[k] + p1[k])), names[k], fontsize="x-small")
     return artists
+
+
+def plot_mesh_on_image(ax, image, vertices, faces, K, color=(0.35, 0.6, 1.0), alpha: float = 0.6,
+                       wireframe: bool = False, linewidth: float = 0.3, zoom: float | None = 1.4,
+                       title: str | None = None):
+    """Draw a camera-frame mesh over an image: projected with ``K``, depth-sorted, shaded.
+
+    Faces are drawn back to front (painter's algorithm, no z-buffer), shaded by how directly they
+    face the camera, so a hand reads as a 3D surface; ``wireframe=True`` draws only the edges.
+
+    Args:
+        ax: a matplotlib 2D ``Axes``.
+        image: (H, W, 3) uint8 image (shown as the background); ``None`` draws on a blank axes.
+        vertices: (V, 3) mesh in the camera frame (OpenCV: x right, y down, z forward), metres.
+        faces: (F, 3) vertex indices.
+        K: (3, 3) intrinsics of ``image``.
+        color: RGB in [0, 1] of the mesh.
+        alpha: face opacity.
+        wireframe: edges only (no filled faces).
+        linewidth: edge width.
+        zoom: frame the view on the projected mesh, this many times its bounding box (``None``
+            keeps the whole image).
+        title: axes title.
+
+    Returns:
+        The ``PolyCollection`` drawn.
+    """
+    from matplotlib.collections import PolyCollection
+
+    v = np.asarray(_to_numpy(vertices), dtype=np.float64)
+    f = np.asarray(_to_numpy(faces), dtype=np.int64)
+    k = np.asarray(_to_numpy(K), dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"vertices must be (V, 3), got {v.shape}")
+    if k.shape != (3, 3):
+        raise ValueError(f"K must be (3, 3), got {k.shape}")
+    z = np.clip(v[:, 2], 1e-6, None)
+    uv = (v @ k.T)[:, :2] / z[:, None]
+    if image is not None:
+        ax.imshow(image)
+    tri = v[f]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True) + 1e-12
+    view = tri.mean(1)
+    view /= np.linalg.norm(view, axis=1, keepdims=True) + 1e-12
+    shade = 0.35 + 0.65 * np.abs((normals * view).sum(1))
+    order = np.argsort(-tri[:, :, 2].mean(1))  # far faces first
+    rgba = np.zeros((len(f), 4))
+    rgba[:, :3] = np.clip(np.asarray(color, dtype=float)[None] * shade[:, None], 0, 1)
+    rgba[:, 3] = alpha
+    if wireframe:
+        coll = PolyCollection(uv[f][order], facecolors="none", edgecolors=[(*color, alpha)],
+                              linewidths=linewidth)
+    else:
+        coll = PolyCollection(uv[f][order], facecolors=rgba[order], edgecolors="none")
+    ax.add_collection(coll)
+    if zoom is not None:
+        lo, hi = uv.min(0), uv.max(0)
+        c, half = (lo + hi) / 2, max(float((hi - lo).max()), 1.0) * zoom / 2
+        ax.set_xlim(c[0] - half, c[0] + half)
+        ax.set_ylim(c[1] + half, c[1] - half)  # image rows grow downwards
+    elif image is not None:
+        ax.set_xlim(-0.5, image.shape[1] - 0.5)
+        ax.set_ylim(image.shape[0] - 0.5, -0.5)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if title is not None:
+        ax.set_title(title, fontsize="small")
+    return coll

@@ -218,3 +218,12 @@ def test_make_sample_rejects_bad_arguments():
         interact.make_sample(0, "hand-chair", S)
     with pytest.raises(ValueError, match="renderer is 64x64"):
         interact.make_sample(0, "hand-hand", 32, renderer=interact.get_renderer(S))
+
+
+def test_interaction_error_survives_pickling():
+    import pickle
+
+    err = pickle.loads(pickle.dumps(interact.InteractionError("hand-chain", 7, "no contact")))
+    assert isinstance(err, interact.InteractionError)
+    assert (err.kind, err.seed, err.reason) == ("hand-chain", 7, "no contact")
+    assert "seed 7" in str(err)

@@ -1,0 +1,592 @@
+"""The main demo job (``handmesh demo`` / ``make demo``): data -> training -> evaluation -> report.
+
+One call runs the whole paper pipeline at laptop scale, on CPU:
+
+1. **Data.** Two VR-balanced INTER-SH sets of mixed scenes (hand-hand, hand-object and
+   hand-chain, one kind drawn per sample; :func:`handmesh_tutorial.dataset.generate_dataset`
+   with :func:`make_scene` and ``balance_vr=True``, so the target hands spread evenly over the
+   paper's four VR bins):
+   ``OUT/data/train`` (seed ``seed``) and the held-out ``OUT/data/test`` (seed ``seed + 1``,
+   never seen in training).
+2. **Training.** MSMR-Net (ResNet-18 encoder, multi-path decoder, coarse-mesh attention) with
+   :func:`handmesh_tutorial.train.train` into ``OUT/train`` (10% of the training set held out
+   for per-epoch validation; ``checkpoint_best.pt`` keeps the best validation PA-MPVPE).
+3. **Evaluation** of the best checkpoint on the test set with
+   :func:`handmesh_tutorial.train.evaluate` into ``OUT/eval`` (``eval.json``,
+   ``predictions.npz``, ``pck.png``, ``vr.png``).
+4. **Report.** ``OUT/report.md`` with the FreiHAND-style scores, the table per VR bin (the
+   paper's Table 2 layout), predicted meshes drawn over held-out images next to the ground truth
+   (``overlays.png``), the loss curves (``loss.png``), PCK curves and error vs VR; ``OUT/demo.json``
+   holds the same numbers and the timings.
+
+**Resumable.** Rerunning the same command skips finished work: the data generators skip samples
+already on disk, training continues from ``OUT/train/checkpoint_last.pt`` (exactly, see
+:mod:`handmesh_tutorial.train`), and a finished training is not repeated. Evaluation and report
+are cheap and always redone.
+
+**Sizes** come from the run-size tier (:func:`handmesh_tutorial.budget.budget`) through
+:meth:`DemoConfig.from_budget`; the demo's own choices, made so that the ``default`` tier
+finishes in about a quarter of an hour on a 2-core CPU:
+
+* training scenes = 1/3 of ``budget.samples`` and test scenes = 1/4 of ``budget.eval_samples``
+  (``default``: 200 + 50). VR balancing rejects candidates (about 5 renders per kept scene,
+  10 for the lowest bin), so a scene costs about as much as 10 training epochs of it;
+* network crop = 1/2 of ``budget.image_size`` (``default``: 64 px; images are rendered at
+  ``budget.image_size``, the hand covers most of them) and batch = 1/2 of ``budget.batch_size``
+  (``default``: 8): a ResNet-18 step costs about linearly in pixels and batch, and a short run
+  needs *steps* more than it needs resolution;
+* ``2 * budget.epochs`` epochs (``default``: 40, about 900 steps), learning rate ``1e-3`` (as
+  MobRecon/HandMesh; the paper's ``1e-4`` is for 200 epochs), halved once, at half the run.
+
+What to expect at the ``default`` size: from scratch, the L1 vertex loss first drops to a plateau
+(about 27 mm) where the network predicts one small, nearly pose-independent mesh near the root --
+the L1-optimal answer when the hand's 3D orientation is unknown. Leaving that plateau needs the
+encoder to read the global orientation from the image; a network overfits 16 fixed images after
+about 100 steps, but generalising from a couple of hundred randomly oriented scenes takes far
+more data and epochs than a quarter of an hour of CPU. The report shows honestly where the run
+got; the ``full`` tier (40,000 scenes, 200 epochs) is the paper's scale.
+
+Example::
+
+    import handmesh_tutorial as hmt
+    result = hmt.demo.run_demo("runs/demo", seed=0)
+    print(result.report, result.scores["pa_mpjpe"])
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "make_scene", "plot_overlays",
+           "plot_loss_curves", "write_report", "headline", "parse_headline", "HEADLINE"]
+
+#: Scores in the report's headline table: (eval.json key, column title, format).
+HEADLINE = (("pa_mpjpe", "PA-MPJPE (mm)", "{:.2f}"), ("pa_mpvpe", "PA-MPVPE (mm)", "{:.2f}"),
+            ("f_at_5mm", "F@5mm", "{:.3f}"), ("f_at_15mm", "F@15mm", "{:.3f}"),
+            ("auc_joints", "AUC joints 0-50mm", "{:.3f}"),
+            ("auc_joints_20mm", "AUC joints 0-20mm", "{:.3f}"))
+
+
+@dataclass
+class DemoConfig:
+    """Sizes and choices of one demo run (see the module docstring for why these values).
+
+    Attributes:
+        train_samples: training scenes generated (all kinds together).
+        test_samples: held-out test scenes.
+        render_size: side of the rendered scene images, pixels.
+        image_size: side of the network's input crop, pixels.
+        epochs: training epochs.
+        batch_size: training batch size.
+        lr: Adam learning rate.
+        encoder: image encoder name.
+        decoder: ``"multi"`` or ``"single"``.
+        attention: coarse-mesh transformer on.
+        threads: torch threads.
+        workers: data-generation processes.
+        overlays: held-out samples drawn in ``overlays.png``.
+        budget: name of the tier the sizes came from.
+    """
+
+    train_samples: int = 200
+    test_samples: int = 50
+    render_size: int = 128
+    image_size: int = 64
+    epochs: int = 40
+    batch_size: int = 8
+    lr: float = 1e-3
+    encoder: str = "resnet18"
+    decoder: str = "multi"
+    attention: bool = True
+    threads: int = 2
+    workers: int = 2
+    overlays: int = 8
+    budget: str = "default"
+
+    @classmethod
+    def from_budget(cls, budget=None, **overrides) -> DemoConfig:
+        """The demo's sizes for a run-size tier.
+
+        Args:
+            budget: a :class:`~handmesh_tutorial.budget.Budget` (default ``hmt.budget()``).
+            **overrides: any field.
+
+        Returns:
+            The config.
+        """
+        if budget is None:
+            from .budget import budget as _budget
+
+            budget = _budget()
+        sized = dict(train_samples=max(4, budget.samples // 3),
+                     test_samples=max(4, budget.eval_samples // 4),
+                     render_size=budget.image_size,
+                     image_size=max(32, budget.image_size // 2),
+                     epochs=2 * budget.epochs, batch_size=max(2, budget.batch_size // 2),
+                     threads=budget.threads, workers=min(2, budget.threads),
+                     overlays=8 if budget.name != "smoke" else 4, budget=budget.name)
+        sized.update(overrides)
+        return cls(**sized)
+
+
+@dataclass
+class DemoResult:
+    """What :func:`run_demo` returns.
+
+    Attributes:
+        out_dir: the output folder.
+        report: path of ``report.md``.
+        scores: the held-out scores (``eval.json`` ``scores``: mm, AUC, F-scores).
+        vr_table: rows per VR bin (``eval.json`` ``vr_table``).
+        table: the VR table as markdown.
+        files: name -> path of everything written.
+        seconds: wall time per stage (``generate``, ``train``, ``evaluate``, ``report``,
+            ``total``) of this call.
+        config: the :class:`DemoConfig` used.
+        train_epochs: epochs completed by the training run.
+    """
+
+    out_dir: Path
+    report: Path
+    scores: dict
+    vr_table: list
+    table: str
+    files: dict
+    seconds: dict
+    config: DemoConfig
+    train_epochs: int = 0
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def make_scene(sample_seed: int, kind: str = "mixed", image_size: int = 128,
+               retries: int = 8) -> dict:
+    """One INTER-SH sample (:func:`handmesh_tutorial.interact.make_sample`), never failing on a
+    scene the generator cannot build.
+
+    ``make_sample`` raises :class:`~handmesh_tutorial.interact.InteractionError` for the rare seed
+    whose scene cannot be built within the generator's bounded retries; the dataset writer would
+    stop there. Here such a seed is replaced by ``SeedSequence([sample_seed, r]).generate_state``
+    for ``r = 1, 2, ...``: still deterministic, same seed -> same bytes.
+
+    Args:
+        sample_seed: the sample's seed.
+        kind: scene kind or ``"mixed"``.
+        image_size: square image side, pixels.
+        retries: replacement seeds tried before giving up.
+
+    Returns:
+        The sample dict.
+
+    Raises:
+        RuntimeError: no scene after ``retries`` replacement seeds.
+    """
+    from .interact import InteractionError, make_sample
+
+    seed = int(sample_seed)
+    for r in range(retries + 1):
+        try:
+            return make_sample(seed, kind, image_size=image_size)
+        except InteractionError as e:
+            reason = e.reason
+        seed = int(np.random.SeedSequence([int(sample_seed), r + 1]).generate_state(1)[0])
+    raise RuntimeError(f"no {kind} scene for seed {sample_seed} after {retries} replacement "
+                       f"seeds (last reason: {reason})")
+
+
+def _generate(root: Path, num: int, seed: int, cfg: DemoConfig, progress: bool):
+    import functools
+
+    from .dataset import generate_dataset
+    from .interact import KINDS, InteractionConfig, init_worker
+
+    fn = functools.partial(make_scene, kind="mixed", image_size=cfg.render_size)
+    config = {k: (list(v) if isinstance(v, tuple) else v)
+              for k, v in asdict(InteractionConfig()).items()}
+    params = {"generator": "handmesh_tutorial.demo", "kind": "mixed", "limits": "paper",
+              "config": config}
+    return generate_dataset(root, fn, num, seed, list(KINDS), workers=cfg.workers,
+                            progress=progress, params=params,
+                            image_size=cfg.render_size, balance_vr=True,
+                            worker_init=functools.partial(init_worker, cfg.render_size))
+
+
+def generate_data(root: str | os.PathLike, config: DemoConfig | None = None, seed: int = 0,
+                  progress: bool = True) -> dict:
+    """Generate (or resume) the demo's two VR-balanced sets: ``root/train`` and ``root/test``.
+
+    Notebooks share data through this call: the same ``root``, sizes and seed reuse what is on
+    disk (nothing is regenerated).
+
+    Args:
+        root: folder of the two sets.
+        config: sizes (``train_samples``, ``test_samples``, ``render_size``, ``workers``);
+            default :meth:`DemoConfig.from_budget`.
+        seed: seed of the training set; the test set uses ``seed + 1``.
+        progress: tqdm bars.
+
+    Returns:
+        dict with ``train`` and ``test`` roots (``Path``) and their
+        :class:`~handmesh_tutorial.dataset.GenerationSummary` as ``train_summary`` and
+        ``test_summary``.
+    """
+    cfg = config or DemoConfig.from_budget()
+    root = Path(root)
+    tr = _generate(root / "train", cfg.train_samples, seed, cfg, progress)
+    te = _generate(root / "test", cfg.test_samples, seed + 1, cfg, progress)
+    return {"train": root / "train", "test": root / "test", "train_summary": tr,
+            "test_summary": te}
+
+
+def plot_overlays(samples: list, pred_vertices, faces, titles: list | None = None,
+                  gt_color=(0.2, 0.8, 0.3), pred_color=(0.35, 0.6, 1.0)):
+    """Figure: per sample, the input scene, the ground-truth mesh and the predicted mesh on it.
+
+    Args:
+        samples: INTER-SH sample dicts (``image``, ``K``, ``meshes``, ``target``, ``kind``,
+            ``vr``).
+        pred_vertices: (N, V, 3) predictions in each sample's camera frame, metres.
+        faces: (F, 3) faces of the predicted meshes.
+        titles: optional extra text per sample (e.g. its error).
+        gt_color: RGB of the ground truth.
+        pred_color: RGB of the prediction.
+
+    Returns:
+        The matplotlib figure (rows of 3 panels, two samples per row).
+    """
+    import matplotlib.pyplot as plt
+
+    from . import viz
+
+    n = len(samples)
+    if len(pred_vertices) != n:
+        raise ValueError(f"{n} samples but {len(pred_vertices)} predictions")
+    rows = math.ceil(n / 2)
+    fig, axes = plt.subplots(rows, 6, figsize=(12, 2.2 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for i, s in enumerate(samples):
+        r, c = divmod(i, 2)
+        a = axes[r, 3 * c: 3 * c + 3]
+        t = s["target"]
+        gv, gf = s["meshes"][t]
+        extra = "" if titles is None else f"\n{titles[i]}"
+        viz.plot_mesh_on_image(a[0], s["image"], gv, gf, s["K"], alpha=0.0,
+                               title=f"{s['kind']}, VR {s['vr'][t]:.2f}")
+        viz.plot_mesh_on_image(a[1], s["image"], gv, gf, s["K"], color=gt_color,
+                               title="ground truth")
+        viz.plot_mesh_on_image(a[2], s["image"], pred_vertices[i], faces, s["K"],
+                               color=pred_color, title=f"prediction{extra}")
+        # identical framing in the three panels: the ground-truth box
+        for ax in a[1:]:
+            ax.set_xlim(a[0].get_xlim())
+            ax.set_ylim(a[0].get_ylim())
+        for ax in a:
+            ax.axis("on")
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.tight_layout()
+    return fig
+
+
+def plot_loss_curves(history: list, step_losses: list):
+    """Figure: training loss per step and per epoch, validation PA-MPJPE / PA-MPVPE per epoch.
+
+    Args:
+        history: rows of ``metrics.csv`` (dicts with ``epoch``, ``step``, ``train_loss`` in
+            metres, ``val_pa_mpjpe``, ``val_pa_mpvpe`` in mm).
+        step_losses: training loss of every step, metres.
+
+    Returns:
+        The matplotlib figure.
+    """
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.4))
+    sl = 1000 * np.asarray(step_losses, dtype=float)
+    if len(sl):
+        a.plot(np.arange(1, len(sl) + 1), sl, lw=0.6, alpha=0.5, label="per step")
+    ep = [r["step"] for r in history]
+    a.plot(ep, [1000 * r["train_loss"] for r in history], "o-", ms=3, label="epoch mean")
+    a.set_yscale("log")  # the first steps are 10x the plateau
+    a.set_xlabel("optimiser step")
+    a.set_ylabel("L1 vertex loss (mm, log scale)")
+    a.set_title("training loss")
+    a.grid(alpha=0.3)
+    a.legend(fontsize="small")
+    e = [r["epoch"] for r in history]
+    for key, label in (("val_pa_mpjpe", "PA-MPJPE"), ("val_pa_mpvpe", "PA-MPVPE"),
+                       ("val_mpjpe", "MPJPE (root-rel.)")):
+        vals = [r.get(key, math.nan) for r in history]
+        if np.isfinite(vals).any():
+            b.plot(e, vals, "o-", ms=3, label=label)
+    b.set_xlabel("epoch")
+    b.set_ylabel("validation error (mm)")
+    b.set_title("validation (10% of the training scenes)")
+    b.grid(alpha=0.3)
+    b.legend(fontsize="small")
+    fig.tight_layout()
+    return fig
+
+
+def headline(scores: dict) -> str:
+    """The headline scores as a one-row markdown table (formats of :data:`HEADLINE`).
+
+    Args:
+        scores: ``eval.json`` ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`).
+
+    Returns:
+        A markdown table.
+    """
+    head = "| " + " | ".join(t for _, t, _ in HEADLINE) + " |"
+    sep = "|" + "---|" * len(HEADLINE)
+    row = "| " + " | ".join(f.format(scores[k]) for k, _, f in HEADLINE) + " |"
+    return "\n".join([head, sep, row])
+
+
+def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: DemoConfig,
+                 seconds: dict, figures: dict, counts: dict, train_info: dict) -> Path:
+    """Write ``report.md`` (atomically).
+
+    Args:
+        path: the report file.
+        scores: held-out scores (``eval.json`` ``scores``).
+        table: VR table (markdown) from :func:`~handmesh_tutorial.train.evaluate`.
+        config: the run's :class:`DemoConfig`.
+        seconds: wall time per stage.
+        figures: caption -> figure path (relative links are made from the report's folder).
+        counts: ``train``/``test`` scene counts and VR histograms.
+        train_info: ``epochs``, ``steps``, ``checkpoint``, ``parameters``, ``size_ratio``
+            (mean predicted / true bounding-box diagonal over the test scenes).
+
+    Returns:
+        The report path.
+    """
+    path = Path(path)
+    rel = {k: os.path.relpath(v, path.parent) for k, v in figures.items()}
+    lines = [
+        "# handmesh demo: MSMR-Net on a small INTER-SH set",
+        "",
+        f"Budget tier `{config.budget}`: {counts['train']} training scenes and "
+        f"{counts['test']} held-out test scenes (hand-hand, hand-object, hand-chain; target-hand "
+        f"VR balanced over the paper's four bins), rendered at {config.render_size} px, network "
+        f"crops of {config.image_size} px. MSMR-Net ({config.encoder} encoder, "
+        f"{config.decoder}-path decoder, attention {'on' if config.attention else 'off'}, "
+        f"{train_info['parameters'] / 1e6:.1f} M parameters) trained from scratch on CPU for "
+        f"{train_info['epochs']} epochs ({train_info['steps']} steps, batch "
+        f"{config.batch_size}, Adam lr {config.lr:g}).",
+        "",
+        "## Held-out scores",
+        "",
+        "FreiHAND protocol (Procrustes-aligned errors; F-scores on aligned vertices; AUC of the "
+        "3D PCK of aligned joints), over all test scenes, target hand only, root = joint 9:",
+        "",
+        headline(scores),
+        "",
+        "## Scores per visibility-ratio bin (paper Table 2 layout)",
+        "",
+        "AUC over 0-20 mm (20 thresholds) as in the paper; `all` = every test scene.",
+        "",
+        table,
+        "",
+        "## Figures",
+        "",
+    ]
+    for caption, p in rel.items():
+        lines += [f"**{caption}**", "", f"![{caption}]({p})", ""]
+    lines += [
+        "## Run",
+        "",
+        "| stage | seconds |",
+        "|---|---|",
+        *[f"| {k} | {v:.1f} |" for k, v in seconds.items()],
+        "",
+        f"Training VR histogram {counts['train_vr']}, test {counts['test_vr']} "
+        "(bins [0.40, 0.60), [0.60, 0.80), [0.80, 0.95), [0.95, 1.00]).",
+        f"Evaluated checkpoint: `{train_info['checkpoint']}`.",
+        "",
+        f"Predicted meshes span on average {100 * train_info['size_ratio']:.0f}% of the size of "
+        "the true hand (bounding-box diagonal). Far below 100% means the network is still on the "
+        "first plateau of the loss, predicting one small, nearly pose-independent mesh near the "
+        "root (the L1-optimal answer while it cannot read the hand's 3D orientation); the "
+        "aligned errors above then measure that mesh's shape, not a pose estimate.",
+        "",
+        "These numbers come from a model trained for minutes on a few hundred synthetic scenes, "
+        "not the paper's 200 epochs on 40,000: they show the pipeline works end to end, "
+        "not the paper's accuracy (see notebooks 08-10).",
+        "",
+    ]
+    _atomic_write_text(path, "\n".join(lines))
+    return path
+
+
+def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoConfig | None = None,
+             progress: bool = True, log=print) -> DemoResult:
+    """Generate data, train, evaluate and write the report (resumable; see the module docs).
+
+    Args:
+        out: output folder.
+        seed: seed of the training data (the test data uses ``seed + 1``), of the network
+            initialisation, data order and augmentation.
+        config: sizes (default :meth:`DemoConfig.from_budget` of ``hmt.budget()``).
+        progress: tqdm bars.
+        log: called with one-line progress messages (``None``: silent).
+
+    Returns:
+        A :class:`DemoResult`.
+
+    Raises:
+        ValueError: ``out`` holds a run of another configuration (the message says what
+            differs; delete the folder or pick another ``--out``).
+    """
+    import matplotlib.pyplot as plt
+
+    from . import train as T
+    from . import viz
+    from .dataset import InterSHDataset
+    from .model import parameter_counts
+
+    cfg = config or DemoConfig.from_budget()
+    say = log or (lambda *_: None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    seconds = {}
+
+    say(f"[1/4] generating {cfg.train_samples} training + {cfg.test_samples} test scenes "
+        f"(VR-balanced, mixed kinds) in {out / 'data'}")
+    t = time.perf_counter()
+    data = generate_data(out / "data", cfg, seed, progress)
+    gen_train, gen_test = data["train_summary"], data["test_summary"]
+    seconds["generate"] = time.perf_counter() - t
+    say(f"      {gen_train.written + gen_test.written} written, "
+        f"{gen_train.skipped + gen_test.skipped} reused, {seconds['generate']:.0f} s")
+
+    t = time.perf_counter()
+    tcfg = T.TrainConfig(
+        data=str(out / "data" / "train"), out_dir=str(out / "train"), val_fraction=0.1,
+        image_size=cfg.image_size, epochs=cfg.epochs, batch_size=cfg.batch_size, lr=cfg.lr,
+        lr_step=max(1, round(cfg.epochs / 2)), encoder=cfg.encoder, decoder=cfg.decoder,
+        attention=cfg.attention, seed=seed, device="cpu", threads=cfg.threads,
+        cache_data=True, progress=progress)
+    last = out / "train" / "checkpoint_last.pt"
+    resume = last.exists()
+    say(f"[2/4] training MSMR-Net for {cfg.epochs} epochs in {out / 'train'}"
+        + (" (resuming from checkpoint_last.pt)" if resume else ""))
+    try:
+        res = T.train(tcfg, resume=resume)
+    except ValueError as e:
+        raise ValueError(f"{e}\n(the folder {out} holds another demo configuration: delete "
+                         f"{out / 'train'} or choose another --out)") from None
+    seconds["train"] = time.perf_counter() - t
+    ckpt = res.best_checkpoint or res.checkpoint
+    say(f"      {res.epochs} epochs, {res.steps} steps, {seconds['train']:.0f} s")
+
+    say(f"[3/4] evaluating {ckpt.name} on the {cfg.test_samples} held-out scenes")
+    t = time.perf_counter()
+    ev = T.evaluate(ckpt, str(out / "data" / "test"), out_dir=out / "eval", device="cpu",
+                    threads=cfg.threads, progress=progress)
+    seconds["evaluate"] = time.perf_counter() - t
+
+    say("[4/4] drawing figures and writing the report")
+    t = time.perf_counter()
+    test = InterSHDataset(out / "data" / "test")
+    per = ev["per_sample"]
+    n = len(per["index"])
+    # an even spread over the error ranking, best to worst: what typical predictions look like
+    order = np.argsort(per["pa_mpjpe"], kind="stable")
+    pick = order[np.unique(np.linspace(0, n - 1, min(cfg.overlays, n)).round().astype(int))]
+    samples = [test[int(per["index"][i])] for i in pick]
+    faces = res.model.faces  # the template's; same topology as the data's meshes
+    titles = [f"PA-MPJPE {per['pa_mpjpe'][i]:.1f} mm" for i in pick]
+    fig = plot_overlays(samples, ev["predictions"]["vertices"][pick], faces, titles)
+    files = dict(ev["files"])
+    files["overlays"] = viz.save_figure(fig, out / "overlays.png", dpi=80)
+    plt.close(fig)
+    fig = plot_loss_curves(res.history, res.step_losses)
+    files["loss"] = viz.save_figure(fig, out / "loss.png", dpi=90)
+    plt.close(fig)
+    figures = {"Predicted meshes (blue) vs ground truth (green) on held-out images, best to "
+               "worst PA-MPJPE": files["overlays"],
+               "Training loss and validation error": files["loss"],
+               "3D PCK curves (held-out)": files["pck"]}
+    if "vr" in files:
+        figures["Error vs visibility ratio and PA-MPJPE per VR bin"] = files["vr"]
+    pred_v = ev["predictions"]["vertices"]
+    ratios = []
+    for k, i in enumerate(per["index"]):
+        s = test[int(i)]
+        gv = np.asarray(s["meshes"][s["target"]][0], dtype=np.float64)
+        diag = np.linalg.norm(np.ptp(gv, axis=0))
+        ratios.append(float(np.linalg.norm(np.ptp(pred_v[k], axis=0)) / diag))
+    counts = {"train": len(InterSHDataset(out / "data" / "train")), "test": len(test),
+              "train_vr": gen_train.vr_histogram, "test_vr": gen_test.vr_histogram}
+    train_info = {"epochs": res.epochs, "steps": res.steps,
+                  "checkpoint": os.path.relpath(ckpt, out),
+                  "parameters": parameter_counts(res.model)["total"],
+                  "size_ratio": float(np.mean(ratios))}
+    seconds["report"] = time.perf_counter() - t
+    seconds["total"] = time.perf_counter() - t0
+    files["report"] = write_report(out / "report.md", scores=ev["scores"], table=ev["table"],
+                                   config=cfg, seconds=seconds, figures=figures, counts=counts,
+                                   train_info=train_info)
+    summary = {"config": asdict(cfg), "seed": seed, "scores": ev["scores"],
+               "vr_table": ev["vr_table"], "seconds": seconds, "counts": counts,
+               "train": train_info, "files": {k: str(v) for k, v in files.items()}}
+    files["json"] = out / "demo.json"
+    _atomic_write_text(files["json"], json.dumps(_json_safe(summary), indent=1))
+    return DemoResult(out_dir=out, report=files["report"], scores=ev["scores"],
+                      vr_table=ev["vr_table"], table=ev["table"], files=files, seconds=seconds,
+                      config=cfg, train_epochs=res.epochs)
+
+
+def _json_safe(obj):
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, np.generic):
+        return _json_safe(obj.item())
+    return obj
+
+
+def parse_headline(report: str) -> dict:
+    """Read the headline scores back from a report's text (the inverse of :func:`headline`).
+
+    Args:
+        report: the text of ``report.md``.
+
+    Returns:
+        {score key: float} for the keys of :data:`HEADLINE`.
+
+    Raises:
+        ValueError: the report has no headline table.
+    """
+    titles = r" \| ".join(re.escape(t) for _, t, _ in HEADLINE)
+    m = re.search(r"\| " + titles + r" \|\n\|[-|]+\n\|([^\n]+)\|", report)
+    if m is None:
+        raise ValueError("no headline table in the report")
+    vals = [float(x) for x in m.group(1).split("|")]
+    return {k: v for (k, _, _), v in zip(HEADLINE, vals, strict=True)}

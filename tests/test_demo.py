@@ -1,0 +1,148 @@
+"""The demo job: runs end to end (smoke budget), its report matches eval.json, it resumes."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import handmesh_tutorial as hmt
+from handmesh_tutorial import cli, demo
+
+torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="module")
+def smoke_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    code = cli.main(["demo", "--out", str(out), "--seed", "3", "--budget", "smoke",
+                     "--no-progress"])
+    assert code == 0
+    return out
+
+
+def _fmt_round(x, fmt):
+    return float(fmt.format(x))
+
+
+def test_demo_writes_report_and_figures(smoke_run, capsys):
+    out = smoke_run
+    for rel in ("report.md", "demo.json", "overlays.png", "loss.png", "eval/eval.json",
+                "eval/pck.png", "eval/predictions.npz", "train/checkpoint_last.pt"):
+        assert (out / rel).is_file(), rel
+        assert (out / rel).stat().st_size > 0, rel
+    report = (out / "report.md").read_text()
+    # every image the report links exists
+    import re
+
+    links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
+    assert len(links) >= 3
+    for link in links:
+        assert (out / link).is_file(), link
+        with open(out / link, "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_report_numbers_equal_eval_json(smoke_run):
+    out = smoke_run
+    ev = json.loads((out / "eval" / "eval.json").read_text())
+    report = (out / "report.md").read_text()
+    got = demo.parse_headline(report)
+    for key, _, fmt in demo.HEADLINE:
+        assert got[key] == pytest.approx(_fmt_round(ev["scores"][key], fmt), abs=1e-12), key
+    # the VR table: one line per bin with the bin's count and PA-MPJPE as in eval.json
+    for row in ev["vr_table"]:
+        line = next(ln for ln in report.splitlines() if ln.startswith(f"| {row['bin']} |"))
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert int(cells[1]) == row["count"]
+        pa = row["pa_mpjpe"]
+        assert cells[3] == ("-" if pa is None or (isinstance(pa, float) and math.isnan(pa))
+                            else f"{pa:.2f}")
+    assert sum(r["count"] for r in ev["vr_table"]) == ev["num_samples"]
+    # the scores are recomputable from the stored predictions (camera frame, ground-truth root)
+    summary = json.loads((out / "demo.json").read_text())
+    assert summary["scores"]["pa_mpjpe"] == pytest.approx(ev["scores"]["pa_mpjpe"])
+
+
+def test_demo_held_out_scores_recompute_from_predictions(smoke_run):
+    out = smoke_run
+    ev = json.loads((out / "eval" / "eval.json").read_text())
+    pred = np.load(out / "eval" / "predictions.npz")
+    test = hmt.dataset.InterSHDataset(out / "data" / "test")
+    gt_j, gt_v = [], []
+    for i in pred["index"]:
+        s = test[int(i)]
+        gt_j.append(s["joints"][s["target"]])
+        gt_v.append(s["meshes"][s["target"]][0])
+    sc = hmt.metrics.freihand_scores(pred_joints=pred["joints"], gt_joints=np.stack(gt_j),
+                                     pred_verts=pred["vertices"], gt_verts=np.stack(gt_v))
+    # float32 storage of the predictions: agree to a few micrometres
+    assert sc["pa_mpjpe"] == pytest.approx(ev["scores"]["pa_mpjpe"], abs=1e-2)
+    assert sc["f_at_15mm"] == pytest.approx(ev["scores"]["f_at_15mm"], abs=1e-2)
+    # the size diagnostic of the report: predicted vs true bounding-box diagonal
+    diag = [np.linalg.norm(p.max(0) - p.min(0)) / np.linalg.norm(g.max(0) - g.min(0))
+            for p, g in zip(pred["vertices"].astype(float), gt_v, strict=True)]
+    summary = json.loads((out / "demo.json").read_text())
+    assert summary["train"]["size_ratio"] == pytest.approx(np.mean(diag), rel=1e-4)
+    assert f"{100 * summary['train']['size_ratio']:.0f}% of the size" in (
+        out / "report.md").read_text()
+
+
+def test_demo_resumes(smoke_run):
+    out = smoke_run
+    before = json.loads((out / "eval" / "eval.json").read_text())["scores"]
+    ck1 = torch.load(out / "train" / "checkpoint_last.pt", weights_only=True)
+    assert int(ck1["epoch"]) == 2
+    cfg = demo.DemoConfig.from_budget(hmt.budget("smoke"), epochs=3)
+    res = demo.run_demo(out, seed=3, config=cfg, progress=False, log=None)
+    # data reused: same scenes; training continued from epoch 2 to 3
+    assert res.train_epochs == 3
+    ck = torch.load(out / "train" / "checkpoint_last.pt", weights_only=True)
+    assert int(ck["epoch"]) == 3
+    assert len(ck["history"]) == 3
+    assert ck["history"][0]["train_loss"] == ck1["history"][0]["train_loss"]  # epoch 1 kept
+    assert json.loads((out / "eval" / "eval.json").read_text())["scores"] == res.scores
+    assert res.scores["num_samples"] == before["num_samples"]
+    assert demo.parse_headline(res.report.read_text())["pa_mpjpe"] == pytest.approx(
+        round(res.scores["pa_mpjpe"], 2))
+
+
+def test_headline_round_trip_and_missing_table():
+    scores = {"pa_mpjpe": 12.345, "pa_mpvpe": 11.1, "f_at_5mm": 0.2345, "f_at_15mm": 0.87654,
+              "auc_joints": 0.5, "auc_joints_20mm": 0.25}
+    text = "# x\n\n" + demo.headline(scores) + "\n"
+    got = demo.parse_headline(text)
+    assert got["pa_mpjpe"] == 12.35 or got["pa_mpjpe"] == 12.34  # rounding of 12.345 in binary
+    assert got["f_at_15mm"] == 0.877
+    with pytest.raises(ValueError, match="no headline table"):
+        demo.parse_headline("# a report without scores")
+
+
+def test_config_from_budget_sizes():
+    b = hmt.budget("default")
+    c = demo.DemoConfig.from_budget(b)
+    assert (c.train_samples, c.test_samples) == (b.samples // 3, b.eval_samples // 4)
+    assert c.image_size == b.image_size // 2 and c.render_size == b.image_size
+    assert (c.epochs, c.batch_size) == (2 * b.epochs, b.batch_size // 2)
+    assert demo.DemoConfig.from_budget(b, epochs=3).epochs == 3
+
+
+def test_plot_mesh_on_image_projects_with_K():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    v = np.array([[0.0, 0.0, 0.5], [0.05, 0.0, 0.5], [0.0, 0.05, 0.6]])
+    f = np.array([[0, 1, 2]])
+    K = np.array([[100.0, 0, 32], [0, 120.0, 30], [0, 0, 1]])
+    fig, ax = plt.subplots()
+    coll = hmt.viz.plot_mesh_on_image(ax, np.zeros((64, 64, 3), np.uint8), v, f, K)
+    poly = coll.get_paths()[0].vertices[:3]
+    expect = np.array([[100 * x / z + 32, 120 * y / z + 30] for x, y, z in v])
+    np.testing.assert_allclose(poly, expect, atol=1e-9)
+    assert ax.get_ylim()[0] > ax.get_ylim()[1]  # image rows grow downwards
+    with pytest.raises(ValueError, match="K must be"):
+        hmt.viz.plot_mesh_on_image(ax, None, v, f, np.eye(2))
+    plt.close(fig)
