@@ -8,9 +8,14 @@ Prints, measured in the same run:
    multi-path + attention (the paper's Table 3 rows), with the ratio to single-path. Target:
    multi-path + attention adds at most ~30% decoder parameters ("minor additional parameter
    cost", paper) with the default channels of :mod:`handmesh_tutorial.model`.
+2b. ``SparseVertexMap`` (the up/down maps between hierarchy levels) forward+backward: the
+   library's broadcast multiply-and-sum vs ``torch.einsum("bvkc,vk->bvc")`` (which PyTorch runs
+   as V tiny batched matmuls), on the finest up map (799 <- 400 vertices, 3 weights per row).
 3. Forward and forward+backward time of the decoder part (coarse tokens -> vertices) and of the
    full model (ResNet-18) at the smoke image size (64) and at 224x224, with ratios to
    single-path.
+4. One training step (forward+backward+Adam) of the demo's model (multi-path + attention,
+   64-px crops, batch ``budget.batch_size``) with a ResNet-10 vs a ResNet-18 encoder.
 
 Sizes: batch = ``hmt.budget().batch_size`` (a quarter of it at 224x224), threads =
 ``hmt.budget().threads`` unless ``--threads``. Times are the fastest of ``--repeats`` round-robin
@@ -69,6 +74,45 @@ def bench_spiralconv(spirals, batch: int, repeats: int) -> None:
           f"ratio library/reference = {t_lib / t_ref:.2f}")
 
 
+def bench_sparse_map(hier, batch: int, repeats: int) -> None:
+    from handmesh_tutorial.blocks import SparseVertexMap
+
+    up = SparseVertexMap(hier.up[0])
+    x = torch.randn(batch, up.in_vertices, 16, requires_grad=True)
+    idx, w = up.index, up.weight
+
+    def lib():
+        up(x).sum().backward()
+
+    def ein():
+        g = x.index_select(1, idx.reshape(-1)).reshape(batch, up.out_vertices, -1, 16)
+        torch.einsum("bvkc,vk->bvc", g, w).sum().backward()
+
+    t = timeit({"lib": lib, "einsum": ein}, repeats)
+    print(f"SparseVertexMap fwd+bwd (B={batch}, {up.out_vertices} <- {up.in_vertices}, "
+          f"{idx.shape[1]} per row, C=16): library {1e3 * t['lib']:.2f} ms, einsum "
+          f"{1e3 * t['einsum']:.2f} ms, ratio einsum/library = {t['einsum'] / t['lib']:.2f}")
+
+
+def bench_demo_step(hand, hier, batch: int, repeats: int) -> None:
+    images = torch.randn(batch, 3, 64, 64)
+    steps = {}
+    for enc in ("resnet10", "resnet18"):
+        net = M.build_model(enc, template=hand, hierarchy=hier)
+        opt = torch.optim.Adam(net.parameters(), 1e-3)
+
+        def step(net=net, opt=opt):
+            opt.zero_grad(set_to_none=True)
+            net(images)["vertices"].abs().mean().backward()
+            opt.step()
+
+        steps[enc] = step
+    t = timeit(steps, repeats)
+    print(f"\nDemo training step (multi-path + attention, B={batch}, 64 px): ResNet-10 "
+          f"{1e3 * t['resnet10']:.0f} ms, ResNet-18 {1e3 * t['resnet18']:.0f} ms, ratio "
+          f"ResNet-18/ResNet-10 = {t['resnet18'] / t['resnet10']:.2f}")
+
+
 def report(models: dict, fwd, fwd_bwd, repeats: int, fmt: str) -> None:
     """Print forward and forward+backward times per model variant, with ratios to the first."""
     tf = timeit({k: (lambda n=n: fwd(n)) for k, n in models.items()}, repeats)
@@ -100,6 +144,7 @@ def main() -> None:
     models = {k: M.build_model("resnet18", template=hand, hierarchy=hier, **kw)
               for k, kw in variants.items()}
     bench_spiralconv(models["single"].spirals, B.batch_size, args.repeats)
+    bench_sparse_map(hier, B.batch_size, args.repeats)
 
     print("\nParameters (decoder part = transformer + decoder; FC shared by all variants)")
     base = None
@@ -144,6 +189,8 @@ def main() -> None:
             (out["vertices"].abs().mean() + out["joints"].abs().mean()).backward()
 
         report(models, fwd, fwd_bwd, args.repeats, "8.1f")
+
+    bench_demo_step(hand, hier, B.batch_size, args.repeats)
 
 
 if __name__ == "__main__":

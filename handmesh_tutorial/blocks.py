@@ -100,7 +100,8 @@ class SparseVertexMap(nn.Module):
             return x.index_select(1, self.index[:, 0])
         b, _, c = x.shape
         g = x.index_select(1, self.index.reshape(-1)).reshape(b, self.out_vertices, -1, c)
-        return torch.einsum("bvkc,vk->bvc", g, self.weight.to(x.dtype))
+        # broadcast multiply-and-sum: an einsum here becomes V tiny bmm's, ~3.5x slower on CPU
+        return (g * self.weight.to(x.dtype)[None, :, :, None]).sum(2)
 
     def to_dense(self) -> torch.Tensor:
         """The matrix as a dense ``(V_out, V_in)`` tensor (for checks and figures)."""

@@ -19,10 +19,15 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     sc = res.scores
     print(f"handmesh demo: report written to {res.report} ({res.seconds['total'] / 60:.1f} min "
           f"this run; budget tier {cfg.budget})")
-    print(f"held-out ({sc['num_samples']} scenes): "
+    print(f"held-out ({sc['num_samples']} scenes): MPJPE {sc['mpjpe']:.2f} mm, "
           f"PA-MPJPE {sc['pa_mpjpe']:.2f} mm, PA-MPVPE {sc['pa_mpvpe']:.2f} mm, "
           f"F@5mm {sc['f_at_5mm']:.3f}, F@15mm {sc['f_at_15mm']:.3f}, "
           f"AUC {sc['auc_joints']:.3f} (0-50 mm)")
+    if res.baseline_scores:
+        b = res.baseline_scores
+        print(f"one mean hand for every image (constant baseline): MPJPE {b['mpjpe']:.2f} mm, "
+              f"PA-MPJPE {b['pa_mpjpe']:.2f} mm, PA-MPVPE {b['pa_mpvpe']:.2f} mm, "
+              f"F@5mm {b['f_at_5mm']:.3f}, F@15mm {b['f_at_15mm']:.3f}")
     print(res.table)
     for name in ("overlays", "loss", "pck", "vr", "json"):
         if name in res.files:

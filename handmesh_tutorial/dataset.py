@@ -68,6 +68,16 @@ _SEED_RULE = ("numpy.random.SeedSequence(entropy=seed, spawn_key=(index, attempt
 # --------------------------------------------------------------------------------------------
 # seeds and shards
 # --------------------------------------------------------------------------------------------
+class SampleRejected(Exception):
+    """Raised by a ``make_sample`` callable for a seed that yields no valid sample.
+
+    :func:`generate_dataset` treats it as a rejected candidate (like ``accept`` returning
+    ``False``): it tries the next attempt's seed instead of stopping. Any other exception stops
+    generation. :class:`handmesh_tutorial.interact.InteractionError` (a scene the generator cannot
+    build within its bounded retries) is one.
+    """
+
+
 def sample_seed(seed: int, index: int, attempt: int = 0) -> int:
     """The seed passed to ``make_sample`` for sample ``index`` (``attempt``-th candidate).
 
@@ -856,6 +866,8 @@ def _make_and_write(task: _Task, index: int) -> dict:
         s_seed = sample_seed(task.seed, index, attempt)
         try:
             raw = task.make_sample(s_seed)
+        except SampleRejected:
+            continue  # e.g. a scene the generator cannot build: the next seed replaces it
         except Exception as e:
             if hasattr(e, "add_note"):  # Python >= 3.11
                 e.add_note(f"while making sample {index} (attempt {attempt}, seed {s_seed})")
@@ -971,7 +983,8 @@ def generate_dataset(
             stored in ``meta.json`` and compared on resume.
         image_size: expected image size (int side or (H, W)); checked per sample if given.
         accept: optional filter ``accept(sample) -> bool``; a rejected candidate is replaced by
-            the next attempt's seed.
+            the next attempt's seed. A ``make_sample`` that raises :class:`SampleRejected`
+            rejects its seed the same way.
         balance_vr: ``True`` (bins from :func:`vr_bins`) or a list of bins: sample ``i`` must have
             its target VR in bin ``i % len(bins)``, so every bin gets the same share (up to one).
         max_attempts: candidates per sample before giving up with RuntimeError.

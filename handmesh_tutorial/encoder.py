@@ -1,4 +1,4 @@
-"""Image encoders written in the library: ResNet-18/34/50 and a small HRNet (W18-small-like).
+"""Image encoders written in the library: ResNet-10/18/34/50 and a small HRNet (W18-small-like).
 
 Paper section "Multi-path Mesh Decoder" (the CNN encoder) and Table 1 (ResNet50, HRNet18/48
 backbones). torchvision is not a dependency (no CPU build here, and it would pull CUDA), so the
@@ -15,6 +15,11 @@ with parallel branches and fusion, the "incre/downsamp/final" head to 2048 featu
 configuration of ``hrnet_w18_small_v2`` by default: fewer modules and blocks than the full W18
 (2 blocks per branch, 1/3/2 modules in stages 2/3/4 instead of 4 blocks and 1/4/3 modules).
 Pass ``config=HRNET_W18`` for the full W18 layout.
+
+ResNet-10 (one basic block per stage, as in timm's ``resnet10t`` or MONAI's ``resnet10``; not a
+torchvision network, so there are no torchvision weights for it) is the CPU choice: without
+pretrained weights it leaves the "mean hand" plateau of from-scratch training in fewer steps
+than ResNet-18 and each step costs less (``benchmarks/model.py``, notebook 08).
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ import torch
 from torch import nn
 
 __all__ = [
-    "BasicBlock", "Bottleneck", "ResNet", "resnet18", "resnet34", "resnet50", "HRNet",
+    "BasicBlock", "Bottleneck", "ResNet", "resnet10", "resnet18", "resnet34", "resnet50", "HRNet",
     "HRNET_W18_SMALL_V2", "HRNET_W18", "hrnet_w18_small", "build_encoder", "ENCODERS",
     "load_torchvision_state_dict",
 ]
@@ -166,6 +171,11 @@ class ResNet(nn.Module):
 def resnet18() -> ResNet:
     """ResNet-18 features, D = 512 (11,176,512 parameters)."""
     return ResNet(BasicBlock, (2, 2, 2, 2))
+
+
+def resnet10() -> ResNet:
+    """ResNet-10 features (one basic block per stage), D = 512 (4,905,792 parameters)."""
+    return ResNet(BasicBlock, (1, 1, 1, 1))
 
 
 def resnet34() -> ResNet:
@@ -354,7 +364,7 @@ def hrnet_w18_small() -> HRNet:
 
 
 #: Encoder names accepted by :func:`build_encoder` and ``build_model(encoder=...)``.
-ENCODERS = {"resnet18": resnet18, "resnet34": resnet34, "resnet50": resnet50,
+ENCODERS = {"resnet10": resnet10, "resnet18": resnet18, "resnet34": resnet34, "resnet50": resnet50,
             "hrnet18": hrnet_w18_small, "hrnet_w18_small": hrnet_w18_small}
 
 
@@ -362,7 +372,8 @@ def build_encoder(name: str) -> nn.Module:
     """An encoder by name.
 
     Args:
-        name: one of :data:`ENCODERS` (``resnet18``, ``resnet34``, ``resnet50``, ``hrnet18``).
+        name: one of :data:`ENCODERS` (``resnet10``, ``resnet18``, ``resnet34``, ``resnet50``,
+            ``hrnet18``).
 
     Returns:
         ``nn.Module`` mapping ``(B, 3, H, W)`` to ``(B, D)``, with attribute ``out_features``.

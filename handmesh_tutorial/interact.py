@@ -53,6 +53,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .collision import Cylinders, cylinders_intersect, self_collisions
+from .dataset import SampleRejected
 
 __all__ = [
     "KINDS",
@@ -81,8 +82,11 @@ KINDS: tuple[str, ...] = ("hand-hand", "hand-object", "hand-chain")
 STOP_REASONS: tuple[str, ...] = ("no valid move", "max rounds")
 
 
-class InteractionError(RuntimeError):
+class InteractionError(RuntimeError, SampleRejected):
     """A scene could not be generated (bounded retries exhausted or an impossible config).
+
+    A :class:`~handmesh_tutorial.dataset.SampleRejected`: :func:`generate_interactions` and
+    :func:`~handmesh_tutorial.dataset.generate_dataset` replace the seed with the next attempt's.
 
     Attributes:
         kind: the scene kind.

@@ -525,3 +525,36 @@ def test_dataset_level_errors(small_root, tmp_path):
         gen(small_root, num=3)  # resuming checks the samples it skips
     with pytest.raises(FileNotFoundError, match=r"nothing/meta\.json missing"):
         D.InterSHDataset(tmp_path / "nothing")
+
+
+def _reject_even_seeds(seed):
+    if seed % 2 == 0:
+        raise D.SampleRejected(f"seed {seed} cannot be built")
+    return make(seed)
+
+
+def test_sample_rejected_is_a_rejected_candidate(tmp_path):
+    s = D.generate_dataset(tmp_path / "r", _reject_even_seeds, 6, SEED, "hand-hand",
+                           progress=False, image_size=SIZE)
+    ds = D.InterSHDataset(tmp_path / "r")
+    for i in range(6):
+        ann = ds.annotation(i)
+        seeds = [D.sample_seed(SEED, i, a) for a in range(ann["attempt"] + 1)]
+        # kept: the first odd seed; every even one before it was skipped, not fatal
+        assert [x % 2 for x in seeds] == [0] * ann["attempt"] + [1]
+        assert ann["seed"] == seeds[-1]
+    assert s.attempts == sum(ds.annotation(i)["attempt"] + 1 for i in range(6))
+
+    def always(seed):
+        raise D.SampleRejected("never")
+
+    with pytest.raises(RuntimeError, match="sample 0: no candidate accepted in 2 attempts"):
+        D.generate_dataset(tmp_path / "n", always, 1, SEED, "hand-hand", progress=False,
+                           max_attempts=2)
+
+
+def test_interaction_error_is_a_sample_rejection():
+    from handmesh_tutorial.interact import InteractionError
+
+    err = InteractionError("hand-chain", 3, "no contact")
+    assert isinstance(err, D.SampleRejected) and isinstance(err, RuntimeError)

@@ -89,18 +89,52 @@ def test_demo_held_out_scores_recompute_from_predictions(smoke_run):
         out / "report.md").read_text()
 
 
+def test_constant_baseline_equals_a_direct_computation(smoke_run):
+    out = smoke_run
+    train = hmt.dataset.InterSHDataset(out / "data" / "train")
+    test = hmt.dataset.InterSHDataset(out / "data" / "test")
+
+    def rel_right(s):  # target hand minus joint 9, left hands mirrored (x -> -x)
+        t = s["target"]
+        v = np.asarray(s["meshes"][t][0], float) - s["joints"][t][9]
+        j = np.asarray(s["joints"][t], float) - s["joints"][t][9]
+        m = np.array([-1.0, 1, 1]) if s["sides"][t] == "left" else np.ones(3)
+        return v * m, j * m, m, s["joints"][t][9]
+
+    tr = [rel_right(train[i]) for i in range(len(train))]
+    med_v = np.median([v for v, *_ in tr], axis=0)
+    med_j = np.median([j for _, j, *_ in tr], axis=0)
+    pv, pj, gv, gj = [], [], [], []
+    for i in range(len(test)):  # the constant, put back in each test camera frame
+        s = test[i]
+        _, _, m, root = rel_right(s)
+        pv.append(med_v * m + root)
+        pj.append(med_j * m + root)
+        gv.append(s["meshes"][s["target"]][0])
+        gj.append(s["joints"][s["target"]])
+    want = hmt.metrics.freihand_scores(pred_joints=np.stack(pj), gt_joints=np.stack(gj),
+                                       pred_verts=np.stack(pv), gt_verts=np.stack(gv))
+    got = demo.constant_baseline(out / "data" / "train", out / "data" / "test")
+    for key in ("mpjpe", "mpvpe", "pa_mpjpe", "f_at_15mm"):
+        assert got[key] == pytest.approx(want[key], abs=1e-3), key  # float32 crops
+    report = (out / "report.md").read_text()
+    row = demo.parse_headline(report, demo.BASELINE_ROW)
+    assert row["mpjpe"] == pytest.approx(round(want["mpjpe"], 2), abs=0.011)
+
+
 def test_demo_resumes(smoke_run):
     out = smoke_run
     before = json.loads((out / "eval" / "eval.json").read_text())["scores"]
     ck1 = torch.load(out / "train" / "checkpoint_last.pt", weights_only=True)
-    assert int(ck1["epoch"]) == 2
-    cfg = demo.DemoConfig.from_budget(hmt.budget("smoke"), epochs=3)
+    smoke_epochs = demo.DemoConfig.from_budget(hmt.budget("smoke")).epochs
+    assert int(ck1["epoch"]) == smoke_epochs
+    cfg = demo.DemoConfig.from_budget(hmt.budget("smoke"), epochs=smoke_epochs + 1)
     res = demo.run_demo(out, seed=3, config=cfg, progress=False, log=None)
-    # data reused: same scenes; training continued from epoch 2 to 3
-    assert res.train_epochs == 3
+    # data reused: same scenes; training continued for one more epoch
+    assert res.train_epochs == smoke_epochs + 1
     ck = torch.load(out / "train" / "checkpoint_last.pt", weights_only=True)
-    assert int(ck["epoch"]) == 3
-    assert len(ck["history"]) == 3
+    assert int(ck["epoch"]) == smoke_epochs + 1
+    assert len(ck["history"]) == smoke_epochs + 1
     assert ck["history"][0]["train_loss"] == ck1["history"][0]["train_loss"]  # epoch 1 kept
     assert json.loads((out / "eval" / "eval.json").read_text())["scores"] == res.scores
     assert res.scores["num_samples"] == before["num_samples"]
@@ -111,10 +145,16 @@ def test_demo_resumes(smoke_run):
 def test_headline_round_trip_and_missing_table():
     scores = {"pa_mpjpe": 12.345, "pa_mpvpe": 11.1, "f_at_5mm": 0.2345, "f_at_15mm": 0.87654,
               "auc_joints": 0.5, "auc_joints_20mm": 0.25}
-    text = "# x\n\n" + demo.headline(scores) + "\n"
+    scores["mpjpe"] = 20.0
+    base = {k: 2 * v for k, v in scores.items()}
+    text = "# x\n\n" + demo.headline(scores, base) + "\n\nmore text\n"
     got = demo.parse_headline(text)
     assert got["pa_mpjpe"] == 12.35 or got["pa_mpjpe"] == 12.34  # rounding of 12.345 in binary
-    assert got["f_at_15mm"] == 0.877
+    assert got["f_at_15mm"] == 0.877 and got["mpjpe"] == 20.0
+    assert demo.parse_headline(text, demo.BASELINE_ROW)["pa_mpvpe"] == 22.2
+    with pytest.raises(ValueError, match="no row 'other'"):
+        demo.parse_headline(text, "other")
+    assert demo.BASELINE_ROW not in demo.headline(scores)
     with pytest.raises(ValueError, match="no headline table"):
         demo.parse_headline("# a report without scores")
 
@@ -122,9 +162,12 @@ def test_headline_round_trip_and_missing_table():
 def test_config_from_budget_sizes():
     b = hmt.budget("default")
     c = demo.DemoConfig.from_budget(b)
-    assert (c.train_samples, c.test_samples) == (b.samples // 3, b.eval_samples // 4)
+    assert (c.train_samples, c.test_samples) == (5 * b.samples, b.eval_samples // 2)
     assert c.image_size == b.image_size // 2 and c.render_size == b.image_size
-    assert (c.epochs, c.batch_size) == (2 * b.epochs, b.batch_size // 2)
+    assert (c.epochs, c.batch_size) == (3 * b.epochs // 4, b.batch_size)
+    assert (c.encoder, c.augment, c.balance_train) == ("resnet10", False, False)
+    f, full = demo.DemoConfig.from_budget(hmt.budget("full")), hmt.budget("full")
+    assert f.augment and (f.train_samples, f.epochs) == (full.samples, full.epochs)
     assert demo.DemoConfig.from_budget(b, epochs=3).epochs == 3
 
 

@@ -25,6 +25,13 @@ def test_resnet18_and_50_known_counts():
     assert _count(enc.resnet50()) == 23_508_032
 
 
+def test_resnet10_is_resnet18_minus_one_basic_block_per_stage():
+    # a BasicBlock(c, c) has two 3x3 convs (9c^2 each, no bias) and two BNs (2c each)
+    one_block = sum(18 * c * c + 4 * c for c in (64, 128, 256, 512))
+    assert _count(enc.resnet10()) == 11_176_512 - one_block == 4_905_792
+    assert [len(getattr(enc.resnet10(), f"layer{i}")) for i in range(1, 5)] == [1, 1, 1, 1]
+
+
 def test_hrnet_parameter_counts_match_timm_model_cards():
     # timm model cards: hrnet_w18_small_v2 15.6 M, hrnet_w18 21.3 M, with a 2048->1000 classifier
     classifier = 2048 * 1000 + 1000
@@ -32,7 +39,8 @@ def test_hrnet_parameter_counts_match_timm_model_cards():
     assert round((_count(enc.HRNet(enc.HRNET_W18)) + classifier) / 1e6, 1) == 21.3
 
 
-@pytest.mark.parametrize("name,dim", [("resnet18", 512), ("resnet50", 2048), ("hrnet18", 2048)])
+@pytest.mark.parametrize("name,dim", [("resnet10", 512), ("resnet18", 512), ("resnet50", 2048),
+                                      ("hrnet18", 2048)])
 def test_encoder_output_shapes(name, dim):
     e = enc.build_encoder(name).eval()
     assert e.out_features == dim
