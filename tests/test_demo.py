@@ -89,37 +89,30 @@ def test_demo_held_out_scores_recompute_from_predictions(smoke_run):
         out / "report.md").read_text()
 
 
-def test_constant_baseline_equals_a_direct_computation(smoke_run):
+def test_constant_baseline_equals_the_median_network_target(smoke_run):
     out = smoke_run
-    train = hmt.dataset.InterSHDataset(out / "data" / "train")
-    test = hmt.dataset.InterSHDataset(out / "data" / "test")
+    # independent path: the training targets as the torch dataset gives them to the network
+    from handmesh_tutorial.augment import InterSHTorchDataset
 
-    def rel_right(s):  # target hand minus joint 9, left hands mirrored (x -> -x)
-        t = s["target"]
-        v = np.asarray(s["meshes"][t][0], float) - s["joints"][t][9]
-        j = np.asarray(s["joints"][t], float) - s["joints"][t][9]
-        m = np.array([-1.0, 1, 1]) if s["sides"][t] == "left" else np.ones(3)
-        return v * m, j * m, m, s["joints"][t][9]
+    def targets(root):
+        ds = InterSHTorchDataset(root, 64, train=False)
+        items = [ds[i] for i in range(len(ds))]
+        return (np.stack([it["vertices"].numpy() for it in items]).astype(float),
+                np.stack([it["joints"].numpy() for it in items]).astype(float))
 
-    tr = [rel_right(train[i]) for i in range(len(train))]
-    med_v = np.median([v for v, *_ in tr], axis=0)
-    med_j = np.median([j for _, j, *_ in tr], axis=0)
-    pv, pj, gv, gj = [], [], [], []
-    for i in range(len(test)):  # the constant, put back in each test camera frame
-        s = test[i]
-        _, _, m, root = rel_right(s)
-        pv.append(med_v * m + root)
-        pj.append(med_j * m + root)
-        gv.append(s["meshes"][s["target"]][0])
-        gj.append(s["joints"][s["target"]])
-    want = hmt.metrics.freihand_scores(pred_joints=np.stack(pj), gt_joints=np.stack(gj),
-                                       pred_verts=np.stack(pv), gt_verts=np.stack(gv))
+    tv, tj = targets(out / "data" / "train")
+    gv, gj = targets(out / "data" / "test")
+    n = len(gv)
+    want = hmt.metrics.freihand_scores(
+        pred_joints=np.repeat(np.median(tj, 0)[None], n, 0), gt_joints=gj,
+        pred_verts=np.repeat(np.median(tv, 0)[None], n, 0), gt_verts=gv)
     got = demo.constant_baseline(out / "data" / "train", out / "data" / "test")
     for key in ("mpjpe", "mpvpe", "pa_mpjpe", "f_at_15mm"):
         assert got[key] == pytest.approx(want[key], abs=1e-3), key  # float32 crops
-    report = (out / "report.md").read_text()
-    row = demo.parse_headline(report, demo.BASELINE_ROW)
-    assert row["mpjpe"] == pytest.approx(round(want["mpjpe"], 2), abs=0.011)
+    # a constant cannot beat the truth; and the report prints this row
+    assert got["mpjpe"] > 0 and got["f_at_5mm"] < 1
+    row = demo.parse_headline((out / "report.md").read_text(), demo.BASELINE_ROW)
+    assert row["mpjpe"] == pytest.approx(round(got["mpjpe"], 2), abs=1e-9)
 
 
 def test_demo_resumes(smoke_run):
@@ -164,7 +157,7 @@ def test_config_from_budget_sizes():
     c = demo.DemoConfig.from_budget(b)
     assert (c.train_samples, c.test_samples) == (5 * b.samples, b.eval_samples // 2)
     assert c.image_size == b.image_size // 2 and c.render_size == b.image_size
-    assert (c.epochs, c.batch_size) == (3 * b.epochs // 4, b.batch_size)
+    assert (c.epochs, c.batch_size) == (b.epochs // 2, b.batch_size)
     assert (c.encoder, c.augment, c.balance_train) == ("resnet10", False, False)
     f, full = demo.DemoConfig.from_budget(hmt.budget("full")), hmt.budget("full")
     assert f.augment and (f.train_samples, f.epochs) == (full.samples, full.epochs)
