@@ -16,10 +16,10 @@ configuration of ``hrnet_w18_small_v2`` by default: fewer modules and blocks tha
 (2 blocks per branch, 1/3/2 modules in stages 2/3/4 instead of 4 blocks and 1/4/3 modules).
 Pass ``config=HRNET_W18`` for the full W18 layout.
 
-ResNet-10 (one basic block per stage, as in timm's ``resnet10t`` or MONAI's ``resnet10``; not a
-torchvision network, so there are no torchvision weights for it) is the CPU choice: without
-pretrained weights it leaves the "mean hand" plateau of from-scratch training in fewer steps
-than ResNet-18 and each step costs less (``benchmarks/model.py``, notebook 08).
+ResNet-10 (ResNet-18 with one basic block per stage instead of two; not a torchvision network,
+so there are no torchvision weights for it) is the CPU choice: without pretrained weights it
+leaves the "mean hand" plateau of from-scratch training in fewer steps than ResNet-18 and each
+step costs less (docs page "Training from scratch on a CPU", ``benchmarks/model.py``).
 """
 
 from __future__ import annotations
