@@ -51,8 +51,8 @@ finishes in about ten minutes on a 2-core CPU:
 The ``full`` tier is the paper's scale instead: ``budget.samples`` training scenes (40,000),
 ``budget.epochs`` epochs (200), augmentation on.
 
-What to expect at the ``default`` size (measured on a 2-core CPU, seed 0, 9.6 min from an empty
-folder: 3.7 min generating, 5.6 min training): the L1 loss sits on the mean-hand plateau (about
+What to expect at the ``default`` size (measured on a 2-core CPU, seed 0, 9.1 min in a fresh
+clone: 3.5 min generating, 5.5 min training): the L1 loss sits on the mean-hand plateau (about
 28 mm) for three epochs, then falls; the validation loss reaches 21.9 mm after 10 epochs. On the
 100 held-out scenes: MPJPE 43.7 mm, PA-MPJPE 23.2 mm, PA-MPVPE 21.3 mm, F@15mm 0.77, against
 54.0 / 38.8 / 38.4 mm and 0.39 for the constant mean hand (:func:`constant_baseline`). The
