@@ -36,6 +36,7 @@ import shutil
 import sys
 import time
 import uuid
+import warnings
 import zipfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -45,7 +46,13 @@ from typing import Any
 import numpy as np
 
 FORMAT_NAME = "INTER-SH"
-FORMAT_VERSION = 1
+#: Version written by this library. 2: FreiHAND-like framing, photo backgrounds, anatomical
+#: limits by default, and the VR probe of balanced sets in ``meta.json`` (``vr_probe``). The
+#: sample files are laid out as in version 1.
+FORMAT_VERSION = 2
+#: Versions this library reads (version 1 roots read the same; resuming one with this version
+#: is refused, as any change of parameters is).
+READABLE_FORMAT_VERSIONS = (1, 2)
 KINDS = ("hand-hand", "hand-object", "hand-chain")
 META_FILE = "meta.json"
 SAMPLES_DIR = "samples"
@@ -61,6 +68,10 @@ _KNOWN_KEYS = frozenset({
     "image", "scene_mask", "alone_masks", "alone_images", "meshes", "joints", "K", "vr", "kind",
     "target", "sides", "names", "pose", "stats", "index", "seed", "attempt",
 })
+#: A bin is filled by VR balancing when at least this many probe candidates hit it: one lucky
+#: hit would keep a bin reachable once in a hundred candidates, whose samples would then mostly
+#: end up off their bin after ``max_attempts`` candidates each.
+PROBE_MIN_HITS = 2
 _SEED_RULE = ("numpy.random.SeedSequence(entropy=seed, spawn_key=(index, attempt))"
               ".generate_state(1, uint64)[0] >> 11")
 
@@ -96,6 +107,16 @@ def sample_seed(seed: int, index: int, attempt: int = 0) -> int:
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise ValueError(f"{name} must be a non-negative integer, got {v!r}")
     ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(int(index), int(attempt)))
+    return int(ss.generate_state(1, dtype=np.uint64)[0] >> np.uint64(11))
+
+
+def probe_seed(seed: int, k: int) -> int:
+    """The seed of the ``k``-th candidate of the VR probe of a balanced set (see
+    :func:`generate_dataset`): ``SeedSequence(seed, spawn_key=(k, 0, 1))``, independent of every
+    sample seed (whose spawn keys have two entries).
+    """
+    sample_seed(seed, k)  # validates
+    ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(int(k), 0, 1))
     return int(ss.generate_state(1, dtype=np.uint64)[0] >> np.uint64(11))
 
 
@@ -539,9 +560,9 @@ def read_annotation(directory: str | os.PathLike) -> dict:
     missing = [k for k in required if k not in ann]
     if missing:
         raise ValueError(f"{path}: missing keys {missing}")
-    if ann["format_version"] != FORMAT_VERSION:
+    if ann["format_version"] not in READABLE_FORMAT_VERSIONS:
         raise ValueError(f"{path}: format_version {ann['format_version']}, this library reads "
-                         f"{FORMAT_VERSION}")
+                         f"{list(READABLE_FORMAT_VERSIONS)}")
     where = str(path)
     for key in ("names", "sides", "vr"):
         if not isinstance(ann[key], dict):
@@ -635,9 +656,9 @@ def read_meta(root: str | os.PathLike) -> dict:
     meta = _read_json(path)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
         raise ValueError(f"{path}: not an {FORMAT_NAME} meta file")
-    if meta.get("format_version") != FORMAT_VERSION:
+    if meta.get("format_version") not in READABLE_FORMAT_VERSIONS:
         raise ValueError(f"{path}: format_version {meta.get('format_version')}, this library "
-                         f"reads {FORMAT_VERSION}")
+                         f"reads {list(READABLE_FORMAT_VERSIONS)}")
     return meta
 
 
@@ -842,6 +863,7 @@ class _Task:
     samples_dir: str
     width: int
     durable: bool
+    filled: tuple[int, ...] | None = None  # bins that balancing fills (None: all of them)
 
 
 _WORKER_TASK: _Task | None = None
@@ -859,43 +881,102 @@ def _worker_make(index: int) -> dict:
     return _make_and_write(_WORKER_TASK, index)
 
 
+def _bin_distance(vr: float, b: tuple[float, float]) -> float:
+    """How far ``vr`` lies outside bin ``b`` (0 inside)."""
+    return max(b[0] - vr, vr - b[1], 0.0)
+
+
+def _candidate(task: _Task, index: int | None, attempt: int, s_seed: int) -> dict | None:
+    """``make_sample(s_seed)`` checked and canonicalised; ``None`` when it rejects its seed.
+
+    ``index`` is the sample's global index, or ``None`` for a candidate of the VR probe.
+    """
+    what = f"sample {index}" if index is not None else f"VR probe candidate {attempt}"
+    try:
+        raw = task.make_sample(s_seed)
+    except SampleRejected:
+        return None  # e.g. a scene the generator cannot build: the next seed replaces it
+    except Exception as e:
+        if hasattr(e, "add_note"):  # Python >= 3.11
+            e.add_note(f"while making {what} (attempt {attempt}, seed {s_seed})")
+        raise
+    if not isinstance(raw, Mapping):
+        raise TypeError(f"make_sample({s_seed}) returned {type(raw).__name__}, expected a "
+                        f"dict ({what})")
+    sample = {**raw, "index": index, "seed": s_seed, "attempt": attempt}
+    canon = _canonical(sample, lambda f: f"{what}: {f!r}")
+    if canon["kind"] not in task.kinds:
+        raise ValueError(f"{what}: kind {canon['kind']!r} is not one of the "
+                         f"dataset's kinds {list(task.kinds)}")
+    hw = canon["image"].shape[:2]
+    if task.image_size is not None and tuple(hw) != tuple(task.image_size):
+        raise ValueError(f"{what}: image size {tuple(hw)}, expected "
+                         f"{tuple(task.image_size)}")
+    return canon
+
+
 def _make_and_write(task: _Task, index: int) -> dict:
-    """Try seeds (seed, index, attempt) until a candidate is accepted; write it; summarise."""
-    want = index % len(task.bins) if task.bins else None
+    """Try seeds (seed, index, attempt) until a candidate is accepted; write it; summarise.
+
+    With VR balancing, sample ``index`` wants bin ``filled[index % len(filled)]``; when no
+    candidate of ``max_attempts`` falls in it, the accepted candidate whose target VR is nearest
+    to the bin is written instead (``off_bin``), so balancing never stops a run.
+    """
+    want = None
+    if task.bins:
+        filled = task.filled if task.filled is not None else tuple(range(len(task.bins)))
+        want = filled[index % len(filled)] if filled else None
+    best = None  # (distance to the wanted bin, attempt, canonical sample)
     for attempt in range(task.max_attempts):
         s_seed = sample_seed(task.seed, index, attempt)
-        try:
-            raw = task.make_sample(s_seed)
-        except SampleRejected:
-            continue  # e.g. a scene the generator cannot build: the next seed replaces it
-        except Exception as e:
-            if hasattr(e, "add_note"):  # Python >= 3.11
-                e.add_note(f"while making sample {index} (attempt {attempt}, seed {s_seed})")
-            raise
-        if not isinstance(raw, Mapping):
-            raise TypeError(f"make_sample({s_seed}) returned {type(raw).__name__}, expected a "
-                            f"dict (sample {index})")
-        sample = {**raw, "index": index, "seed": s_seed, "attempt": attempt}
-        canon = _canonical(sample, lambda f, i=index: f"sample {i}: {f!r}")
-        if canon["kind"] not in task.kinds:
-            raise ValueError(f"sample {index}: kind {canon['kind']!r} is not one of the "
-                             f"dataset's kinds {list(task.kinds)}")
-        hw = canon["image"].shape[:2]
-        if task.image_size is not None and tuple(hw) != tuple(task.image_size):
-            raise ValueError(f"sample {index}: image size {tuple(hw)}, expected "
-                             f"{tuple(task.image_size)}")
+        canon = _candidate(task, index, attempt, s_seed)
+        if canon is None:
+            continue
         vr = canon["vr"][canon["target"]]
         if want is not None and vr_bin_index(vr, task.bins) != want:
+            dist = _bin_distance(vr, task.bins[want])
+            if (best is None or dist < best[0]) and (task.accept is None or task.accept(canon)):
+                best = (dist, attempt, canon)
             continue
         if task.accept is not None and not task.accept(canon):
             continue
-        files = _encode(canon)
-        _write_folder(Path(task.samples_dir) / f"{index:0{task.width}d}", files, task.durable)
-        return {"index": index, "attempts": attempt + 1, "target_vr": vr}
-    bin_msg = f", target VR bin {task.bins[want]}" if want is not None else ""
+        _write_folder(Path(task.samples_dir) / f"{index:0{task.width}d}", _encode(canon),
+                      task.durable)
+        return {"index": index, "attempts": attempt + 1, "target_vr": vr, "off_bin": False}
+    if best is not None:  # balancing missed its bin: the nearest accepted candidate
+        canon = best[2]
+        _write_folder(Path(task.samples_dir) / f"{index:0{task.width}d}", _encode(canon),
+                      task.durable)
+        return {"index": index, "attempts": task.max_attempts,
+                "target_vr": canon["vr"][canon["target"]], "off_bin": True}
     raise RuntimeError(f"sample {index}: no candidate accepted in {task.max_attempts} attempts "
-                       f"(seeds {_SEED_RULE} with attempt 0..{task.max_attempts - 1}{bin_msg}); "
-                       f"raise max_attempts or relax accept/balance_vr")
+                       f"(seeds {_SEED_RULE} with attempt 0..{task.max_attempts - 1}); "
+                       f"raise max_attempts or relax accept")
+
+
+def _probe(task: _Task, num: int) -> dict:
+    """VR probe of a balanced set: ``num`` candidates (seeds :func:`probe_seed`), their
+    target-VR counts per bin, and the bins balancing fills (those with at least
+    :data:`PROBE_MIN_HITS` hits)."""
+    hits = [0] * len(task.bins)
+    rejected = outside = 0
+    for k in range(num):
+        canon = _candidate(task, None, k, probe_seed(task.seed, k))
+        if canon is None or (task.accept is not None and not task.accept(canon)):
+            rejected += 1
+            continue
+        b = vr_bin_index(canon["vr"][canon["target"]], task.bins)
+        if b < 0:
+            outside += 1
+        else:
+            hits[b] += 1
+    return {"candidates": int(num), "hits": hits, "outside": outside, "rejected": rejected,
+            "min_hits": PROBE_MIN_HITS,
+            "filled": [b for b, h in enumerate(hits) if h >= PROBE_MIN_HITS]}
+
+
+def _fmt_bin(b: Sequence[float]) -> str:
+    return f"[{b[0]:.2f}, {b[1]:.2f}{']' if b[1] >= 1 else ')'}"
 
 
 @dataclass
@@ -913,6 +994,12 @@ class GenerationSummary:
         vr_bins: the VR bins of the histogram.
         vr_histogram: target-hand VR counts per bin over all samples of the shard on disk.
         vr_outside: samples whose target VR is in no bin.
+        vr_probe: with VR balancing, the probe (``candidates``, ``hits`` per bin, ``outside``,
+            ``rejected``, ``filled``: the bin indices balancing fills), else ``None``.
+        off_bin: balanced samples of this call written outside their bin (no candidate of
+            ``max_attempts`` reached it: the nearest one was kept).
+        probe_attempts: ``make_sample`` calls of the probe in this call (0 when reused from
+            ``meta.json``).
     """
 
     root: str
@@ -925,6 +1012,16 @@ class GenerationSummary:
     vr_bins: list[tuple[float, float]]
     vr_histogram: list[int]
     vr_outside: int
+    vr_probe: dict | None = None
+    off_bin: int = 0
+    probe_attempts: int = 0
+
+    @property
+    def vr_unreachable(self) -> list[tuple[float, float]]:
+        """Bins that VR balancing left out because its probe (almost) never reached them."""
+        if not self.vr_probe:
+            return []
+        return [b for k, b in enumerate(self.vr_bins) if k not in self.vr_probe["filled"]]
 
     @property
     def samples_per_second(self) -> float:
@@ -934,10 +1031,16 @@ class GenerationSummary:
     def __str__(self) -> str:
         hist = ", ".join(f"[{lo:.2f}, {hi:.2f}{']' if hi >= 1 else ')'}: {n}" for (lo, hi), n
                          in zip(self.vr_bins, self.vr_histogram, strict=True))
-        return (f"{self.root}: wrote {self.written}, skipped {self.skipped} already present "
+        text = (f"{self.root}: wrote {self.written}, skipped {self.skipped} already present "
                 f"(indices {self.indices}), {self.attempts} make_sample calls, "
                 f"{self.samples_per_second:.2f} samples/s, {self.stale_removed} stale temp "
                 f"removed\ntarget VR histogram: {hist}; outside bins: {self.vr_outside}")
+        if self.vr_probe:
+            gone = ", ".join(_fmt_bin(b) for b in self.vr_unreachable) or "none"
+            text += (f"\nVR balancing: bins left out (reached by fewer than "
+                     f"{self.vr_probe['min_hits']} of {self.vr_probe['candidates']} probe "
+                     f"candidates): {gone}; samples written outside their bin: {self.off_bin}")
+        return text
 
 
 def generate_dataset(
@@ -955,6 +1058,7 @@ def generate_dataset(
     accept: Callable[[dict], bool] | None = None,
     balance_vr: bool | Sequence = False,
     max_attempts: int = 100,
+    vr_probe: int = 64,
     worker_init: Callable[[], Any] | None = None,
     durable: bool = True,
     mp_context: str = "spawn",
@@ -985,9 +1089,20 @@ def generate_dataset(
         accept: optional filter ``accept(sample) -> bool``; a rejected candidate is replaced by
             the next attempt's seed. A ``make_sample`` that raises :class:`SampleRejected`
             rejects its seed the same way.
-        balance_vr: ``True`` (bins from :func:`vr_bins`) or a list of bins: sample ``i`` must have
-            its target VR in bin ``i % len(bins)``, so every bin gets the same share (up to one).
-        max_attempts: candidates per sample before giving up with RuntimeError.
+        balance_vr: ``True`` (bins from :func:`vr_bins`) or a list of bins: the target VRs are
+            spread evenly over the bins that ``make_sample`` can reach. First a *probe* makes
+            ``vr_probe`` candidates (seeds :func:`probe_seed`, not samples) and counts their
+            target VRs per bin; bins it hits fewer than :data:`PROBE_MIN_HITS` times (e.g.
+            [0.40, 0.60) for hand-chain scenes, whose thin rings rarely hide half a hand) are
+            reported at once (a ``UserWarning``) and left out. Sample ``i`` then wants bin
+            ``filled[i % len(filled)]``; if none of its ``max_attempts`` candidates lands
+            there, the accepted candidate nearest to the bin is written (counted in
+            ``off_bin``): balancing never stops a run. The probe is
+            stored in ``meta.json`` (``vr_probe``) and reused on resume; it is deterministic in
+            ``seed``, so shards agree.
+        max_attempts: candidates per sample; RuntimeError when none is accepted (every seed
+            rejected by ``make_sample`` or ``accept``).
+        vr_probe: candidates of the VR probe (only with ``balance_vr``), >= 1.
         worker_init: called once in each worker process (and once in-process when
             ``workers == 1``) before any ``make_sample``, e.g. to create a renderer.
         durable: fsync every file and folder (safe against power cuts, slower).
@@ -1012,8 +1127,9 @@ def generate_dataset(
     if isinstance(num, bool) or not isinstance(num, int) or num < 1:
         raise ValueError(f"num must be a positive integer, got {num!r}")
     sample_seed(seed, 0)  # validates seed
-    if workers < 1 or max_attempts < 1:
-        raise ValueError(f"workers and max_attempts must be >= 1, got {workers}, {max_attempts}")
+    if workers < 1 or max_attempts < 1 or vr_probe < 1:
+        raise ValueError(f"workers, max_attempts and vr_probe must be >= 1, got {workers}, "
+                         f"{max_attempts}, {vr_probe}")
     k, n = shard if shard is not None else (0, 1)
     indices = shard_range(num, k, n)
     if isinstance(image_size, int):
@@ -1045,7 +1161,28 @@ def generate_dataset(
     task = _Task(make_sample, accept, int(seed), kinds, bins if balance_vr else None,
                  tuple(image_size) if image_size else None, int(max_attempts),
                  str(root / SAMPLES_DIR), width, durable)
+    probe, probe_calls = None, 0
     with _lock(root):
+        if balance_vr:
+            old = read_meta(root) if (root / META_FILE).exists() else {}
+            probe = old.get("vr_probe")
+            if not (isinstance(probe, dict) and probe.get("candidates") == vr_probe):
+                if worker_init is not None:
+                    worker_init()  # the probe runs in this process
+                probe = _probe(task, vr_probe)
+                probe_calls = vr_probe
+            task.filled = tuple(probe["filled"])
+            meta["vr_probe"] = probe
+            gone = [bins[b] for b in range(len(bins)) if b not in probe["filled"]]
+            if gone:
+                how = ("no bin is reachable: the samples are not balanced" if not probe["filled"]
+                       else "the other bins share the samples evenly")
+                warnings.warn(f"VR balancing: {len(gone)} of {len(bins)} bins reached by fewer "
+                              f"than {probe['min_hits']} of {vr_probe} probe candidates (hits "
+                              f"per bin {probe['hits']}, "
+                              f"outside all bins {probe['outside']}, rejected "
+                              f"{probe['rejected']}): {', '.join(_fmt_bin(b) for b in gone)} "
+                              f"left out; {how}", UserWarning, stacklevel=2)
         stale = _open_root(root, meta)
         samples_dir = root / SAMPLES_DIR
         done_vr: dict[int, float] = {}
@@ -1063,14 +1200,15 @@ def generate_dataset(
         skipped = len(done_vr)
         todo = [i for i in indices if i not in done_vr]
         results = _run(task, todo, workers, worker_init, progress, len(indices), skipped,
-                       mp_context, f"INTER-SH {'/'.join(kinds)}")
+                       mp_context, f"INTER-SH {'/'.join(kinds)}", initialised=probe_calls > 0)
     for r in results:
         done_vr[r["index"]] = r["target_vr"]
     hist = vr_histogram(list(done_vr.values()), bins)
     outside = len(done_vr) - sum(hist)
     return GenerationSummary(str(root), meta["ranges"], len(results), skipped,
                              sum(r["attempts"] for r in results), stale,
-                             time.perf_counter() - t0, list(bins), hist, outside)
+                             time.perf_counter() - t0, list(bins), hist, outside, probe,
+                             sum(r["off_bin"] for r in results), probe_calls)
 
 
 def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
@@ -1092,14 +1230,15 @@ def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
 
 
 def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | None,
-         progress: bool, total: int, initial: int, mp_context: str, desc: str) -> list[dict]:
+         progress: bool, total: int, initial: int, mp_context: str, desc: str,
+         initialised: bool = False) -> list[dict]:
     from tqdm.auto import tqdm
 
     results: list[dict] = []
     bar = tqdm(total=total, initial=initial, disable=not progress, desc=desc, unit="sample")
     try:
         if workers == 1 or len(todo) <= 1:
-            if worker_init is not None and todo:
+            if worker_init is not None and todo and not initialised:
                 worker_init()
             for i in todo:
                 results.append(_make_and_write(task, i))

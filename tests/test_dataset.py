@@ -446,6 +446,69 @@ def test_vr_balanced_generation(tmp_path):
     assert s2.attempts == s.attempts
 
 
+def _never_below_half(seed):
+    """A generator whose target VR is never below 0.5 (like hand-chain scenes and low VRs)."""
+    s = make(seed)
+    s["vr"][s["target"]] = 0.5 + 0.5 * (seed % 997) / 997
+    return s
+
+
+def test_vr_balancing_leaves_out_unreachable_bins_up_front(tmp_path):
+    bins = ((0.0, 0.3), (0.5, 0.75), (0.75, 1.0))
+    with pytest.warns(UserWarning, match=r"1 of 3 bins .* \[0\.00, 0\.30\) left out"):
+        s = gen(tmp_path / "u", num=6, fn=_never_below_half, balance_vr=bins, vr_probe=16)
+    assert s.written == 6 and s.off_bin == 0 and s.probe_attempts == 16
+    assert s.vr_histogram == [0, 3, 3] and s.vr_unreachable == [(0.0, 0.3)]
+    assert "bins left out (reached by fewer than 2 of 16 probe candidates): [0.00, 0.30)" in str(s)
+    ds = D.InterSHDataset(tmp_path / "u")
+    probe = ds.meta["vr_probe"]
+    assert probe["filled"] == [1, 2] and probe["hits"][0] == 0 and sum(probe["hits"]) == 16
+    for i in range(6):  # the reachable bins take turns
+        lo, hi = bins[1 + i % 2]
+        assert lo <= ds.annotation(i)["target_vr"] <= hi
+    # the probe used its own seeds, never a sample's
+    probe_seeds = {D.probe_seed(SEED, k) for k in range(16)}
+    assert not probe_seeds & {D.sample_seed(SEED, i, a) for i in range(6) for a in range(100)}
+    # resume: the probe comes from meta.json (no candidate made), same bytes
+    before = tree(tmp_path / "u")
+    import shutil
+
+    for name in ("000004", "000005"):
+        shutil.rmtree(tmp_path / "u" / "samples" / name)
+    with pytest.warns(UserWarning, match="left out"):
+        again = gen(tmp_path / "u", num=6, fn=_never_below_half, balance_vr=bins, vr_probe=16)
+    assert again.probe_attempts == 0 and again.written == 2
+    assert tree(tmp_path / "u") == before
+    with pytest.raises(ValueError, match="vr_probe must be >= 1|must be >= 1"):
+        gen(tmp_path / "z", num=2, balance_vr=bins, vr_probe=0)
+
+
+def test_vr_balancing_never_stops_on_a_hard_bin(tmp_path, monkeypatch):
+    """A bin the probe kept but a sample cannot reach: the nearest candidate is written."""
+    monkeypatch.setattr(D, "PROBE_MIN_HITS", 0)  # keep even the bin nobody reaches
+    bins = ((0.0, 0.3), (0.5, 1.0))
+    s = gen(tmp_path / "h", num=4, fn=_never_below_half, balance_vr=bins, vr_probe=4,
+            max_attempts=5)
+    assert s.written == 4 and s.off_bin == 2 and s.attempts == 5 + 1 + 5 + 1
+    ds = D.InterSHDataset(tmp_path / "h")
+    for i in (0, 2):  # wanted [0, 0.3): the candidate nearest to it, out of 5
+        ann = ds.annotation(i)
+        vrs = [_never_below_half(D.sample_seed(SEED, i, a)) for a in range(5)]
+        best = min(range(5), key=lambda a: vrs[a]["vr"][vrs[a]["target"]])
+        assert ann["attempt"] == best
+    assert "samples written outside their bin: 2" in str(s)
+
+
+def test_version_1_roots_stay_readable(small_root):
+    meta = json.loads((small_root / "meta.json").read_text())
+    (small_root / "meta.json").write_text(json.dumps({**meta, "format_version": 1}))
+    _rewrite_json(small_root / "samples" / "000000" / "annotation.json", format_version=1)
+    ds = D.InterSHDataset(small_root)
+    assert ds[0]["image"].shape == (SIZE, SIZE, 3)
+    with pytest.raises(ValueError, match="format_version"):  # but not resumed by version 2
+        gen(small_root, num=3)
+
+
 def test_accept_filter_and_its_limit(tmp_path):
     def other_fully_visible(sample):
         return sample["vr"][2] == 1.0
