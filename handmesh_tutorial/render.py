@@ -21,36 +21,55 @@ Typical use::
 
     with Renderer(224) as r:
         out = r.render([(verts, faces, colors, 1), (v2, f2, c2, 2)], K,
-                       lights=random_lights(rng), background=random_background(rng, 224, 224),
+                       lights=random_lights(rng), background=scene_background(rng, 224, 224),
                        alone=True)
     out.image, out.labels, out.depth, out.alone_masks
+
+Backgrounds are procedural (`random_background`) or cut from natural photographs
+(`photo_background`): CC0 / public-domain images that scikit-image bundles in its wheel
+(`BACKGROUND_PHOTOS`, read from the installed package at run time; licences and credits in
+``docs/concepts/scenes.md``).
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib.util
+import io
 import os
 import types
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 
 __all__ = [
+    "BACKGROUND_PHOTOS",
     "CV_TO_GL",
+    "BackgroundPhoto",
     "Light",
     "RenderMesh",
     "RenderResult",
     "Renderer",
+    "color_temperature",
     "crop_camera",
     "default_lights",
     "ensure_egl",
+    "framing",
     "import_pyrender",
     "intrinsics",
     "patch_pyrender_numpy2",
+    "photo_background",
+    "photo_pixels",
     "project",
     "random_background",
     "random_lights",
+    "scene_background",
+    "skimage_data_dir",
 ]
 
 #: Pose of the pyrender (OpenGL) camera in the OpenCV camera frame, and its own inverse: it flips
@@ -251,6 +270,31 @@ def crop_camera(points3d: Any, image_size: int, margin: float = 0.1, focal: floa
     return intrinsics(f, f, mid - f * c[0], mid - f * c[1])
 
 
+def framing(points3d: Any, K: Any, image_size: int, margin: float = 0.08) -> dict:
+    """How a body is framed in a square image: its share of the image and what lies inside.
+
+    Args:
+        points3d: (N, 3) points in the camera frame, metres, ``Z > 0`` (a hand's vertices or
+            its 21 joints).
+        K: (3, 3) intrinsics.
+        image_size: side ``S`` of the square image, pixels.
+        margin: border, as a fraction of ``S``, that counts as outside for ``inside``.
+
+    Returns:
+        dict with ``share`` (the longer side of the points' projected bounding box over ``S``),
+        ``inside`` (fraction of the points at least ``margin * S`` pixels inside the image
+        border, which lies at ``-0.5`` and ``S - 0.5``) and ``center`` ((2,) bounding-box centre,
+        pixels).
+    """
+    uv = project(points3d, K)
+    S = int(image_size)
+    lo, hi = uv.min(0), uv.max(0)
+    m = margin * S
+    ok = ((uv >= -0.5 + m) & (uv <= S - 0.5 - m)).all(1)
+    return {"share": float((hi - lo).max() / S), "inside": float(ok.mean()),
+            "center": 0.5 * (lo + hi)}
+
+
 # --------------------------------------------------------------------------------------------
 # Lights and backgrounds
 # --------------------------------------------------------------------------------------------
@@ -326,6 +370,33 @@ def random_lights(rng: np.random.Generator | int | None, num: tuple[int, int] = 
     return lights
 
 
+def color_temperature(kelvin: float) -> tuple[float, float, float]:
+    """The colour of a black-body light source, as linear RGB with its largest channel 1.
+
+    Tanner Helland's fit of the Planckian locus in sRGB (valid 1000-40000 K), converted to linear
+    RGB for pyrender: about ``(1, 0.42, 0.13)`` at 2700 K (a tungsten bulb), ``(1, 0.86, 0.76)``
+    at 5000 K, white at 6600 K, and blue above (``(0.71, 0.79, 1)`` at 10000 K, shade).
+
+    Args:
+        kelvin: colour temperature, kelvin.
+
+    Returns:
+        ``(r, g, b)`` in [0, 1].
+    """
+    t = float(np.clip(kelvin, 1000.0, 40000.0)) / 100.0
+    if t <= 66:
+        r = 255.0
+        g = 99.4708025861 * np.log(t) - 161.1195681661
+        b = 0.0 if t <= 19 else 138.5177312231 * np.log(t - 10) - 305.0447927307
+    else:
+        r = 329.698727446 * (t - 60) ** -0.1332047592
+        g = 288.1221695283 * (t - 60) ** -0.0755148492
+        b = 255.0
+    rgb = srgb_to_linear(np.clip(np.array([r, g, b]) / 255.0, 0.0, 1.0))
+    rgb = rgb / rgb.max()
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+
+
 def _value_noise(rng: np.random.Generator, H: int, W: int, octaves: int = 4) -> np.ndarray:
     """Multi-octave smooth value noise (a Perlin-like texture) in [0, 1], shape (H, W)."""
     out = np.zeros((H, W))
@@ -395,6 +466,215 @@ def random_background(rng: np.random.Generator | int | None, H: int, W: int | No
     img = c0 + t[..., None] * (c1 - c0)
     img = img + rng.normal(0.0, 0.02, img.shape)
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class BackgroundPhoto:
+    """A photograph shipped in scikit-image's wheel (``skimage/data/<file>``), used as a
+    background by `photo_background`.
+
+    Attributes:
+        name: short name (the ``skimage.data`` function of the same image).
+        file: file name in ``skimage/data``.
+        texture: ``True`` for a grey close-up texture (tinted at random), ``False`` for a colour
+            photograph.
+        licence: the licence stated in the image's ``skimage.data`` docstring (scikit-image 0.26).
+        credit: author or source.
+        description: what it shows.
+        tints: for textures, plausible sRGB surface colours (one is drawn and jittered).
+        sha256: hash of the file in scikit-image 0.22-0.26 (the same bytes in all of them).
+    """
+
+    name: str
+    file: str
+    texture: bool
+    licence: str
+    credit: str
+    description: str
+    tints: tuple[tuple[float, float, float], ...] = ()
+    sha256: str = ""
+
+
+#: The photographs `photo_background` draws from: only images that scikit-image *bundles in its
+#: wheel* (not the ones ``skimage.data`` downloads with pooch) and whose ``skimage.data``
+#: docstring states CC0 or the public domain. Left out: the astronaut and camera portraits
+#: (faces), the Hubble deep field (black sky), microscopy and retina images, and the Middlebury
+#: motorcycle pair (no licence stated). Nothing is copied into this library: the files are read
+#: from the installed scikit-image at run time.
+BACKGROUND_PHOTOS: tuple[BackgroundPhoto, ...] = (
+    BackgroundPhoto("coffee", "coffee.png", False, "CC0",
+                    "Rachel Michetti (photographer), courtesy of Pikolo Espresso Bar",
+                    "a cup of espresso on a wooden table",
+                    sha256="cc02f8ca188b167c775a7101b5d767d1e71792cf762c33d6fa15a4599b5a8de7"),
+    BackgroundPhoto("chelsea", "chelsea.png", False, "CC0",
+                    "Stefan van der Walt (photographer)", "Chelsea the cat",
+                    sha256="596aa1e7cb875eb79f437e310381d26b338a81c2da23439704a73c4651e8c4bb"),
+    BackgroundPhoto("rocket", "rocket.jpg", False, "public domain", "SpaceX",
+                    "a Falcon 9 on its launch pad at dusk",
+                    sha256="c2dd0de7c538df8d111e479619b129464d0269d0ae5fd18ca91d33a7fdfea95c"),
+    BackgroundPhoto("brick", "brick.png", True, "CC0", "CC0Textures (Bricks25)",
+                    "a brick wall, grey",
+                    ((0.55, 0.28, 0.2), (0.62, 0.45, 0.35), (0.5, 0.5, 0.5), (0.85, 0.82, 0.75)),
+                    "7966caf324f6ba843118d98f7a07746d22f6a343430add0233eca5f6eaaa8fcf"),
+    BackgroundPhoto("grass", "grass.png", True, "CC0", "linolafett on DeviantArt (Grass 01)",
+                    "grass, grey", ((0.3, 0.42, 0.18), (0.42, 0.5, 0.22), (0.6, 0.55, 0.32)),
+                    "b6b6022426b38936c43a4ac09635cd78af074e90f42ffa8227ac8b7452d39f89"),
+    BackgroundPhoto("gravel", "gravel.png", True, "CC0", "CC0Textures (Gravel04)",
+                    "gravel, grey", ((0.5, 0.48, 0.45), (0.62, 0.56, 0.46), (0.4, 0.4, 0.42)),
+                    "c48615b451bf1e606fbd72c0aa9f8cc0f068ab7111ef7d93bb9b0f2586440c12"),
+)
+
+
+def _photo(name: str) -> BackgroundPhoto:
+    for ph in BACKGROUND_PHOTOS:
+        if ph.name == name:
+            return ph
+    raise ValueError(f"unknown background photo {name!r}; expected one of "
+                     f"{[ph.name for ph in BACKGROUND_PHOTOS]}")
+
+
+def skimage_data_dir() -> Path:
+    """The ``data`` folder of the installed scikit-image (found without importing it).
+
+    Raises:
+        ImportError: scikit-image is not installed (``pip install scikit-image``).
+    """
+    spec = importlib.util.find_spec("skimage")
+    if spec is None or not spec.submodule_search_locations:
+        raise ImportError("photo backgrounds read the photographs bundled in scikit-image's "
+                          "wheel: pip install scikit-image (random_background needs nothing)")
+    return Path(list(spec.submodule_search_locations)[0]) / "data"
+
+
+@functools.cache
+def photo_pixels(name: str) -> np.ndarray:
+    """The pixels of one of `BACKGROUND_PHOTOS`, read once per process (read-only array).
+
+    Args:
+        name: a `BackgroundPhoto` name (``"coffee"``, ``"brick"``, ...).
+
+    Returns:
+        (H, W, 3) uint8 RGB for photographs, (H, W) uint8 grey for textures.
+
+    Raises:
+        ValueError: unknown name.
+        ImportError: scikit-image is not installed.
+        FileNotFoundError: the installed scikit-image lacks the file.
+    """
+    from PIL import Image
+
+    ph = _photo(name)
+    path = skimage_data_dir() / ph.file
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: the installed scikit-image does not bundle "
+                                f"{ph.file} (scikit-image 0.26's wheel does)")
+    data = path.read_bytes()
+    if ph.sha256 and hashlib.sha256(data).hexdigest() != ph.sha256:
+        warnings.warn(f"{path} differs from the {ph.file} of scikit-image 0.22-0.26: scenes made "
+                      "with the same seed will differ from other installations", stacklevel=2)
+    with Image.open(io.BytesIO(data)) as im:
+        a = np.array(im.convert("L" if ph.texture else "RGB"))
+    a.setflags(write=False)
+    return a
+
+
+def photo_background(rng: np.random.Generator | int | None, H: int, W: int | None = None,
+                     photo: str | None = None) -> np.ndarray:
+    """A background cut from a natural photograph (`BACKGROUND_PHOTOS`), randomly varied.
+
+    One photograph (a colour photograph with probability 0.6, else a texture, uniform within
+    each group; or ``photo``) is cropped at a random place
+    and scale (35-100 % of the largest window of the image's aspect for photographs, 25-90 % for
+    textures, which are also turned by a multiple of 90 degrees and flipped vertically), resized
+    to ``(H, W)``, flipped left-right with probability 0.5, and defocused with probability 0.6
+    (Gaussian blur, sigma up to 2 px at 224 px: the shallow depth of field of a close-up).
+    Grey textures get one of their plausible surface colours (`BackgroundPhoto.tints`), jittered.
+    Then colour jitter (brightness x0.55-1.2, contrast x0.7-1.15,
+    saturation x0.5-1.15, per-channel white balance), an illumination gradient of up to ±25 % in
+    a random direction, and a little pixel noise.
+
+    Args:
+        rng: a ``numpy.random.Generator`` or a seed.
+        H: height, pixels.
+        W: width, pixels (default ``H``).
+        photo: a `BackgroundPhoto` name, or ``None`` to draw one.
+
+    Returns:
+        (H, W, 3) uint8 RGB image.
+
+    Raises:
+        ValueError: unknown ``photo``.
+        ImportError: scikit-image is not installed.
+    """
+    from PIL import Image, ImageFilter
+
+    rng = np.random.default_rng(rng)
+    W = H if W is None else W
+    if photo is None:
+        texture = bool(rng.random() >= 0.6)
+        group = [ph for ph in BACKGROUND_PHOTOS if ph.texture == texture]
+        photo = group[int(rng.integers(len(group)))].name
+    ph = _photo(photo)
+    im = Image.fromarray(photo_pixels(photo))
+    if ph.texture:
+        k = int(rng.integers(4))
+        if k:
+            im = im.transpose((Image.Transpose.ROTATE_90, Image.Transpose.ROTATE_180,
+                               Image.Transpose.ROTATE_270)[k - 1])
+        scale = rng.uniform(0.25, 0.9)
+    else:
+        scale = rng.uniform(0.35, 1.0)
+    pw, phh = im.size
+    aspect = W / H
+    cw = min(pw, phh * aspect) * scale
+    ch = cw / aspect
+    x0, y0 = rng.uniform(0, pw - cw), rng.uniform(0, phh - ch)
+    im = im.resize((W, H), Image.Resampling.BILINEAR, box=(x0, y0, x0 + cw, y0 + ch))
+    if rng.random() < 0.5:
+        im = im.transpose(Image.Transpose.FLIP_LEFT_RIGHT)
+    if ph.texture and rng.random() < 0.5:
+        im = im.transpose(Image.Transpose.FLIP_TOP_BOTTOM)
+    sigma = rng.uniform(0.3, 2.0) * max(H, W) / 224
+    if rng.random() < 0.6:
+        im = im.filter(ImageFilter.GaussianBlur(float(sigma)))
+    img = np.asarray(im, dtype=np.float64) / 255.0
+    if ph.texture:  # grey -> a surface colour (the mean of the texture becomes the colour)
+        base = np.asarray(ph.tints[int(rng.integers(len(ph.tints)))])
+        base = np.clip(base * np.exp(rng.normal(0.0, 0.08, 3)) * rng.uniform(0.7, 1.2), 0, 1)
+        img = img[..., None] / max(float(img.mean()), 1e-3) * base
+    mean = img.mean((0, 1))
+    img = (img - mean) * rng.uniform(0.7, 1.15) + mean  # contrast
+    grey = img @ np.array([0.299, 0.587, 0.114])
+    img = grey[..., None] + rng.uniform(0.5, 1.15) * (img - grey[..., None])  # saturation
+    img = img * rng.uniform(0.55, 1.2) * np.exp(rng.normal(0.0, 0.06, 3))  # exposure, white bal.
+    yy, xx = np.mgrid[0:H, 0:W] / max(H, W)
+    ang = rng.uniform(0, 2 * np.pi)
+    ramp = np.cos(ang) * (xx - xx.mean()) + np.sin(ang) * (yy - yy.mean())
+    img = img * (1 + rng.uniform(-0.5, 0.5) * ramp)[..., None]
+    img = img + rng.normal(0.0, 0.01, img.shape)
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def scene_background(rng: np.random.Generator | int | None, H: int, W: int | None = None,
+                     photo_prob: float = 0.75) -> np.ndarray:
+    """The generator's background: a `photo_background` with probability ``photo_prob``, else a
+    procedural `random_background`.
+
+    Args:
+        rng: a ``numpy.random.Generator`` or a seed.
+        H: height, pixels.
+        W: width, pixels (default ``H``).
+        photo_prob: probability of a photograph, in [0, 1].
+
+    Returns:
+        (H, W, 3) uint8 RGB image.
+    """
+    if not 0.0 <= photo_prob <= 1.0:
+        raise ValueError(f"photo_prob must be in [0, 1], got {photo_prob}")
+    rng = np.random.default_rng(rng)
+    if rng.random() < photo_prob:
+        return photo_background(rng, H, W)
+    return random_background(rng, H, W)
 
 
 # --------------------------------------------------------------------------------------------
@@ -556,9 +836,10 @@ class Renderer:
 
     # scene construction ------------------------------------------------------------------
     def _scene(self, meshes: list[RenderMesh], K: np.ndarray, lights: Sequence[Light],
-               ambient: float):
+               ambient: Any):
         pr = self._pr
-        scene = pr.Scene(bg_color=np.zeros(4), ambient_light=np.full(3, ambient))
+        amb = np.broadcast_to(np.asarray(ambient, dtype=float), (3,)).copy()
+        scene = pr.Scene(bg_color=np.zeros(4), ambient_light=amb)
         # pyrender's IntrinsicsCamera puts u = fx X/Z + cx at a pixel's left edge (OpenGL window
         # coordinates); +0.5 moves it to the pixel centre (OpenCV convention).
         cam = pr.IntrinsicsCamera(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2] + 0.5, cy=K[1, 2] + 0.5,
@@ -615,7 +896,7 @@ class Renderer:
 
     # public API -----------------------------------------------------------------------------
     def render(self, meshes: Sequence[Any], K: Any, *, lights: Sequence[Light] | None = None,
-               background: Any = None, ambient: float = 0.25, color: bool = True,
+               background: Any = None, ambient: Any = 0.25, color: bool = True,
                alone: bool = False, alone_images: bool = False) -> RenderResult:
         """Render a scene: RGB image, label mask, depth and optionally each body alone.
 
@@ -627,7 +908,8 @@ class Renderer:
             lights: lights in the camera frame; ``None`` means `default_lights`.
             background: (H, W, 3) uint8 (or float [0, 1]) image, or an RGB (3,) colour, behind
                 the bodies; ``None`` is black. Use `random_background` for variety.
-            ambient: ambient light level in [0, 1].
+            ambient: ambient light level in [0, 1], or a (3,) linear RGB ambient colour (e.g.
+                tinted by the background, as light bouncing off the surroundings is).
             color: run the colour pass (``False``: masks and depth only, faster).
             alone: also render each body alone and return its mask (the VR denominators).
             alone_images: also return each body alone over the background (implies ``alone``).

@@ -253,3 +253,87 @@ def test_bad_inputs_raise(renderer):
         renderer.render([m], _K(), background=np.zeros((S + 1, S, 3), np.uint8))
     with pytest.raises(ValueError, match="unknown light kind"):
         renderer.render([m], _K(), lights=[R.Light("spot")])
+
+
+# ---------------------------------------------------------------- realistic appearance
+
+
+def test_color_temperature_warm_to_cool():
+    warm, day, cool = (np.array(R.color_temperature(k)) for k in (2700, 6600, 10000))
+    for c in (warm, day, cool):
+        assert c.max() == pytest.approx(1.0) and c.min() >= 0.0
+    assert warm[0] == 1.0 and warm[2] < 0.3          # tungsten: orange
+    np.testing.assert_allclose(day, 1.0, atol=0.03)  # ~6600 K: white
+    assert cool[2] == 1.0 and cool[0] < 0.85         # shade: blue
+    blue_share = [R.color_temperature(k)[2] / R.color_temperature(k)[0]
+                  for k in (2000, 3000, 4000, 5000, 6000)]
+    assert blue_share == sorted(blue_share)          # bluer as the temperature rises
+
+
+def test_background_photos_are_bundled_in_the_wheel_and_free():
+    """Only photographs the installed scikit-image ships (no pooch download), CC0 or public
+    domain, each with its credit."""
+    folder = R.skimage_data_dir()
+    assert {ph.name for ph in R.BACKGROUND_PHOTOS} == {"coffee", "chelsea", "rocket", "brick",
+                                                       "grass", "gravel"}
+    for ph in R.BACKGROUND_PHOTOS:
+        assert (folder / ph.file).is_file(), ph.file
+        assert ph.licence in ("CC0", "public domain") and ph.credit and ph.description
+        px = R.photo_pixels(ph.name)
+        assert px.dtype == np.uint8 and not px.flags.writeable
+        assert px.ndim == (2 if ph.texture else 3) and min(px.shape[:2]) >= 300
+        assert bool(ph.tints) == ph.texture
+
+
+def test_a_changed_photograph_is_reported(monkeypatch):
+    import dataclasses
+
+    changed = tuple(dataclasses.replace(ph, sha256="0" * 64) if ph.name == "coffee" else ph
+                    for ph in R.BACKGROUND_PHOTOS)
+    monkeypatch.setattr(R, "BACKGROUND_PHOTOS", changed)
+    R.photo_pixels.cache_clear()
+    try:
+        with pytest.warns(UserWarning, match="coffee.png differs .* same seed will differ"):
+            R.photo_pixels("coffee")
+    finally:
+        R.photo_pixels.cache_clear()
+
+
+def test_photo_background_is_deterministic_and_varied():
+    a = R.photo_background(4, 40, 50)
+    assert a.shape == (40, 50, 3) and a.dtype == np.uint8 and a.std() > 2.0
+    assert a.tobytes() == R.photo_background(4, 40, 50).tobytes()
+    imgs = [R.photo_background(s, 32) for s in range(12)]
+    assert len({im.tobytes() for im in imgs}) == 12
+    for ph in R.BACKGROUND_PHOTOS:  # every photograph, colour or tinted texture, gives colour
+        im = R.photo_background(1, 32, photo=ph.name).astype(float)
+        assert im.std() > 2.0 and np.abs(im[..., 0] - im[..., 2]).mean() > 1.0, ph.name
+    with pytest.raises(ValueError, match="unknown background photo"):
+        R.photo_background(0, 8, photo="lena")
+
+
+def test_scene_background_mixes_photos_and_procedural():
+    for prob, fn in ((1.0, R.photo_background), (0.0, R.random_background)):
+        rng = np.random.default_rng(3)
+        rng.random()  # scene_background's own draw (photo or not)
+        assert R.scene_background(3, 24, photo_prob=prob).tobytes() == fn(rng, 24).tobytes()
+    with pytest.raises(ValueError, match="photo_prob"):
+        R.scene_background(0, 8, photo_prob=1.5)
+
+
+def test_ambient_colour(renderer):
+    body = [_sphere((0.0, 0.0, 0.4), 0.04, 1, color=(1.0, 1.0, 1.0))]
+    out = renderer.render(body, _K(), lights=[], ambient=(1.0, 0.0, 0.0))
+    px = out.image[out.labels == 1].astype(float)
+    assert px[:, 0].mean() > 100 and px[:, 1:].max() < 5  # lit red by the ambient term only
+    grey = renderer.render(body, _K(), lights=[], ambient=0.5).image[out.labels == 1]
+    assert np.ptp(grey.astype(int), axis=1).max() <= 1    # a scalar ambient stays grey
+
+
+def test_framing_measures_share_and_inside():
+    K = R.intrinsics(100.0, 100.0, 49.5, 49.5)
+    pts = np.array([[-0.1, -0.1, 1.0], [0.1, 0.05, 1.0], [0.0, 0.0, 1.0], [0.45, 0.0, 1.0]])
+    fr = R.framing(pts, K, 100, margin=0.08)
+    assert fr["share"] == pytest.approx(0.55)  # u from 39.5 to 94.5
+    assert fr["inside"] == 0.75                 # u = 94.5 lies within 8 px of the border
+    np.testing.assert_allclose(fr["center"], [67.0, 47.0])
