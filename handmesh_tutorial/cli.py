@@ -52,7 +52,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     s = interact.generate_interactions(
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,
         workers=args.workers, balance_vr=args.balance_vr, shard=args.shard, limits=args.limits,
-        durable=not args.no_fsync, progress=not args.quiet)
+        durable=not args.no_fsync, progress=not args.quiet, vr_probe=args.vr_probe)
     print(f"handmesh generate: {s.written} samples written, {s.skipped} already present "
           f"(skipped), {s.attempts} candidates, {s.samples_per_second:.2f} samples/s, "
           f"{s.seconds:.1f} s -> {s.root}")
@@ -60,6 +60,12 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     for (lo, hi), n in zip(s.vr_bins, s.vr_histogram, strict=True):
         print(f"  [{lo:.2f}, {hi:.2f}{']' if hi >= 1 else ')'}: {n}")
     print(f"  outside the bins (VR < {s.vr_bins[0][0]:.2f}): {s.vr_outside}")
+    if s.vr_probe:
+        gone = ", ".join(f"[{lo:.2f}, {hi:.2f}{']' if hi >= 1 else ')'}"
+                         for lo, hi in s.vr_unreachable) or "none"
+        print(f"VR balancing over the reachable bins; left out: {gone} (probe of "
+              f"{s.vr_probe['candidates']} candidates, hits per bin {s.vr_probe['hits']}); "
+              f"samples written outside their bin: {s.off_bin}")
     return 0
 
 
@@ -152,11 +158,16 @@ def build_parser() -> argparse.ArgumentParser:
                      "(default: 224)")
     gen.add_argument("--workers", type=int, default=1, help="worker processes (default: 1)")
     gen.add_argument("--balance-vr", action="store_true",
-                     help="equal numbers of samples per VR bin of the target hand")
+                     help="equal numbers of samples per VR bin of the target hand; bins that a "
+                     "probe of candidates (almost) never reaches, e.g. [0.40, 0.60) for "
+                     "hand-chain, are reported up front and left out")
+    gen.add_argument("--vr-probe", type=int, default=64, metavar="N",
+                     help="candidates of the --balance-vr probe (default: 64)")
     gen.add_argument("--shard", type=_shard, default=None, metavar="K/N",
                      help="make only shard K of N (merge with dataset.merge_shards)")
-    gen.add_argument("--limits", choices=("paper", "anatomical"), default="paper",
-                     help="joint limits: paper (+-60 deg per LCS axis) or anatomical")
+    gen.add_argument("--limits", choices=("anatomical", "paper"), default="anatomical",
+                     help="joint limits of the hands: anatomical (default: natural poses) or "
+                     "paper (+-60 deg about every LCS axis, the paper's generator)")
     gen.add_argument("--no-fsync", action="store_true",
                      help="skip fsync of every file (faster, not safe against power cuts)")
     gen.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -3,7 +3,8 @@
 One call runs the whole paper pipeline at laptop scale, on CPU:
 
 1. **Data.** Two INTER-SH sets of mixed scenes (hand-hand, hand-object and hand-chain, one kind
-   drawn per sample; :func:`handmesh_tutorial.dataset.generate_dataset` with
+   drawn per sample; natural poses: the generator's default anatomical joint limits, not the
+   paper's ±60°; :func:`handmesh_tutorial.dataset.generate_dataset` with
    :func:`handmesh_tutorial.interact.make_sample`): ``OUT/data/train`` (seed ``seed``, the
    generator's natural VR distribution) and the held-out ``OUT/data/test`` (seed ``seed + 1``,
    never seen in training, ``balance_vr=True``: the target hands spread evenly over the paper's
@@ -34,7 +35,8 @@ finishes in about ten minutes on a 2-core CPU:
   needs *many different* scenes far more than it needs balanced ones: on 1,900 scenes without
   augmentation the validation loss stopped falling after 12 epochs (train 19.8 mm, val 24.6 mm);
 * network crop = 1/2 of ``budget.image_size`` (``default``: 64 px; images are rendered at
-  ``budget.image_size``, the hand covers most of them), batch ``budget.batch_size``
+  ``budget.image_size``, where the target hand spans 45-75 % of the side; the
+  network's crop is cut around it), batch ``budget.batch_size``
   (``default``: 16), ``budget.epochs / 2`` epochs (``default``: 10, about 1,700 steps), learning
   rate ``1e-3`` (as MobRecon/HandMesh; the paper's ``1e-4`` is for 200 epochs with a pretrained
   encoder), halved once, after three quarters of the run;
@@ -218,7 +220,7 @@ def _generate(root: Path, num: int, seed: int, cfg: DemoConfig, progress: bool, 
     config = {k: (list(v) if isinstance(v, tuple) else v)
               for k, v in asdict(InteractionConfig()).items()}
     params = {"generator": "handmesh_tutorial.interact.make_sample", "kind": "mixed",
-              "limits": "paper", "config": config}
+              "limits": config["limits"], "config": config}
     return generate_dataset(root, fn, num, seed, list(KINDS), workers=cfg.workers,
                             progress=progress, params=params,
                             image_size=cfg.render_size, balance_vr=balance,

@@ -10,14 +10,20 @@
    (2 mm) until its cylinders first collide; it backs off to the last valid position.
 4. **Joint moves.** Every joint of every dynamic body (both hands, the chain links) gets a random
    direction in its LCS-angle space and turns along it in increments of ``joint_step_deg``
-   (2 degrees) until a collision with another body, a self-collision, or its limit (60 degrees in
-   the paper, ``limits="paper"``; ``"anatomical"`` as an option) stops it, backing off to the last
-   valid angle.
+   (2 degrees) until a collision with another body, a self-collision, or its limit stops it,
+   backing off to the last valid angle. The default limits are anatomical
+   (``limits="anatomical"``, :data:`handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG`: one-sided
+   flexion, little abduction and twist), which give natural poses; the paper's ±60 degrees about
+   every axis (fingers bent backwards and twisted) is ``limits="paper"``
+   (``handmesh generate --limits paper``).
 5. **Repeat.** Joints move in turn, at most ``sweep_deg`` per round, until no joint can make a
    valid move (stop reason ``"no valid move"``) or ``max_rounds`` rounds have run
    (``"max rounds"``).
-6. **Render** (:func:`make_sample`): camera, light and background at random, scene image, label
-   mask, every body alone, visibility ratios.
+6. **Render** (:func:`make_sample`): a camera framed on the target hand like a FreiHAND crop
+   (:func:`frame_camera`: the hand wholly inside, 45-75 % of the image side), random lights of
+   random colour temperature (:func:`scene_lights`), a natural photograph or a procedural texture
+   behind (:func:`handmesh_tutorial.render.scene_background`); scene image, label mask, every
+   body alone, visibility ratios.
 
 Validity is decided on the collision cylinders (:mod:`handmesh_tutorial.collision`), as in the
 paper; each body is a rig of rigid cylinders attached to the nodes of its kinematic tree, and all
@@ -56,6 +62,9 @@ from .collision import Cylinders, cylinders_intersect, self_collisions
 from .dataset import SampleRejected
 
 __all__ = [
+    "FRAME_FOCAL",
+    "FRAME_MARGIN",
+    "FRAME_SHARE",
     "KINDS",
     "STOP_REASONS",
     "InteractionConfig",
@@ -64,6 +73,7 @@ __all__ = [
     "SceneBody",
     "build_scene",
     "camera_pose",
+    "frame_camera",
     "closest_points_on_triangles",
     "generate_interactions",
     "get_renderer",
@@ -108,8 +118,9 @@ class InteractionConfig:
     """Parameters of the generator (lengths in metres, angles in degrees).
 
     Attributes:
-        limits: joint limits of the hands: ``"paper"`` (±60° about every LCS axis) or
-            ``"anatomical"`` (:data:`handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG`).
+        limits: joint limits of the hands: ``"anatomical"`` (default,
+            :data:`handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG`: natural poses) or ``"paper"``
+            (±60° about every LCS axis, the paper's generator).
         approach_step: step of the approach (step 3), metres.
         joint_step_deg: angular increment of a joint move (step 4), degrees.
         sweep_deg: largest rotation of one joint per round, degrees (joints take turns).
@@ -131,7 +142,7 @@ class InteractionConfig:
             :data:`handmesh_tutorial.objects.OBJECT_KINDS`).
     """
 
-    limits: str = "paper"
+    limits: str = "anatomical"
     approach_step: float = 0.002
     joint_step_deg: float = 2.0
     sweep_deg: float = 30.0
@@ -1237,12 +1248,124 @@ def camera_pose(centre, rng, distance=(0.35, 0.7), toward=None,
     return R, -R @ cam
 
 
-def scene_lights(rng, depth: float = 0.5):
-    """Random studio lighting: a key light 35-75 degrees off the optical axis from a random side,
-    a weaker fill light from the opposite side, and sometimes a point light near the camera.
+#: Share of the image side covered by the target hand's bounding box (FreiHAND's 224-px crops:
+#: roughly 40-80 %), see :func:`frame_camera`.
+FRAME_SHARE: tuple[float, float] = (0.45, 0.75)
+#: Focal length as a multiple of the image side (403-806 px at 224 px, fields of view of
+#: 31-16 degrees: a crop of a hand from an ordinary camera), see :func:`frame_camera`.
+FRAME_FOCAL: tuple[float, float] = (1.8, 3.6)
+#: Free border, as a fraction of the image side, that the target hand never enters.
+FRAME_MARGIN: float = 0.08
 
-    ``render.random_lights`` lights mostly along the optical axis, which renders hands flat; a
-    side key light gives the shading cues (folds, finger outlines) real photos have.
+
+def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
+                 spread: float = 0.6, share: tuple[float, float] = FRAME_SHARE,
+                 focal: tuple[float, float] = FRAME_FOCAL,
+                 margin: float = FRAME_MARGIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A camera framed on the target hand like a FreiHAND 224-px crop.
+
+    1. The view direction is uniform on the sphere (or ``toward`` plus Gaussian noise of
+       ``spread``), with a random roll, aimed at the centre of the hand's bounding box.
+    2. A share ``s`` of the image side is drawn from ``share`` and a focal length ``f0`` from
+       ``focal`` (log-uniform, times the image side); the camera distance is the one at which the
+       hand's extent across the view, seen with ``f0``, covers ``s`` of the image:
+       ``d = f0 * extent / (s * S)``.
+    3. The camera turns (a small rotation, so the hand stays near the optical axis) to put the
+       hand's box centre at a random place that keeps the whole hand at least ``margin * S``
+       pixels inside the border, and the focal length is set so that the longer side of the
+       hand's projected bounding box is exactly ``s * S`` (``f`` stays close to ``f0``; the
+       principal point is the image centre within ±1 %).
+
+    Every vertex of the hand (so all 21 joints) ends up inside the image with the margin; the
+    second body may leave the frame. Deterministic in ``rng``.
+
+    Args:
+        target_vertices: (V, 3) world vertices of the target hand, metres.
+        rng: ``numpy.random.Generator`` or seed.
+        image_size: side ``S`` of the square image, pixels.
+        toward: optional (3,) world direction from the hand in which to put the camera.
+        spread: noise of the ``toward`` direction (unit vectors).
+        share: (min, max) share of the image side covered by the hand's bounding box, with
+            ``max <= 1 - 2 * margin``.
+        focal: (min, max) focal length as a multiple of ``S``.
+        margin: free border, as a fraction of ``S``.
+
+    Returns:
+        ``(R, t, K)``: world -> OpenCV camera frame ``X_cam = R @ X + t``, and (3, 3) intrinsics.
+
+    Raises:
+        ValueError: a share, focal or margin range that cannot be met.
+    """
+    from .render import intrinsics
+
+    V = np.asarray(target_vertices, float)
+    S = int(image_size)
+    rng = np.random.default_rng(rng)
+    lo_s, hi_s = (float(x) for x in share)
+    if not 0 <= margin < 0.5 or not 0 < lo_s <= hi_s <= 1 - 2 * margin:
+        raise ValueError(f"need 0 <= margin < 0.5 and 0 < share[0] <= share[1] <= 1 - 2 * margin, "
+                         f"got share {share}, margin {margin}")
+    if not 0 < focal[0] <= focal[1]:
+        raise ValueError(f"focal must be (min, max) with 0 < min <= max, got {focal}")
+    centre = 0.5 * (V.min(0) + V.max(0))
+    if toward is None:
+        z = -_random_direction(rng)  # optical axis (camera -> hand)
+    else:
+        z = -_unit(_unit(np.asarray(toward, float)) + spread * rng.normal(size=3))
+    a = _random_direction(rng)
+    while abs(a @ z) > 0.95:
+        a = _random_direction(rng)
+    x = _unit(np.cross(z, a))
+    R = np.stack([x, np.cross(z, x), z])
+    s = rng.uniform(lo_s, hi_s)
+    f0 = S * np.exp(rng.uniform(np.log(focal[0]), np.log(focal[1])))
+    P = (V - centre) @ R.T
+    extent = float(max(np.ptp(P[:, 0]), np.ptp(P[:, 1])))
+    d = max(f0 * extent / (s * S), 0.5 * float(np.ptp(P[:, 2])) + 0.1)
+    cam = centre - d * z
+    mid = (S - 1) / 2.0
+    pp = mid + rng.uniform(-0.01, 0.01, 2) * S
+    where = rng.uniform(-0.9, 0.9, 2)  # box centre: this fraction of the room left to move
+    for _ in range(3):  # turn the camera so the box centre lands where wanted
+        Xc = (V - cam) @ R.T
+        n = Xc[:, :2] / Xc[:, 2:3]
+        nlo, nhi = n.min(0), n.max(0)
+        f = s * S / float((nhi - nlo).max())
+        room = np.maximum(S * (0.5 - margin) - 0.5 * f * (nhi - nlo) - np.abs(pp - mid), 0.0)
+        want = (mid + where * room - pp) / f
+        cur = 0.5 * (nlo + nhi)
+        Q = Rotation.align_vectors([np.r_[want, 1.0]], [np.r_[cur, 1.0]])[0].as_matrix()
+        R = Q @ R
+    Xc = (V - cam) @ R.T
+    n = Xc[:, :2] / Xc[:, 2:3]
+    f = s * S / float((n.max(0) - n.min(0)).max())
+    # guarantee: shrink about the principal point if a vertex is within the margin
+    lo_ok, hi_ok = -0.5 + margin * S, S - 0.5 - margin * S
+    k = 1.0
+    for ax in range(2):
+        umin, umax = pp[ax] + f * n[:, ax].min(), pp[ax] + f * n[:, ax].max()
+        if umax > hi_ok:
+            k = min(k, (hi_ok - pp[ax]) / (umax - pp[ax]))
+        if umin < lo_ok:
+            k = min(k, (pp[ax] - lo_ok) / (pp[ax] - umin))
+    f *= k * (1 - 1e-9) if k < 1 else 1.0
+    return R, -R @ cam, intrinsics(f, f, float(pp[0]), float(pp[1]))
+
+
+def scene_lights(rng, depth: float = 0.5):
+    """Random lighting of varied intensity, colour temperature and direction (camera frame).
+
+    * a **key light** 20-75 degrees off the optical axis from a random side;
+    * a weaker **fill light** from the opposite side;
+    * with probability 0.3 a **rim light** from behind the bodies (it lights their silhouettes);
+    * with probability 0.3 a point light near the camera.
+
+    The key light's colour temperature is drawn log-uniformly in 2700-8000 K; the fill shares it
+    half of the time, else it differs by about 60 mired (mixed light: a lamp and a window). The
+    camera is white-balanced for a temperature near the key's (15 mired off), so colour casts
+    stay as mild as in real photos. All intensities share an exposure factor (x0.6-1.6). A side
+    key light gives the shading cues (folds, finger outlines) that real photos have;
+    ``render.random_lights`` lights mostly along the optical axis.
 
     Args:
         rng: ``numpy.random.Generator`` or seed.
@@ -1251,7 +1374,7 @@ def scene_lights(rng, depth: float = 0.5):
     Returns:
         A list of :class:`handmesh_tutorial.render.Light` (camera frame).
     """
-    from .render import Light
+    from .render import Light, color_temperature
 
     rng = np.random.default_rng(rng)
 
@@ -1260,17 +1383,32 @@ def scene_lights(rng, depth: float = 0.5):
         return (float(np.sin(th) * np.cos(phi)), float(np.sin(th) * np.sin(phi)),
                 float(np.cos(th)))
 
+    def shifted(kelvin, mired):  # colour temperatures differ evenly in mired (1e6 / K)
+        return float(np.clip(1e6 / (1e6 / kelvin + mired), 2500.0, 9000.0))
+
+    t_key = float(np.exp(rng.uniform(np.log(2700.0), np.log(8000.0))))
+    t_wb = shifted(t_key, rng.normal(0.0, 15.0))  # the camera's (imperfect) white balance
+    ref = np.asarray(color_temperature(t_wb))
+
+    def colour(kelvin):
+        c = np.asarray(color_temperature(kelvin)) / ref
+        return tuple(float(v) for v in c / c.max())
+
+    exposure = float(np.exp(rng.uniform(np.log(0.6), np.log(1.6))))
     phi = rng.uniform(0, 2 * np.pi)
-    tint = np.clip(1 + rng.normal(0, 0.04, 3), 0.88, 1.0)
-    lights = [Light("directional", tuple(float(x) for x in tint), float(rng.uniform(1.5, 3.0)),
-                    direction=direction(35, 75, phi)),
-              Light("directional", (1.0, 1.0, 1.0), float(rng.uniform(0.4, 1.1)),
+    t_fill = t_key if rng.random() < 0.5 else shifted(t_key, rng.normal(0.0, 60.0))
+    lights = [Light("directional", colour(t_key), float(rng.uniform(1.5, 3.0)) * exposure,
+                    direction=direction(20, 75, phi)),
+              Light("directional", colour(t_fill), float(rng.uniform(0.3, 1.0)) * exposure,
                     direction=direction(10, 50, phi + np.pi + rng.uniform(-0.8, 0.8)))]
     if rng.random() < 0.3:
+        lights.append(Light("directional", colour(t_key), float(rng.uniform(1.0, 3.0)) * exposure,
+                            direction=direction(110, 160, rng.uniform(0, 2 * np.pi))))
+    if rng.random() < 0.3:
         ang = rng.uniform(0, 2 * np.pi)
-        lights.append(Light("point", (1.0, 1.0, 1.0), float(rng.uniform(0.2, 0.6) * depth**2),
-                            position=(float(0.3 * depth * np.cos(ang)),
-                                      float(0.3 * depth * np.sin(ang)), 0.0)))
+        lights.append(Light("point", colour(t_wb), float(rng.uniform(0.2, 0.6) * depth**2)
+                            * exposure, position=(float(0.3 * depth * np.cos(ang)),
+                                                  float(0.3 * depth * np.sin(ang)), 0.0)))
     return lights
 
 
@@ -1296,7 +1434,8 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
         renderer: a :class:`~handmesh_tutorial.render.Renderer` of that size; ``None`` uses the
             per-process one (:func:`get_renderer`).
         config: generator parameters (:class:`InteractionConfig`).
-        limits: shortcut for ``config.limits`` (``"paper"`` or ``"anatomical"``).
+        limits: shortcut for ``config.limits``: ``"anatomical"`` (the default config's) or
+            ``"paper"`` (±60° on every axis).
 
     Returns:
         The sample dict of :func:`render_scene`.
@@ -1322,15 +1461,23 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
 
 
 def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
-                 occluder_view: float = 0.4) -> dict:
+                 occluder_view: float = 0.4, *, share: tuple[float, float] = FRAME_SHARE,
+                 focal: tuple[float, float] = FRAME_FOCAL, margin: float = FRAME_MARGIN,
+                 photo_prob: float = 0.75) -> dict:
     """Step 6: place a camera, render a scene and measure visibility; the dataset sample dict.
 
-    The camera looks at the target hand from a uniformly random direction (or, with probability
-    ``occluder_view``, from around the other body's side), 0.35-0.7 m away, with a random roll
-    (:func:`camera_pose`); :func:`render.crop_camera` then picks the focal length
-    and principal point so the target hand fills the image with a random margin (5-15 %). Lights,
-    ambient level and background are random. The renderer draws the scene (image, label mask)
-    and each body alone (the VR denominators).
+    **Camera** (:func:`frame_camera`): it looks at the target hand from a uniformly random
+    direction (or, with probability ``occluder_view``, from around the other body's side), with a
+    random roll, at the distance where the hand covers a random share (``share``, 45-75 %) of the
+    image side with a focal length of 1.8-3.6 times the side; the whole target hand stays at
+    least ``margin`` (8 %) of the side inside the border, like a FreiHAND 224-px crop. The other
+    body may leave the frame.
+    **Light** (:func:`scene_lights`): key, fill, sometimes rim and point lights of random colour
+    temperature and exposure, plus an ambient term tinted by the background.
+    **Background** (:func:`handmesh_tutorial.render.scene_background`): a natural photograph
+    (random crop, flip, defocus, colour jitter; ``photo_prob``) or a procedural texture.
+    The renderer draws the scene (image, label mask) and each body alone (the VR denominators);
+    the image gets a little sensor noise (0-2 grey levels).
 
     Args:
         scene: a :class:`Scene`.
@@ -1340,6 +1487,10 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
             the per-process one.
         occluder_view: probability of a view from the side of the other body (camera direction
             around ``other centre - target centre``), which makes low VRs (occlusion) common.
+        share: (min, max) share of the image side covered by the target hand's bounding box.
+        focal: (min, max) focal length as a multiple of the image side.
+        margin: free border around the target hand, as a fraction of the image side.
+        photo_prob: probability of a photograph (else a procedural texture) as background.
 
     Returns:
         A sample for :func:`handmesh_tutorial.dataset.write_sample`: ``image`` (S,S,3) uint8,
@@ -1347,12 +1498,14 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
         (vertices (V,3) float32 camera frame metres, faces (F,3) int32)}, ``joints`` {hand label:
         (21,3) float32 camera frame}, ``pose`` {hand label: (15,3)}, ``K`` (3,3), ``vr`` {label:
         float}, ``kind``, ``target`` (label 1; the left hand in hand-hand scenes), ``sides``,
-        ``names``, ``stats`` (:attr:`Scene.stats` plus ``camera_distance_m``).
+        ``names``, ``stats`` (:attr:`Scene.stats` plus ``camera_distance_m`` (camera to scene
+        centre), ``target_distance_m`` (camera to the target hand's box centre), ``focal_px``
+        and ``target_share`` (the hand's box over the image side)).
 
     Raises:
         InteractionError: a body is not in view.
     """
-    from .render import crop_camera, random_background
+    from .render import framing, scene_background, srgb_to_linear
     from .visibility import visibility_ratios
 
     rng = np.random.default_rng(rng)
@@ -1368,16 +1521,23 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
         other = [b for b in scene.bodies if b.label != scene.target][0]
         toward = other.vertices.mean(0) - centre
     for _ in range(10):
-        R, t = camera_pose(centre, rng, toward=toward)
+        R, t, K = frame_camera(tb.vertices, rng, image_size, toward=toward, share=share,
+                               focal=focal, margin=margin)
         meshes = scene.render_meshes(R, t)
         if min(m[0][:, 2].min() for m in meshes) > 0.05:  # everything in front of the camera
             break
     target_v = tb.vertices @ R.T + t
-    K = crop_camera(target_v, image_size, margin=float(rng.uniform(0.05, 0.15)))
-    lights = scene_lights(rng, float(np.linalg.norm(t)))
-    bg = random_background(rng, image_size, image_size)
-    out = r.render(meshes, K, lights=lights, background=bg,
-                   ambient=float(rng.uniform(0.08, 0.2)), alone=True)
+    depth = float(np.linalg.norm(centre @ R.T + t))
+    lights = scene_lights(rng, depth)
+    bg = scene_background(rng, image_size, image_size, photo_prob=photo_prob)
+    # ambient light: bounced off the surroundings, so tinted by the background's mean colour
+    tint = srgb_to_linear(bg.reshape(-1, 3).mean(0) / 255.0)
+    tint = 0.6 + 0.4 * tint / max(float(tint.mean()), 1e-3)
+    ambient = float(rng.uniform(0.06, 0.2)) * tint
+    out = r.render(meshes, K, lights=lights, background=bg, ambient=ambient, alone=True)
+    noise = rng.uniform(0.0, 2.0)
+    image = np.clip(out.image + rng.normal(0.0, noise, out.image.shape) + 0.5, 0, 255)
+    image = image.astype(np.uint8)
     alone = dict(out.alone_masks)
     for lab, m in alone.items():
         if not m.any():
@@ -1385,7 +1545,7 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     vr = visibility_ratios(out.labels, alone)
     hands = [b for b in scene.bodies if b.kind == "hand"]
     return {
-        "image": out.image,
+        "image": image,
         "scene_mask": out.labels.astype(np.int32),
         "alone_masks": alone,
         "meshes": {b.label: ((b.vertices @ R.T + t).astype(np.float32), b.faces.astype(np.int32))
@@ -1398,14 +1558,17 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
         "target": scene.target,
         "sides": {b.label: b.side for b in hands},
         "names": {b.label: b.name for b in scene.bodies},
-        "stats": {**scene.stats, "camera_distance_m": float(np.linalg.norm(t))},
+        "stats": {**scene.stats, "camera_distance_m": float(np.linalg.norm(t)),
+                  "target_distance_m": depth, "focal_px": float(K[0, 0]),
+                  "target_share": framing(target_v, K, image_size, margin)["share"]},
     }
 
 
 def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: int = 224,
                           workers: int = 1, balance_vr: bool = False,
-                          shard: tuple[int, int] | None = None, limits: str = "paper",
-                          durable: bool = True, progress: bool = True, max_attempts: int = 100):
+                          shard: tuple[int, int] | None = None, limits: str = "anatomical",
+                          durable: bool = True, progress: bool = True, max_attempts: int = 100,
+                          vr_probe: int = 64):
     """Generate (or resume) an INTER-SH dataset of rendered interactions on disk.
 
     A thin wrapper of :func:`handmesh_tutorial.dataset.generate_dataset` with
@@ -1420,12 +1583,16 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
         seed: base seed.
         image_size: square image side, pixels.
         workers: processes.
-        balance_vr: force sample ``i``'s target VR into bin ``i mod 4`` (paper's VR bins).
+        balance_vr: spread the target VRs evenly over the paper's VR bins: bins that a probe
+            of candidates never reaches (e.g. [0.4, 0.6) for hand-chain scenes) are reported up
+            front and left out (see :func:`handmesh_tutorial.dataset.generate_dataset`).
         shard: ``(k, n)``: only the k-th of n equal index ranges.
-        limits: ``"paper"`` or ``"anatomical"`` joint limits.
+        limits: ``"anatomical"`` joint limits (default: natural poses) or ``"paper"`` (±60°
+            about every LCS axis, as in the paper).
         durable: fsync every file (slower, safe against power cuts).
         progress: tqdm progress bar.
         max_attempts: candidates per sample (VR balancing rejects some).
+        vr_probe: candidates of the VR probe that finds the reachable bins (``balance_vr``).
 
     Returns:
         The :class:`handmesh_tutorial.dataset.GenerationSummary`.
@@ -1443,5 +1610,6 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
     return generate_dataset(root, fn, int(num), int(seed), kinds, shard=shard, workers=workers,
                             progress=progress, params=params, image_size=int(image_size),
                             balance_vr=balance_vr, max_attempts=max_attempts,
+                            vr_probe=vr_probe,
                             worker_init=functools.partial(init_worker, int(image_size)),
                             durable=durable)

@@ -33,7 +33,8 @@ def test_generate_writes_a_readable_dataset_and_resumes(tmp_path, capsys):
     ds = dataset.InterSHDataset(root)
     assert len(ds) == 3 and ds.missing == []
     assert sorted(ds.meta["kinds"]) == ["hand-chain", "hand-hand", "hand-object"]
-    assert ds.meta["params"]["limits"] == "paper"
+    assert ds.meta["params"]["limits"] == "anatomical"  # natural poses by default
+    assert ds.meta["format_version"] == dataset.FORMAT_VERSION == 2
     counts = [int(line.rsplit(":", 1)[1]) for line in out.splitlines()
               if line.strip().startswith("[") or "outside the bins" in line]
     assert sum(counts) == 3  # every sample is counted once in the printed histogram
@@ -62,20 +63,49 @@ def test_generate_shard_and_options(tmp_path, capsys):
     root = tmp_path / "shard1"
     code, out = _run(capsys, "--kind", "hand-object", "--num", "4", "--seed", "2", "--out",
                      str(root), "--image-size", "64", "--shard", "1/2", "--limits",
-                     "anatomical", "--quiet", "--no-fsync")
+                     "paper", "--quiet", "--no-fsync")
     assert code == 0 and "2 samples written" in out
     ds = dataset.InterSHDataset(root)
-    assert ds.meta["shards"] == [[1, 2]] and ds.meta["params"]["limits"] == "anatomical"
+    assert ds.meta["shards"] == [[1, 2]] and ds.meta["params"]["limits"] == "paper"
     assert sorted(p.name for p in (root / "samples").iterdir()) == ["000002", "000003"]
     # the same sample index is the same scene whatever the shard
     from handmesh_tutorial import interact
 
-    s = interact.make_sample(dataset.sample_seed(2, 3), "hand-object", 64, limits="anatomical")
+    s = interact.make_sample(dataset.sample_seed(2, 3), "hand-object", 64, limits="paper")
     assert np.array_equal(s["image"], dataset.read_sample(root / "samples" / "000003")["image"])
-    # a different option on the same root is refused, naming the differing key
+    # a different option (here the default anatomical limits) on the same root is refused,
+    # naming the differing key
     with pytest.raises(ValueError, match="params"):
         cli.main(["generate", "--kind", "hand-object", "--num", "4", "--seed", "2", "--out",
                   str(root), "--image-size", "64", "--shard", "1/2", "--quiet"])
+
+
+def test_balanced_hand_chain_reports_unreachable_bins_and_fills_the_rest(tmp_path, capsys):
+    """Chains rarely hide half a hand: [0.40, 0.60) is left out up front (a warning), the other
+    bins share the samples, and the run never fails on a hard bin."""
+    root = tmp_path / "chain"
+    with pytest.warns(UserWarning, match=r"VR balancing: .*\[0\.40, 0\.60\).* left out"):
+        code, out = _run(capsys, "--kind", "hand-chain", "--num", "3", "--seed", "0", "--out",
+                         str(root), "--image-size", "48", "--balance-vr", "--vr-probe", "24",
+                         "--quiet", "--no-fsync")
+    assert code == 0 and "3 samples written" in out
+    assert "left out: [0.40, 0.60)" in out
+    ds = dataset.InterSHDataset(root)
+    probe = ds.meta["vr_probe"]
+    assert probe["candidates"] == 24 and 0 not in probe["filled"] and probe["filled"]
+    bins = dataset.vr_bins()
+    off = 0
+    for i in range(3):
+        want = bins[probe["filled"][i % len(probe["filled"])]]
+        vr = ds.annotation(i)["target_vr"]
+        off += not (want[0] <= vr < want[1] or vr == want[1] == 1.0)
+    assert f"samples written outside their bin: {off}" in out
+    # resuming reuses the probe stored in meta.json (no candidate made, same bins reported)
+    with pytest.warns(UserWarning, match=r"\[0\.40, 0\.60\).* left out"):
+        code, out = _run(capsys, "--kind", "hand-chain", "--num", "3", "--seed", "0", "--out",
+                         str(root), "--image-size", "48", "--balance-vr", "--vr-probe", "24",
+                         "--quiet", "--no-fsync")
+    assert code == 0 and "0 samples written, 3 already present (skipped), 0 candidates" in out
 
 
 @pytest.mark.parametrize("bad", [["--shard", "3/2"], ["--shard", "x"], ["--kind", "foot"],
@@ -92,5 +122,6 @@ def test_generate_help_through_the_module_entry_point():
     r = subprocess.run([sys.executable, "-m", "handmesh_tutorial.cli", "generate", "--help"],
                        capture_output=True, text=True, check=True)
     for opt in ("--kind", "--num", "--seed", "--out", "--image-size", "--workers",
-                "--balance-vr", "--shard", "--limits"):
+                "--balance-vr", "--vr-probe", "--shard", "--limits"):
         assert opt in r.stdout
+    assert "anatomical (default" in r.stdout and "paper" in r.stdout

@@ -121,14 +121,16 @@ def test_hand_cylinders_follow_the_hand_model(scenes, kind):
 
 
 def test_hand_angles_respect_the_limits(scenes):
+    assert interact.InteractionConfig().limits == "anatomical"  # natural poses by default
+    lo, hi = hmt.lcs.hand_joint_limits("anatomical")
     for kind, sc in scenes.items():
         for b in sc.bodies:
             if b.kind == "hand":
-                assert np.abs(b.angles).max() <= np.deg2rad(60) + 1e-9, kind
-    sc = interact.build_scene("hand-hand", 3, limits="anatomical")
+                assert hmt.lcs.within_limits(b.angles, lo, hi), kind
+    sc = interact.build_scene("hand-hand", 3, limits="paper")  # the paper's ±60° box
     for b in sc.bodies:
-        lo, hi = hmt.lcs.hand_joint_limits("anatomical")
-        assert hmt.lcs.within_limits(b.angles, lo, hi)
+        assert np.abs(b.angles).max() <= np.deg2rad(60) + 1e-9
+    assert max(np.abs(b.angles).max() for b in sc.bodies) > np.deg2rad(20)
 
 
 def test_no_self_collision_of_the_hands(scenes):
@@ -205,6 +207,71 @@ def test_vr_masks_and_joints(samples, kind, tmp_path):
     mask = binary_dilation(back["alone_masks"][t], iterations=1)
     inside = mask[px[:, 1].clip(0, S - 1), px[:, 0].clip(0, S - 1)]
     assert inside.mean() > 0.99
+
+
+@pytest.mark.parametrize("kind", interact.KINDS)
+def test_target_hand_is_framed_like_a_freihand_crop(kind):
+    """Over 20 seeds: >= 95 % of the target's 21 joints at least 8 % of the side inside the
+    image, and its bounding box (alone mask) 40-80 % of the image side, as in FreiHAND."""
+    from handmesh_tutorial.render import framing
+
+    tested = 0
+    for i in range(20):
+        try:
+            smp = interact.make_sample(dataset.sample_seed(3, i), kind, S)
+        except interact.InteractionError:
+            continue
+        tested += 1
+        t = smp["target"]
+        joints = framing(smp["joints"][t], smp["K"], S, margin=0.08)
+        assert joints["inside"] >= 0.95, (kind, i, joints)
+        ys, xs = np.nonzero(smp["alone_masks"][t])
+        share = max(np.ptp(xs) + 1, np.ptp(ys) + 1) / S
+        assert 0.40 <= share <= 0.80, (kind, i, share)
+        # by construction: every vertex inside the margin, the box 45-75 % of the side
+        verts = framing(smp["meshes"][t][0], smp["K"], S, margin=0.08)
+        assert verts["inside"] == 1.0
+        assert 0.45 - 1e-6 <= verts["share"] <= 0.75 + 1e-6
+        assert verts["share"] == pytest.approx(smp["stats"]["target_share"])
+        # principal point at the image centre (within 1 %), a crop-like focal length
+        np.testing.assert_allclose(smp["K"][:2, 2], (S - 1) / 2, atol=0.01 * S + 1e-9)
+        assert 1.6 * S <= smp["K"][0, 0] <= 4.2 * S
+    assert tested >= 18
+
+
+def test_frame_camera_geometry():
+    rng = np.random.default_rng(0)
+    hand = rng.normal(size=(300, 3)) * [0.06, 0.03, 0.015] + [0.2, -0.1, 0.05]
+    for seed in range(30):
+        R, t, K = interact.frame_camera(hand, seed, 224)
+        assert np.allclose(R @ R.T, np.eye(3)) and np.isclose(np.linalg.det(R), 1.0)
+        cam = hand @ R.T + t
+        fr = hmt.render.framing(cam, K, 224, margin=0.08)
+        assert fr["inside"] == 1.0 and 0.45 - 1e-9 <= fr["share"] <= 0.75 + 1e-9
+        again = interact.frame_camera(hand, seed, 224)
+        assert all(np.array_equal(a, b) for a, b in zip((R, t, K), again, strict=True))
+    # a wished share and a given side: the camera sits on that side of the hand
+    toward = np.array([0.0, 0.0, 1.0])
+    R, t, K = interact.frame_camera(hand, 1, 224, toward=toward, spread=0.0, share=(0.6, 0.6))
+    centre = 0.5 * (hand.min(0) + hand.max(0))
+    assert (-R.T @ t - centre) @ toward > 0.1
+    assert hmt.render.framing(hand @ R.T + t, K, 224)["share"] == pytest.approx(0.6)
+    with pytest.raises(ValueError, match="share"):
+        interact.frame_camera(hand, 0, 224, share=(0.5, 0.9))
+
+
+def test_scene_lights_vary_colour_and_direction():
+    sets = [interact.scene_lights(s, 0.5) for s in range(60)]
+    assert interact.scene_lights(7, 0.5) == sets[7]
+    keys = np.array([ls[0].color for ls in sets])
+    assert (keys[:, 0] > keys[:, 2] + 0.05).any() and (keys[:, 2] > keys[:, 0] + 0.05).any()
+    assert (keys.min(1) > 0.4).all()  # white-balanced: casts stay mild
+    inten = [ls[0].intensity for ls in sets]
+    assert max(inten) > 2 * min(inten)
+    rims = [lt for ls in sets for lt in ls if lt.kind == "directional" and lt.direction[2] < 0]
+    assert 5 <= len(rims) <= 35  # a light from behind the bodies in about 30 % of the scenes
+    for ls in sets:
+        assert ls[0].kind == "directional" and ls[0].direction[2] > 0  # the key faces the scene
 
 
 def test_mixed_kind_is_drawn_from_the_seed():
