@@ -658,7 +658,8 @@ def photo_background(rng: np.random.Generator | int | None, H: int, W: int | Non
 def scene_background(rng: np.random.Generator | int | None, H: int, W: int | None = None,
                      photo_prob: float = 0.75) -> np.ndarray:
     """The generator's background: a `photo_background` with probability ``photo_prob``, else a
-    procedural `random_background`.
+    procedural `random_background` with its colours muted (saturation x0.3-0.8: the random
+    colours of the procedural textures are far more vivid than real surroundings).
 
     Args:
         rng: a ``numpy.random.Generator`` or a seed.
@@ -674,7 +675,10 @@ def scene_background(rng: np.random.Generator | int | None, H: int, W: int | Non
     rng = np.random.default_rng(rng)
     if rng.random() < photo_prob:
         return photo_background(rng, H, W)
-    return random_background(rng, H, W)
+    img = random_background(rng, H, W).astype(np.float64)
+    grey = (img @ np.array([0.299, 0.587, 0.114]))[..., None]
+    img = grey + rng.uniform(0.3, 0.8) * (img - grey)
+    return np.clip(img + 0.5, 0, 255).astype(np.uint8)
 
 
 # --------------------------------------------------------------------------------------------
@@ -783,6 +787,29 @@ def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     return vn
 
 
+_LIVE_RENDERERS = 0  # open Renderers of this process (they share the EGL display)
+
+
+def _keep_egl_display(platform: Any) -> None:
+    """Make a pyrender EGL platform's ``delete_context`` destroy its context only, without
+    ``eglTerminate`` on the display that the process's other renderers still use."""
+    if platform is None or not hasattr(platform, "_egl_display"):
+        return
+
+    def delete_context() -> None:
+        from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
+
+        if platform._egl_display is not None:
+            if platform._egl_context is not None:
+                eglMakeCurrent(platform._egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE,
+                               EGL_NO_CONTEXT)
+                eglDestroyContext(platform._egl_display, platform._egl_context)
+                platform._egl_context = None
+            platform._egl_display = None
+
+    platform.delete_context = delete_context
+
+
 class Renderer:
     """An offscreen pyrender renderer of a fixed image size, reused for many scenes.
 
@@ -814,11 +841,23 @@ class Renderer:
         self.znear, self.zfar = float(znear), float(zfar)
         self._pr = import_pyrender()
         self._r = self._pr.OffscreenRenderer(self.width, self.height)
+        global _LIVE_RENDERERS
+        _LIVE_RENDERERS += 1
 
     # context management ------------------------------------------------------------------
     def close(self) -> None:
-        """Free the OpenGL context (idempotent)."""
+        """Free the OpenGL context (idempotent).
+
+        Under EGL all renderers of a process share one display, and pyrender's
+        ``delete_context`` calls ``eglTerminate`` on it, which breaks every other live renderer
+        (``eglMakeCurrent`` then fails with error 12296). While other renderers live, only this
+        renderer's context is destroyed (`_keep_egl_display`); the last one terminates.
+        """
+        global _LIVE_RENDERERS
         if self._r is not None:
+            _LIVE_RENDERERS -= 1
+            if _LIVE_RENDERERS > 0:
+                _keep_egl_display(getattr(self._r, "_platform", None))
             self._r.delete()
             self._r = None
 

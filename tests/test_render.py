@@ -313,10 +313,17 @@ def test_photo_background_is_deterministic_and_varied():
 
 
 def test_scene_background_mixes_photos_and_procedural():
-    for prob, fn in ((1.0, R.photo_background), (0.0, R.random_background)):
-        rng = np.random.default_rng(3)
-        rng.random()  # scene_background's own draw (photo or not)
-        assert R.scene_background(3, 24, photo_prob=prob).tobytes() == fn(rng, 24).tobytes()
+    rng = np.random.default_rng(3)
+    rng.random()  # scene_background's own draw (photo or not)
+    assert R.scene_background(3, 24, photo_prob=1.0).tobytes() == \
+        R.photo_background(rng, 24).tobytes()
+    rng = np.random.default_rng(3)
+    rng.random()
+    vivid = R.random_background(rng, 24).astype(float)
+    muted = R.scene_background(3, 24, photo_prob=0.0).astype(float)
+    chroma = [np.abs(im - im.mean(2, keepdims=True)).mean() for im in (vivid, muted)]
+    assert chroma[1] < 0.85 * chroma[0]  # the same texture, its colours muted
+    assert np.abs(vivid.mean((0, 1)).mean() - muted.mean((0, 1)).mean()) < 10
     with pytest.raises(ValueError, match="photo_prob"):
         R.scene_background(0, 8, photo_prob=1.5)
 
@@ -337,3 +344,13 @@ def test_framing_measures_share_and_inside():
     assert fr["share"] == pytest.approx(0.55)  # u from 39.5 to 94.5
     assert fr["inside"] == 0.75                 # u = 94.5 lies within 8 px of the border
     np.testing.assert_allclose(fr["center"], [67.0, 47.0])
+
+
+def test_closing_one_renderer_keeps_the_others_working(renderer):
+    """EGL renderers share one display: closing a second one must not break the first."""
+    body = [_sphere((0.0, 0.0, 0.4), 0.04, 1)]
+    before = renderer.render(body, _K()).image
+    with R.Renderer(32) as other:
+        assert (other.render(body, _K() * [[0.5], [0.5], [1]]).labels == 1).any()
+    after = renderer.render(body, _K()).image  # raised GLError 12296 before the fix
+    assert after.tobytes() == before.tobytes()
