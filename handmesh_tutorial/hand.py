@@ -554,7 +554,7 @@ def example_pose(name: str, side: str = "right") -> np.ndarray:
         flex[fing["index"]] = np.deg2rad([5, 5, 5])
         flex[fing["thumb"]] = np.deg2rad([45, 35, 40])
     elif name == "pinch":
-        flex[fing["index"]] = np.deg2rad([40, 45, 25])
+        flex[fing["index"]] = np.deg2rad([35, 40, 20])
         for f in ("middle", "ring", "pinky"):
             flex[fing[f]] = np.deg2rad([20, 25, 15])
         flex[fing["thumb"]] = np.deg2rad([25, 20, 15])
