@@ -10,7 +10,7 @@ Prints, measured in the same run:
    cost", paper) with the default channels of :mod:`handmesh_tutorial.model`.
 2b. ``SparseVertexMap`` (the up/down maps between hierarchy levels) forward+backward: the
    library's broadcast multiply-and-sum vs ``torch.einsum("bvkc,vk->bvc")`` (which PyTorch runs
-   as V tiny batched matmuls), on the finest up map (799 <- 400 vertices, 3 weights per row).
+   as V tiny batched matmuls), on the finest up map (779 <- 390 vertices, 3 weights per row).
 3. Forward and forward+backward time of the decoder part (coarse tokens -> vertices) and of the
    full model (ResNet-18) at the smoke image size (64) and at 224x224, with ratios to
    single-path.

@@ -1015,18 +1015,31 @@ def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL) -> bool:
     return bool(_all_pairs_test(A, B, atol, early=True)[2].any())
 
 
-def self_collisions(body: Cylinders, *, atol: float = ATOL):
+#: Fraction of each radius :func:`self_collisions` lets soft tissue compress (measured on the
+#: MakeHuman hand: 0.3 keeps a plain fist, a pinch and a flat hand free of self-collisions while
+#: a finger crossed through its neighbour still collides).
+SELF_CONTACT_COMPRESSION: float = 0.3
+
+
+def self_collisions(body: Cylinders, *, atol: float = ATOL,
+                    compression: float = SELF_CONTACT_COMPRESSION):
     """Intersecting pairs of NON-ADJACENT cylinders of one body (e.g. fingers crossing).
 
     Pairs listed in ``body.adjacent`` touch by design and are skipped. For hands built by
-    :func:`hand_cylinders` these are: consecutive phalanges of a finger; the proximal segment of
-    every finger (thumb metacarpal included) with every palm cylinder; all palm cylinders with each
-    other; and the proximal phalanges of neighbouring fingers (index-middle, middle-ring,
-    ring-pinky), which sit side by side on the knuckle line, joined by the finger webs.
+    :func:`hand_cylinders` these are: consecutive phalanges of a finger; every phalanx with every
+    palm cylinder (the proximal segment sits on the palm; the others curl onto it in a fist, a
+    contact the flexion limits bound); all palm cylinders with each other; and the proximal
+    phalanges of neighbouring fingers (index-middle, middle-ring, ring-pinky), which sit side by
+    side on the knuckle line, joined by the finger webs.
+
+    Skin is soft: two parts of one hand pressed together (fingers side by side, thumb on a
+    finger) overlap as cylinders before anything passes through anything. The test therefore
+    shrinks every radius by the fraction ``compression`` first (0 = the exact cylinders).
 
     Args:
         body: a :class:`Cylinders`.
         atol: contact tolerance, metres.
+        compression: fraction of each radius that may be compressed, in [0, 1).
 
     Returns:
         ``(i, j)`` int arrays with ``i < j``.
@@ -1039,6 +1052,11 @@ def self_collisions(body: Cylinders, *, atol: float = ATOL):
         i, j = i[keep], j[keep]
     if i.size == 0:
         return i, j
+    if not 0 <= compression < 1:
+        raise ValueError(f"compression must be in [0, 1), got {compression}")
+    if compression:
+        body = Cylinders(body.p0, body.p1, body.radius * (1.0 - compression), body.names,
+                         body.parts, body.adjacent)
     hit = _pairs_test(body, body, i, j, atol, early=False)
     return i[hit], j[hit]
 
@@ -1120,7 +1138,7 @@ def _hand_adjacency() -> np.ndarray:
     adj = []
     for f in range(5):
         adj += [(3 * f, 3 * f + 1), (3 * f + 1, 3 * f + 2)]        # consecutive phalanges
-        adj += [(3 * f, 15 + p) for p in range(5)]                  # proximal segment and palm
+        adj += [(3 * f + s, 15 + p) for s in range(3) for p in range(5)]   # phalanges and palm
     adj += [(15 + p, 15 + q) for p in range(5) for q in range(p + 1, 5)]  # palm with palm
     adj += [(3, 6), (6, 9), (9, 12)]                       # neighbouring proximal phalanges
     return np.array(adj, dtype=np.int64)

@@ -129,7 +129,8 @@ class InteractionConfig:
         axis_weights: scale of a joint's random direction about its LCS ``(x, y, z)`` axes
             (abduction, flexion, twist).
         flexion_bias: probability that a hand joint's direction flexes (rather than extends).
-        shape_scale: hand shape parameters are uniform in ``±shape_scale``.
+        shape_scale: scales the adult shape ranges of
+            :data:`~handmesh_tutorial.hand.SHAPE_SAMPLE_RANGES` (0 = every hand average).
         lateral_offset: spread of the aim point on the second hand (palm plane), metres.
         contact_tol: the settle step closes mesh gaps larger than this, metres.
         penetration_tol: the settle step backs off mesh penetrations deeper than this, metres.
@@ -150,7 +151,7 @@ class InteractionConfig:
     init_pose_scale: float = 0.5
     axis_weights: tuple[float, float, float] = (0.3, 1.0, 0.15)
     flexion_bias: float = 0.9
-    shape_scale: float = 0.6
+    shape_scale: float = 1.0
     lateral_offset: float = 0.025
     contact_tol: float = 0.0015
     penetration_tol: float = 0.0015
@@ -422,7 +423,8 @@ class SceneBody:
         joints: (21, 3) FreiHAND keypoints of a hand (world, metres), else ``None``.
         pose: (15, 3) float32 axis-angle finger pose of a hand (MANO order), else ``None``.
         angles: (J, 3) LCS angles (radians) of a hand's joints or the chain's links, else None.
-        shape: (4,) hand shape parameters, else ``None``.
+        shape: (6,) hand shape parameters (:data:`~handmesh_tutorial.hand.SHAPE_PARAM_NAMES`), else
+            ``None``.
         dynamic: whether step 4 moved its joints.
     """
 
@@ -827,7 +829,9 @@ class _Generator:
         return int(self.rng.integers(len(SKIN_TONES)))
 
     def _hand(self, side, label, tone):
-        shape = self.rng.uniform(-1, 1, 4) * self.cfg.shape_scale
+        from .hand import random_shape
+
+        shape = random_shape(self.rng, 1, self.cfg.shape_scale)[0]
         model, _ = _hand_assets(side)
         colors = model.vertex_colors(tone, rng=int(self.rng.integers(2**31)))
         return _Hand(side, shape, self.cfg.limits, label, colors)

@@ -1245,7 +1245,7 @@ def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict
     """
     from scipy.spatial.transform import Rotation
 
-    from .hand import random_pose
+    from .hand import random_pose, random_shape
 
     rng = np.random.default_rng(seed)
     if side is None:
@@ -1269,7 +1269,7 @@ def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict
         hm, colors = _toy_hand(sd)
         pose = random_pose(rng, 1, sd, max_flexion_deg=70.0)
         orient = Rotation.random(random_state=rng).as_rotvec()[None].astype(np.float32)
-        shape = rng.uniform(-0.5, 0.5, (1, 4)).astype(np.float32)
+        shape = random_shape(rng, 1, 0.5)
         with torch.no_grad():
             o = hm(pose=pose, shape=shape, global_orient=orient)
         v, j = o.vertices[0].double().numpy(), o.joints[0].double().numpy()

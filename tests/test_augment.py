@@ -198,7 +198,7 @@ def test_dataset_on_disk_items_determinism_and_collate(toy_root):
     assert bool(e0["mirrored"]) == (s["sides"][s["target"]] == "left")
     np.testing.assert_allclose(ev.vr_values(), raw.vr_table())
     batch = next(iter(torch.utils.data.DataLoader(ds, batch_size=3)))
-    assert batch["image"].shape == (3, 3, 32, 32) and batch["vertices"].shape == (3, 799, 3)
+    assert batch["image"].shape == (3, 3, 32, 32) and batch["vertices"].shape == (3, 779, 3)
     sub = A.InterSHTorchDataset(toy_root, image_size=32, indices=[3, 1], train=False)
     assert len(sub) == 2 and int(sub[0]["index"]) == 3
     np.testing.assert_allclose(sub.vr_values(), raw.vr_table()[[3, 1]])

@@ -13,6 +13,7 @@ between, or that the oracle cannot certify, form the tolerance band and are only
 
 import numpy as np
 import pytest
+import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -512,13 +513,24 @@ def test_left_hand_is_mirrored_right(hands):
 
 def test_self_collisions(hands):
     model = hands["right"]
-    for name in ("flat", "spread", "pinch"):
+    for name in ("flat", "spread", "pinch", "fist", "point"):   # natural poses: no collision
         i, j = C.self_collisions(C.hand_cylinders(_posed(model, name), model=model))
         assert i.size == 0, name
-    body = C.hand_cylinders(_posed(model, "fist"), model=model)
+    # the middle finger swung 40 degrees sideways through the index finger
+    cross = torch.zeros(1, 15, 3)
+    cross[0, 3] = torch.tensor([0.0, np.deg2rad(40), 0.0])
+    body = C.hand_cylinders(model(pose=cross), model=model)
     i, j = C.self_collisions(body)
     pairs = {(body.names[a], body.names[b]) for a, b in zip(i, j, strict=True)}
-    assert ("thumb_1", "index_3") in pairs  # the thumb wraps over the curled fingers
+    assert ("index_2", "middle_2") in pairs
+    # the exact cylinders (no compression) of a fist touch: fingers rest on each other
+    fist = C.hand_cylinders(_posed(model, "fist"), model=model)
+    assert C.self_collisions(fist, compression=0.0)[0].size > 0
+    with pytest.raises(ValueError, match="compression"):
+        C.self_collisions(fist, compression=1.0)
+    body = C.Cylinders(body.p0, body.p1, body.radius * (1 - C.SELF_CONTACT_COMPRESSION),
+                       body.names, body.parts, body.adjacent)
+    i, j = C.self_collisions(body, compression=0.0)
     adj = {tuple(p) for p in body.adjacent.tolist()}
     assert not any((a, b) in adj for a, b in zip(i, j, strict=True))
     # brute force over all non-adjacent pairs gives the same set

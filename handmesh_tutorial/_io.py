@@ -1,0 +1,55 @@
+"""Atomic file writes (temp file in the same folder + rename): a crash never leaves half a file."""
+
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["atomic_write_bytes", "atomic_savez"]
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = False) -> Path:
+    """Write ``data`` to ``path`` atomically; parent folders are created.
+
+    Args:
+        path: destination file.
+        data: the bytes.
+        durable: ``fsync`` the file before the rename.
+
+    Returns:
+        The written path.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            if durable:
+                fh.flush()
+                os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
+def atomic_savez(path: str | os.PathLike, **arrays) -> Path:
+    """``numpy.savez_compressed`` to ``path`` atomically (no pickled objects allowed).
+
+    Args:
+        path: destination ``.npz``.
+        **arrays: the arrays by name.
+
+    Returns:
+        The written path.
+    """
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **{k: np.asarray(v) for k, v in arrays.items()})
+    return atomic_write_bytes(path, buf.getvalue())
