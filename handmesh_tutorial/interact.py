@@ -248,7 +248,11 @@ class _Rig:
     """
 
     def __init__(self, rest, parents, frames, lower, upper, cylinders: Cylinders, attach,
-                 root_R=None, root_P=None):
+                 root_R=None, root_P=None, followers: dict | None = None):
+        # followers {node: (leader node, ratio)}: the node's flexion (y) angle is ``ratio`` times
+        # its leader's and it has no freedom of its own (a finger's DIP following its PIP)
+        self.followers = dict(followers or {})
+        self.leads = {lead: (node, ratio) for node, (lead, ratio) in self.followers.items()}
         self.rest = np.asarray(rest, float)
         self.parents = np.asarray(parents, int)
         n = len(self.rest)
@@ -302,6 +306,8 @@ class _Rig:
         from .lcs import rotation_from_lcs_angles
 
         self.angles = np.array(angles, float).reshape(self.num_joints, 3)
+        for node, (lead, ratio) in self.followers.items():
+            self.angles[node - 1] = [0.0, ratio * self.angles[lead - 1, 1], 0.0]
         if self.num_joints:
             self.local[1:] = rotation_from_lcs_angles(self.frames, self.angles)
         self.update()
@@ -313,6 +319,11 @@ class _Rig:
         a = np.asarray(angles, float).reshape(1, 3)
         self.angles[node - 1] = a[0]
         self.local[node] = rotation_from_lcs_angles(self.frames[node - 1:node], a)[0]
+        if node in self.leads:
+            f, ratio = self.leads[node]
+            fa = np.array([[0.0, ratio * a[0, 1], 0.0]])
+            self.angles[f - 1] = fa[0]
+            self.local[f] = rotation_from_lcs_angles(self.frames[f - 1:f], fa)[0]
         self.update()
 
     def update(self) -> None:
@@ -352,6 +363,12 @@ class _Rig:
         A = np.asarray(angles, float).reshape(-1, 1, 3)
         K = len(A)
         Lk = rotation_from_lcs_angles(self.frames[node - 1:node], A)[:, 0]  # (K,3,3)
+        follower = self.leads.get(node)
+        if follower is not None:
+            f, ratio = follower
+            Af = np.zeros_like(A)
+            Af[..., 1] = ratio * A[..., 1]
+            Lf = rotation_from_lcs_angles(self.frames[f - 1:f], Af)[:, 0]
         G = {}
         P = {}
         for m in self.subtree[node]:
@@ -359,6 +376,9 @@ class _Rig:
             if m == node:
                 G[m] = self.G[p] @ Lk
                 P[m] = np.broadcast_to(self.P[m], (K, 3))
+            elif follower is not None and m == follower[0]:
+                G[m] = G[p] @ Lf
+                P[m] = P[p] + G[p] @ (self.rest[m] - self.rest[p])
             else:
                 G[m] = G[p] @ self.local[m]
                 P[m] = P[p] + G[p] @ (self.rest[m] - self.rest[p])
@@ -509,8 +529,13 @@ class _Hand:
         self.rest_joints21 = rest.joints[0].numpy().astype(float)
         rest16 = rest.joints_mano[0].numpy().astype(float)
         cyl = hand_cylinders(rest, model=self.model)
+        from .lcs import DIP_FOLLOWS_PIP, DIP_PIP_RATIO
+
+        # natural hands: each finger's DIP follows its PIP (the paper's +-60 deg: independent)
+        followers = ({dip: (pip, DIP_PIP_RATIO) for dip, pip in DIP_FOLLOWS_PIP.items()}
+                     if limits == "anatomical" else None)
         self.rig = _Rig(rest16, self.model.parents, self.art.frames, self.art.lower,
-                        self.art.upper, cyl, _hand_attach())
+                        self.art.upper, cyl, _hand_attach(), followers=followers)
         self.dynamic = True
 
     def mesh(self):
@@ -963,6 +988,8 @@ class _Generator:
 
     # -- steps 4 and 5 -------------------------------------------------------------------------
     def _direction(self, body, j) -> np.ndarray | None:
+        if j in body.rig.followers:   # driven by its leader (a DIP by its PIP)
+            return None
         span = body.rig.upper[j - 1] - body.rig.lower[j - 1]
         w = np.asarray(self.cfg.axis_weights, float) if body.kind == "hand" else np.ones(3)
         d = self.rng.normal(size=3) * w * (span > 0)

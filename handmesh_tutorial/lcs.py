@@ -94,6 +94,15 @@ ANATOMICAL_LIMITS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
     "thumb_ip": ((0.0, 0.0), (-15.0, 80.0), (0.0, 0.0)),
 }
 
+#: DIP flexion = this fraction of the PIP flexion under anatomical limits: the distal joint of a
+#: finger is driven by the same tendons as the middle one and follows it (about 2/3, Rijpkema &
+#: Girard 1991; the constraint common in hand animation and tracking).
+DIP_PIP_RATIO: float = 2.0 / 3.0
+
+#: Coupled joints of the hand under anatomical limits: ``{DIP node: PIP node}`` (MANO nodes
+#: 1..15; the thumb's IP stays independent).
+DIP_FOLLOWS_PIP: dict[int, int] = {3: 2, 6: 5, 9: 8, 12: 11}
+
 #: Kind of each of the 15 articulated MANO joints (MANO order 1..15: index, middle, pinky, ring,
 #: thumb; three joints each).
 HAND_JOINT_KINDS: tuple[str, ...] = (

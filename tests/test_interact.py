@@ -128,10 +128,24 @@ def test_hand_angles_respect_the_limits(scenes):
         for b in sc.bodies:
             if b.kind == "hand":
                 assert hmt.lcs.within_limits(b.angles, lo, hi), kind
+    # natural hands: every finger's DIP follows its PIP (flexion only, 2/3 of it)
+    ratio = hmt.lcs.DIP_PIP_RATIO
+    flexed = 0
+    for sc in scenes.values():
+        for b in sc.bodies:
+            if b.kind == "hand":
+                for dip, pip in hmt.lcs.DIP_FOLLOWS_PIP.items():
+                    np.testing.assert_allclose(b.angles[dip - 1], [0, ratio * b.angles[pip - 1, 1],
+                                                                   0], atol=1e-12)
+                    flexed += b.angles[pip - 1, 1] > np.deg2rad(10)
+    assert flexed > 0
     sc = interact.build_scene("hand-hand", 3, limits="paper")  # the paper's ±60° box
     for b in sc.bodies:
         assert np.abs(b.angles).max() <= np.deg2rad(60) + 1e-9
     assert max(np.abs(b.angles).max() for b in sc.bodies) > np.deg2rad(20)
+    # ... with independent DIPs
+    assert any(abs(b.angles[dip - 1, 1] - ratio * b.angles[pip - 1, 1]) > 1e-3
+               for b in sc.bodies for dip, pip in hmt.lcs.DIP_FOLLOWS_PIP.items())
 
 
 def test_no_self_collision_of_the_hands(scenes):
