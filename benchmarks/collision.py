@@ -11,7 +11,7 @@ Prints, measured in the same run on the same pairs:
    built beforehand) on a ``--fcl-pairs`` subsample; its rate is extrapolated. Also fcl's agreement
    with ours: disagreements are located with the independent oracle
    (:func:`hmt.collision.distance_bounds`), i.e. how far from contact they are.
-4. A full hand-vs-hand query (two open hands as 20 cylinders each, all 400 primitive pairs):
+4. A full hand-vs-hand query (two hands as 20 cylinders each, all 400 primitive pairs):
    median :func:`bodies_collide` and :func:`colliding_pairs` times over random relative poses near
    contact, vs fcl's per-pair loop on the same primitives. Target: well under a millisecond.
 

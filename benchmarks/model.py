@@ -3,7 +3,7 @@
 Prints, measured in the same run:
 
 1. ``SpiralConv`` forward+backward vs a plain reference (advanced-index gather ``x[:, idx]`` +
-   ``torch.nn.functional.linear``) on the open hand's finest mesh. Target: no slower (ratio ~1).
+   ``torch.nn.functional.linear``) on the hand's finest mesh. Target: no slower (ratio ~1).
 2. Parameters of the mesh part (FC, transformer, decoder) for single-path, multi-path, and
    multi-path + attention (the paper's Table 3 rows), with the ratio to single-path. Target:
    multi-path + attention adds at most ~30% decoder parameters ("minor additional parameter
@@ -136,7 +136,7 @@ def main() -> None:
     print(f"budget {B.name}: batch {B.batch_size}, threads {threads}, torch {torch.__version__}")
     hand = HandModel("right")
     hier = mesh_hierarchy(hand.template_vertices, hand.faces)
-    print(f"open hand hierarchy: {hier.num_vertices} vertices")
+    print(f"hand hierarchy: {hier.num_vertices} vertices")
 
     variants = {"single": dict(decoder="single", attention=False),
                 "multi": dict(decoder="multi", attention=False),

@@ -17,7 +17,8 @@ __version__ = "0.1.0"
 _SUBMODULES = (
     "augment", "blocks", "budget", "cli", "collision", "dataset", "decoder", "demo", "encoder",
     "freihand",
-    "hand", "interact", "lcs", "mano", "metrics", "model", "objects", "render", "sampling",
+    "hand", "interact", "lcs", "makehuman", "mano", "metrics", "model", "objects", "render",
+    "sampling",
     "spiral", "train", "visibility", "viz",
 )
 

@@ -10,7 +10,7 @@ mirrored on the way in and back on the way out (:func:`unmirror`, :func:`to_came
 * the image is flipped horizontally, ``u' = W - 1 - u`` (pixel centres at integer coordinates,
   as everywhere in this library);
 * the 3D points get their camera-frame ``x`` negated, ``M = diag(-1, 1, 1)`` (a left hand seen in
-  a mirror is a right hand; the open hand's left mesh is the vertex-by-vertex mirror of the right
+  a mirror is a right hand; the hand model's left mesh is the vertex-by-vertex mirror of the right
   one, so the vertex order is kept);
 * the intrinsics become ``K' = F K M`` with ``F`` the pixel flip: ``fx, fy, cy`` unchanged,
   ``cx' = W - 1 - cx`` and the skew negated (:func:`flip_intrinsics`).

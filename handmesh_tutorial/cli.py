@@ -196,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--no-attention", action="store_true", help="no coarse-mesh transformer")
     tr.add_argument("--channels", type=_channels, help="decoder channels, finest first")
     tr.add_argument("--latent-channels", type=int)
-    tr.add_argument("--template", help=".npz template (default: the open hand)")
+    tr.add_argument("--template", help=".npz template (default: the MakeHuman hand)")
     tr.add_argument("--seed", type=int)
     tr.add_argument("--device", help="auto | cpu | cuda")
     tr.add_argument("--threads", type=int, help="torch threads")

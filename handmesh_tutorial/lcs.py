@@ -46,7 +46,7 @@ clinical range-of-motion tables such as the AAOS values). They are plausible def
 sampling, not measurements.
 
 **Left hands.** If the left mesh is the mirror image of the right by a reflection ``M`` (the
-library's open hand negates z, :func:`handmesh_tutorial.hand.mirror_points`), the rule gives
+library's hand negates z, :func:`handmesh_tutorial.hand.mirror_points`), the rule gives
 ``F_left = M F_right diag(1, -1, 1)``: ``z`` and ``x`` mirror, ``y`` flips to stay right-handed
 (``(Mz) × (Mx) = -M (z × x)``). Then equal flexion angles give mirrored poses, while ``a_x`` and
 ``a_z`` change sign (:func:`mirror_angles`). All limits on ``x`` and ``z`` are symmetric, so the

@@ -1,6 +1,7 @@
 """Load a user's own ``MANO_RIGHT.pkl`` / ``MANO_LEFT.pkl`` without chumpy, safely.
 
-MANO is licence-gated, so the library ships its own open hand (:mod:`handmesh_tutorial.hand`).
+MANO is licence-gated, so the library ships its own hand (the MakeHuman hand,
+:mod:`handmesh_tutorial.hand`).
 A user who owns the official files can load them here and use them anywhere a
 :class:`~handmesh_tutorial.hand.HandModel` is accepted: :func:`load_mano` returns a
 :class:`ManoModel` with the same call signature and output (vertices, 21 FreiHAND-order joints,
@@ -455,7 +456,7 @@ class ManoModel(torch.nn.Module):
         self.register_buffer("_to_freihand", torch.as_tensor(
             np.asarray(_hand.MANO_TO_FREIHAND), dtype=torch.long))
 
-        # HandModel-compatible attributes (numpy, like the open hand).
+        # HandModel-compatible attributes (numpy, like HandModel).
         self.faces = np.asarray(params["f"]).astype(np.int64)
         self.parents = parents
         self.fingertip_vertex_ids = np.asarray(tips, dtype=np.int64)
@@ -496,7 +497,7 @@ class ManoModel(torch.nn.Module):
         its child joint, or to its fingertip for the last joint of a finger); for the wrist, the
         palm's half-thickness (mean distance of the palm vertices from the plane through the
         wrist and the knuckles). An estimate for collision proxies, like
-        :attr:`HandModel.bone_radii` (on the open hand written in MANO format the two agree to
+        :attr:`HandModel.bone_radii` (on the MakeHuman hand written in MANO format the two agree to
         about 10 %).
         """
         v = self.template_vertices.astype(np.float64)
@@ -647,7 +648,7 @@ class ManoModel(torch.nn.Module):
         eye = torch.eye(3, dtype=rots.dtype, device=rots.device)
         pose_feat = (rots[:, 1:] - eye).reshape(batch, 135)
         v_posed = v_shaped + (pose_feat @ self.posedirs).reshape(batch, -1, 3)
-        # Same skinning as the open hand: G_k = G_parent [R_k | J_k - J_parent], blended.
+        # Same skinning as HandModel: G_k = G_parent [R_k | J_k - J_parent], blended.
         verts, transforms = _hand.lbs(v_posed, joints, rots, self.weights, self.parents)
         posed_joints = transforms[:, :, :3, 3]
         if tr is not None:

@@ -12,7 +12,7 @@ Paper section "Multi-path Mesh Decoder" (architecture figure) and Table 3 (ablat
 5. joints ``(B, J, 3)`` = the template's joint regressor ``(J, V)`` applied to the vertices.
 
 The FC is kept modest by a small coarse width ``C`` (``latent_channels``, default 16); in CMR
-the FC is ~73% of the decoder's parameters; with a ResNet-18, the open hand (50 coarse vertices)
+the FC is ~73% of the decoder's parameters; with a ResNet-18, our hand (49 coarse vertices)
 and the default channels ours is 410k parameters, 0.76 of the single-path decoder and 0.61 of the
 multi-path one. :func:`parameter_table` prints the split.
 

@@ -645,7 +645,7 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
     Args:
         path: a file written by :func:`train` / :func:`save_checkpoint`.
         device: where the model goes (``map_location`` too).
-        template: the mesh template (default: the config's ``template``, i.e. the open hand
+        template: the mesh template (default: the config's ``template``, i.e. the MakeHuman hand
             unless a template file was used); its hash must equal the checkpoint's.
 
     Returns:
@@ -1226,7 +1226,7 @@ def _splat(points, colors, K, size):
 
 
 def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict:
-    """A fast stand-in INTER-SH ``hand-hand`` sample: two posed open hands, point-splatted.
+    """A fast stand-in INTER-SH ``hand-hand`` sample: two posed hands, point-splatted.
 
     No OpenGL: the faces of both meshes are sampled at 10 points each, projected and z-buffered
     (shaded by the face normal), over a random colour gradient. Masks, VR, meshes and joints are

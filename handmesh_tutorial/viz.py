@@ -149,7 +149,7 @@ def plot_frames(ax, origins, frames, length: float = 0.012,
             ax.text(*tip, "xyz"[axis], color=colors[axis], fontsize=9)
 
 
-#: Default camera for hands in the open hand's template frame (fingers +x, palm -y): y is drawn
+#: Default camera for hands in the hand template's frame (fingers +x, palm -y): y is drawn
 #: up, seen from above the back of the hand and from the side.
 HAND_VIEW = {"elev": 40.0, "azim": -65.0, "vertical_axis": "y"}
 #: Light for that view (travels down and away from the viewer).
@@ -188,7 +188,7 @@ def plot_hand(ax, vertices, faces, colors=None, joints=None, view: dict | None =
 
 
 def save_hand_gallery(path: str | os.PathLike, seed: int = 0, dpi: int = 90) -> Path:
-    """Figure of the open hand, right and left, in a few poses, saved atomically as PNG.
+    """Figure of the hand model, right and left, in a few poses, saved atomically as PNG.
 
     Rows: right hand, left hand (the left is posed with the mirrored pose, see
     :func:`handmesh_tutorial.hand.mirror_axis_angle`). Columns: flat (rest), fist, pointing,
@@ -229,7 +229,7 @@ def save_hand_gallery(path: str | os.PathLike, seed: int = 0, dpi: int = 90) -> 
             ax = fig.add_subplot(2, len(names), row * len(names) + col + 1, projection="3d")
             plot_hand(ax, out.vertices[0], model.faces, colors=colors,
                       title=f"{side}: {name}")
-    fig.suptitle(f"open hand ({model.num_vertices} vertices), right and left, seed={seed}",
+    fig.suptitle(f"MakeHuman hand ({model.num_vertices} vertices), right and left, seed={seed}",
                  fontsize=11)
     fig.tight_layout()
     try:
