@@ -45,8 +45,8 @@ from ._io import atomic_savez
 __all__ = [
     "MANO_JOINT_NAMES", "MANO_PARENTS", "FREIHAND_JOINT_NAMES", "FREIHAND_PARENTS",
     "MANO_TO_FREIHAND", "FINGERTIP_NAMES", "FINGER_NAMES", "MIRROR_AXIS", "SHAPE_PARAM_NAMES",
-    "SHAPE_SAMPLE_RANGES", "SKIN_TONES", "ASSET_PATH", "random_shape", "HandTemplate",
-    "HandOutput", "HandModel",
+    "SHAPE_SAMPLE_RANGES", "SKIN_TONES", "ASSET_PATH", "random_shape", "forearm_mesh",
+    "HandTemplate", "HandOutput", "HandModel",
     "joint_regressor_from_mesh", "save_template", "load_template",
     "axis_angle_to_matrix", "lbs", "mirror_points", "mirror_axis_angle",
     "self_intersections", "mesh_checks", "flexion_axes", "example_pose", "random_pose",
@@ -597,6 +597,45 @@ def random_pose(rng: np.random.Generator | int | None = None, batch: int = 1,
     return pose.astype(np.float32)
 
 
+def forearm_mesh(loop: np.ndarray, axis, length: float = 0.25, rings: int = 8,
+                 flare: float = 1.3) -> tuple[np.ndarray, np.ndarray]:
+    """A forearm for rendering: a tube continuing the wrist's boundary loop along ``axis``.
+
+    Real photographs show the forearm; a hand cut at the wrist (the cap) does not look like one.
+    The tube starts on the wrist loop (so it joins the hand seamlessly), widens linearly to
+    ``flare`` times the loop's size at the far end (a forearm is wider towards the elbow) and is
+    closed there. It is scenery, not part of the hand model: no joints, no skinning, not in the
+    mesh targets.
+
+    Args:
+        loop: (L,3) the wrist loop's vertices in order (posed, any frame), metres.
+        axis: (3,) direction from the wrist towards the elbow (normalised here).
+        length: tube length, metres.
+        rings: rings of vertices after the first.
+        flare: size of the last ring relative to the first.
+
+    Returns:
+        ``(vertices (L*(rings+1)+1, 3), faces (2*L*rings + L, 3))``, outward-facing when the loop
+        runs like the hand's boundary (its half-edges without twins).
+    """
+    loop = np.asarray(loop, float)
+    a = _unit(axis)
+    c = loop.mean(0)
+    n = len(loop)
+    verts = [c + (1 + (flare - 1) * k / rings) * (loop - c) + (length * k / rings) * a
+             for k in range(rings + 1)]
+    v = np.concatenate(verts + [(c + length * a)[None]])
+    faces = []
+    idx = np.arange(n)
+    for k in range(rings):
+        r0, r1 = k * n + idx, (k + 1) * n + idx
+        r0n, r1n = k * n + np.roll(idx, -1), (k + 1) * n + np.roll(idx, -1)
+        faces += [np.stack([r0, r0n, r1], 1), np.stack([r0n, r1n, r1], 1)]
+    last = rings * n
+    faces.append(np.stack([last + idx, last + np.roll(idx, -1), np.full(n, len(v) - 1)], 1))
+    return v, np.concatenate(faces).astype(np.int64)
+
+
 def random_shape(rng: np.random.Generator | int | None = None, batch: int = 1,
                  scale: float = 1.0) -> np.ndarray:
     """Random adult hand shapes: uniform in :data:`SHAPE_SAMPLE_RANGES`, scaled about 0.
@@ -699,6 +738,22 @@ class HandModel(nn.Module):
         self.register_buffer("j_shapedirs", torch.as_tensor(tpl.joint_shape_dirs, dtype=f32))
         self.register_buffer("tip_ids", torch.as_tensor(self.fingertip_vertex_ids))
         self.register_buffer("to_freihand", torch.as_tensor(MANO_TO_FREIHAND, dtype=torch.long))
+
+    @property
+    def wrist_loop(self) -> np.ndarray:
+        """(L,) int64 ids of the wrist's boundary loop (the rim of the cap), ordered like the
+        cap's faces: consecutive ids ``(loop[i], loop[i+1])`` run opposite to the skin's
+        boundary half-edges, as an outward face glued to the rim does (see :func:`forearm_mesh`).
+        """
+        skin = self.faces[~np.asarray(self.template.cap_faces, bool)]
+        e = np.concatenate([skin[:, [0, 1]], skin[:, [1, 2]], skin[:, [2, 0]]])
+        half = {(int(a), int(b)) for a, b in e}
+        prev = {b: a for a, b in half if (b, a) not in half}    # boundary a -> b; walk b -> a
+        start = next(iter(sorted(prev)))
+        loop = [start]
+        while prev[loop[-1]] != start:
+            loop.append(prev[loop[-1]])
+        return np.asarray(loop, np.int64)
 
     @property
     def num_vertices(self) -> int:

@@ -427,6 +427,29 @@ def _hand_attach() -> np.ndarray:
     return np.array(att + [0] * 5, int)
 
 
+#: Length of the forearm drawn behind each hand and of its collision cylinder, metres.
+FOREARM_LENGTH: float = 0.25
+
+
+def _with_forearm(cyl: Cylinders, loop: np.ndarray) -> Cylinders:
+    """The hand's 20 cylinders plus one for its forearm (rest frame: the forearm runs along -x
+    from the wrist loop), so other bodies cannot pass through the forearm that
+    :func:`~handmesh_tutorial.hand.forearm_mesh` draws. It is adjacent to the palm cylinders and
+    the thumb's metacarpal (they meet at the wrist)."""
+    c = loop.mean(0)
+    axis = np.array([-1.0, 0.0, 0.0])
+    # the drawn tube widens from the loop's size to 1.3 x: its mean radius
+    radius = 1.15 * float(np.linalg.norm(loop - c, axis=1).mean())
+    names = list(cyl.names)
+    forearm = Cylinders(c[None], (c + FOREARM_LENGTH * axis)[None], np.array([radius]),
+                        ("forearm",), np.array([5]), np.zeros((0, 2), np.int64))
+    both = Cylinders.concat([cyl, forearm])
+    k = len(names)
+    extra = [(i, k) for i, n in enumerate(names) if n.startswith("palm") or n == "thumb_1"]
+    return Cylinders(both.p0, both.p1, both.radius, both.names, both.parts,
+                     np.concatenate([both.adjacent, np.array(extra, np.int64)]))
+
+
 @dataclass
 class SceneBody:
     """One body of a generated scene, in the scene (world) frame.
@@ -446,6 +469,9 @@ class SceneBody:
         shape: (6,) hand shape parameters (:data:`~handmesh_tutorial.hand.SHAPE_PARAM_NAMES`), else
             ``None``.
         dynamic: whether step 4 moved its joints.
+        forearm: a hand's forearm for rendering, ``(vertices (N,3) world, faces (M,3), colours
+            (N,3))`` (:func:`~handmesh_tutorial.hand.forearm_mesh`: scenery, not a body: it
+            occludes but has no label, no annotation and no collision), else ``None``.
     """
 
     label: int
@@ -461,6 +487,7 @@ class SceneBody:
     angles: np.ndarray | None = None
     shape: np.ndarray | None = None
     dynamic: bool = True
+    forearm: tuple | None = None
 
 
 @dataclass
@@ -510,6 +537,15 @@ class Scene:
         t = np.zeros(3) if t is None else np.asarray(t, float)
         return [(b.vertices @ R.T + t, b.faces, b.colors, b.label) for b in self.bodies]
 
+    def scenery_meshes(self, R=None, t=None) -> list[tuple]:
+        """``(vertices, faces, sRGB colors, owner label)`` of the scenery (the hands' forearms),
+        optionally moved ``x -> R x + t``; see :meth:`handmesh_tutorial.render.Renderer.render`'s
+        ``occluders``."""
+        R = np.eye(3) if R is None else np.asarray(R, float)
+        t = np.zeros(3) if t is None else np.asarray(t, float)
+        return [(b.forearm[0] @ R.T + t, b.forearm[1], b.forearm[2], b.label)
+                for b in self.bodies if b.forearm is not None]
+
 
 class _Hand:
     """A hand during generation: its rig plus what is needed to produce the mesh."""
@@ -528,14 +564,15 @@ class _Hand:
             rest = self.model(shape=torch.as_tensor(self.shape[None]))
         self.rest_joints21 = rest.joints[0].numpy().astype(float)
         rest16 = rest.joints_mano[0].numpy().astype(float)
-        cyl = hand_cylinders(rest, model=self.model)
+        cyl = _with_forearm(hand_cylinders(rest, model=self.model),
+                            rest.vertices[0].numpy().astype(float)[self.model.wrist_loop])
         from .lcs import DIP_FOLLOWS_PIP, DIP_PIP_RATIO
 
         # natural hands: each finger's DIP follows its PIP (the paper's +-60 deg: independent)
         followers = ({dip: (pip, DIP_PIP_RATIO) for dip, pip in DIP_FOLLOWS_PIP.items()}
                      if limits == "anatomical" else None)
         self.rig = _Rig(rest16, self.model.parents, self.art.frames, self.art.lower,
-                        self.art.upper, cyl, _hand_attach(), followers=followers)
+                        self.art.upper, cyl, np.r_[_hand_attach(), 0], followers=followers)
         self.dynamic = True
 
     def mesh(self):
@@ -1176,13 +1213,22 @@ class _Generator:
         for b in bodies:
             v, f = meshes[b.label]
             is_hand = b.kind == "hand"
+            forearm = None
+            if is_hand:
+                from .hand import forearm_mesh
+
+                loop = b.model.wrist_loop
+                fv, ff = forearm_mesh(v[loop], b.rig.G[0] @ np.array([-1.0, 0.0, 0.0]),
+                                      length=FOREARM_LENGTH)
+                skin = np.asarray(b.colors, float)[loop].mean(0)
+                forearm = (fv, ff, np.tile(skin, (len(fv), 1)))
             out.append(SceneBody(
                 label=b.label, name=b.name, kind=b.kind, side=b.side if is_hand else None,
                 vertices=v, faces=np.asarray(f, np.int64), colors=np.asarray(b.colors, float),
                 cylinders=b.rig.cylinders(), joints=joints[b.label],
                 pose=b.art.to_pose(b.rig.angles) if is_hand else None,
                 angles=b.rig.angles.copy() if b.rig.num_joints else None,
-                shape=b.shape.copy() if is_hand else None, dynamic=b.dynamic))
+                shape=b.shape.copy() if is_hand else None, dynamic=b.dynamic, forearm=forearm))
         return Scene(self.kind, self.seed, out, target, u, stats, self.history)
 
 
@@ -1292,7 +1338,8 @@ FRAME_MARGIN: float = 0.08
 def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
                  spread: float = 0.6, share: tuple[float, float] = FRAME_SHARE,
                  focal: tuple[float, float] = FRAME_FOCAL,
-                 margin: float = FRAME_MARGIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 margin: float = FRAME_MARGIN,
+                 avoid=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A camera framed on the target hand like a FreiHAND 224-px crop.
 
     1. The view direction is uniform on the sphere (or ``toward`` plus Gaussian noise of
@@ -1320,6 +1367,9 @@ def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
             ``max <= 1 - 2 * margin``.
         focal: (min, max) focal length as a multiple of ``S``.
         margin: free border, as a fraction of ``S``.
+        avoid: optional ``(axis (3,), max_cos)``: view directions (hand -> camera) closer than
+            ``arccos(max_cos)`` to ``axis`` are drawn again (up to 20 times), e.g. views along
+            the forearm from the elbow, where the forearm would hide the hand.
 
     Returns:
         ``(R, t, K)``: world -> OpenCV camera frame ``X_cam = R @ X + t``, and (3, 3) intrinsics.
@@ -1339,10 +1389,13 @@ def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
     if not 0 < focal[0] <= focal[1]:
         raise ValueError(f"focal must be (min, max) with 0 < min <= max, got {focal}")
     centre = 0.5 * (V.min(0) + V.max(0))
-    if toward is None:
-        z = -_random_direction(rng)  # optical axis (camera -> hand)
-    else:
-        z = -_unit(_unit(np.asarray(toward, float)) + spread * rng.normal(size=3))
+    for _ in range(20):
+        if toward is None:
+            z = -_random_direction(rng)  # optical axis (camera -> hand)
+        else:
+            z = -_unit(_unit(np.asarray(toward, float)) + spread * rng.normal(size=3))
+        if avoid is None or -z @ _unit(np.asarray(avoid[0], float)) <= avoid[1]:
+            break
     a = _random_direction(rng)
     while abs(a @ z) > 0.95:
         a = _random_direction(rng)
@@ -1551,9 +1604,15 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     if rng.random() < occluder_view:
         other = [b for b in scene.bodies if b.label != scene.target][0]
         toward = other.vertices.mean(0) - centre
+    # never look along the target's forearm from the elbow: the forearm would hide the hand
+    avoid = None
+    if tb.forearm is not None:
+        fv = tb.forearm[0]
+        ring = (len(fv) - 1) // 9        # forearm_mesh: 9 rings of the loop, then the far centre
+        avoid = (fv[-1] - fv[:ring].mean(0), np.cos(np.deg2rad(50)))
     for _ in range(10):
         R, t, K = frame_camera(tb.vertices, rng, image_size, toward=toward, share=share,
-                               focal=focal, margin=margin)
+                               focal=focal, margin=margin, avoid=avoid)
         meshes = scene.render_meshes(R, t)
         if min(m[0][:, 2].min() for m in meshes) > 0.05:  # everything in front of the camera
             break
@@ -1565,7 +1624,8 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     tint = srgb_to_linear(bg.reshape(-1, 3).mean(0) / 255.0)
     tint = 0.6 + 0.4 * tint / max(float(tint.mean()), 1e-3)
     ambient = float(rng.uniform(0.06, 0.2)) * tint
-    out = r.render(meshes, K, lights=lights, background=bg, ambient=ambient, alone=True)
+    out = r.render(meshes, K, lights=lights, background=bg, ambient=ambient, alone=True,
+                   occluders=scene.scenery_meshes(R, t))
     noise = rng.uniform(0.0, 2.0)
     image = np.clip(out.image + rng.normal(0.0, noise, out.image.shape) + 0.5, 0, 255)
     image = image.astype(np.uint8)

@@ -886,16 +886,10 @@ class Renderer:
         scene.add(cam, pose=CV_TO_GL)
         material = pr.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=0.7,
                                                 baseColorFactor=(1.0, 1.0, 1.0, 1.0))
+        self._material = material
         nodes = {}
         for m in meshes:
-            prim = pr.Primitive(positions=m.vertices.astype(np.float32),
-                                normals=_vertex_normals(m.vertices, m.faces).astype(np.float32),
-                                indices=m.faces.astype(np.uint32),
-                                color_0=np.concatenate([srgb_to_linear(m.colors),
-                                                        np.ones((len(m.colors), 1))],
-                                                       1).astype(np.float32),
-                                material=material)
-            nodes[m.label] = scene.add(pr.Mesh([prim]), name=f"body{m.label}")
+            nodes[m.label] = self._add_mesh(scene, m, name=f"body{m.label}")
         for light in lights:
             if light.kind == "directional":
                 pl = pr.DirectionalLight(color=np.asarray(light.color), intensity=light.intensity)
@@ -908,6 +902,17 @@ class Renderer:
             else:
                 raise ValueError(f"unknown light kind {light.kind!r}; expected directional|point")
         return scene, nodes
+
+    def _add_mesh(self, scene, m: RenderMesh, name: str):
+        pr = self._pr
+        prim = pr.Primitive(positions=m.vertices.astype(np.float32),
+                            normals=_vertex_normals(m.vertices, m.faces).astype(np.float32),
+                            indices=m.faces.astype(np.uint32),
+                            color_0=np.concatenate([srgb_to_linear(m.colors),
+                                                    np.ones((len(m.colors), 1))],
+                                                   1).astype(np.float32),
+                            material=self._material)
+        return scene.add(pr.Mesh([prim]), name=name)
 
     def _color(self, scene, background: np.ndarray) -> np.ndarray:
         rgba, _ = self._r.render(scene, flags=self._pr.RenderFlags.RGBA)
@@ -936,7 +941,8 @@ class Renderer:
     # public API -----------------------------------------------------------------------------
     def render(self, meshes: Sequence[Any], K: Any, *, lights: Sequence[Light] | None = None,
                background: Any = None, ambient: Any = 0.25, color: bool = True,
-               alone: bool = False, alone_images: bool = False) -> RenderResult:
+               alone: bool = False, alone_images: bool = False,
+               occluders: Sequence[Any] = ()) -> RenderResult:
         """Render a scene: RGB image, label mask, depth and optionally each body alone.
 
         Args:
@@ -952,6 +958,10 @@ class Renderer:
             color: run the colour pass (``False``: masks and depth only, faster).
             alone: also render each body alone and return its mask (the VR denominators).
             alone_images: also return each body alone over the background (implies ``alone``).
+            occluders: scenery ``(vertices, faces, colors, owner)`` tuples (e.g. a hand's
+                forearm): drawn in the image and hiding what is behind them, but label 0 in the
+                masks; an occluder also hides parts of its owner (a body label, or 0 for none)
+                in the owner's *alone* mask, so VR counts only what other bodies hide.
 
         Returns:
             A `RenderResult`.
@@ -966,14 +976,25 @@ class Renderer:
         bg = self._background(background)
         lights = default_lights() if lights is None else list(lights)
         scene, nodes = self._scene(ms, K, lights, ambient)
+        scenery = []
+        for i, occ in enumerate(occluders):
+            if len(occ) != 4:
+                raise ValueError(f"occluders[{i}] must be (vertices, faces, colors, owner), got "
+                                 f"{len(occ)} items")
+            mesh = _as_meshes([(occ[0], occ[1], occ[2], 1)])[0]     # validated, colours in [0,1]
+            scenery.append((self._add_mesh(scene, mesh, name="scenery"), int(occ[3])))
         image = self._color(scene, bg) if color else None
-        labels, depth = self._seg(scene, {n: _label_color(lab) for lab, n in nodes.items()})
+        background_code = _label_color(0)
+        seg_map = {n: _label_color(lab) for lab, n in nodes.items()}
+        seg_map.update({node: background_code for node, _ in scenery})
+        labels, depth = self._seg(scene, seg_map)
         out = RenderResult(image, labels, depth.astype(np.float32))
         if alone or alone_images:
             out.alone_masks = {}
             out.alone_images = {} if alone_images else None
             for lab, node in nodes.items():
-                lab_img, _ = self._seg(scene, {node: _label_color(lab)})
+                own = {n: background_code for n, owner in scenery if owner == lab}
+                lab_img, _ = self._seg(scene, {node: _label_color(lab), **own})
                 out.alone_masks[lab] = lab_img == lab
                 if alone_images:
                     for other in nodes.values():  # hide the others; no re-upload of buffers

@@ -477,3 +477,23 @@ def test_gradients_flow(right):
         assert abs(p.grad[0, 0, 2].item() - fd.item()) < 1e-4
     finally:
         right.float()
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_forearm_continues_the_wrist_into_one_closed_surface(side):
+    model = H.HandModel(side)
+    loop = model.wrist_loop
+    assert len(loop) == model.template.cap_faces.sum() and len(set(loop.tolist())) == len(loop)
+    v = model.template_vertices.astype(float)
+    fv, ff = H.forearm_mesh(v[loop], [-1.0, 0.0, 0.0], length=0.15)
+    n = len(loop)
+    np.testing.assert_allclose(fv[:n], v[loop], atol=1e-15)          # starts on the wrist rim
+    np.testing.assert_allclose(fv[-1], v[loop].mean(0) + [-0.15, 0.0, 0.0], atol=1e-12)
+    # glue the tube to the hand's skin (cap removed): one watertight, outward surface
+    ids = np.concatenate([loop, len(v) + np.arange(len(fv) - n)])
+    skin = model.faces[~model.template.cap_faces]
+    both = trimesh.Trimesh(np.concatenate([v, fv[n:]]), np.concatenate([skin, ids[ff]]),
+                           process=False)
+    assert both.is_watertight and both.is_winding_consistent and both.volume > 0
+    hand_volume = trimesh.Trimesh(v, model.faces, process=False).volume
+    assert both.volume > hand_volume + 1e-4                         # the forearm adds >100 cm^3

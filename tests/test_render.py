@@ -354,3 +354,26 @@ def test_closing_one_renderer_keeps_the_others_working(renderer):
         assert (other.render(body, _K() * [[0.5], [0.5], [1]]).labels == 1).any()
     after = renderer.render(body, _K()).image  # raised GLError 12296 before the fix
     assert after.tobytes() == before.tobytes()
+
+
+def test_occluders_hide_but_carry_no_label(renderer):
+    """Scenery (a forearm) is drawn and hides bodies, reads as background in the masks, and
+    hides its owner in the owner's alone mask too (so VR counts only other bodies)."""
+    bodies = _two_bodies()
+    plain = renderer.render(bodies, _K(), alone=True)
+    # a thin plate in front of both bodies, covering the centre of the image
+    plate = _box((0.0, 0.0, 0.30), (0.02, 0.2, 0.01), 0, color=(230, 25, 25))
+    occ = (plate[0], plate[1], plate[2], 1)                        # owned by body 1
+    out = renderer.render(bodies, _K(), alone=True, occluders=[occ])
+    hidden = plain.labels != out.labels
+    assert hidden.sum() > 50
+    assert np.all(out.labels[hidden] == 0)                         # covered pixels: background
+    assert set(np.unique(out.labels)) <= {0, 1, 2}
+    assert not np.array_equal(out.image, plain.image)
+    red = (out.image[..., 0] > 150) & (out.image[..., 1] < 80)
+    assert red[hidden].mean() > 0.9                                # the plate is what we see
+    # owner's alone mask loses the covered part; the other body's alone mask does not
+    plate_px = renderer.render([(plate[0], plate[1], plate[2], 3)], _K()).labels == 3
+    assert (plain.alone_masks[1] & plate_px).sum() > 20
+    np.testing.assert_array_equal(out.alone_masks[1], plain.alone_masks[1] & ~plate_px)
+    np.testing.assert_array_equal(out.alone_masks[2], plain.alone_masks[2])
