@@ -427,27 +427,10 @@ def _hand_attach() -> np.ndarray:
     return np.array(att + [0] * 5, int)
 
 
-#: Length of the forearm drawn behind each hand and of its collision cylinder, metres.
+_MAX_SETTLE = 0.05
+
+#: Length of the forearm drawn behind each hand, metres (scenery: not a collision body).
 FOREARM_LENGTH: float = 0.25
-
-
-def _with_forearm(cyl: Cylinders, loop: np.ndarray) -> Cylinders:
-    """The hand's 20 cylinders plus one for its forearm (rest frame: the forearm runs along -x
-    from the wrist loop), so other bodies cannot pass through the forearm that
-    :func:`~handmesh_tutorial.hand.forearm_mesh` draws. It is adjacent to the palm cylinders and
-    the thumb's metacarpal (they meet at the wrist)."""
-    c = loop.mean(0)
-    axis = np.array([-1.0, 0.0, 0.0])
-    # the drawn tube widens from the loop's size to 1.3 x: its mean radius
-    radius = 1.15 * float(np.linalg.norm(loop - c, axis=1).mean())
-    names = list(cyl.names)
-    forearm = Cylinders(c[None], (c + FOREARM_LENGTH * axis)[None], np.array([radius]),
-                        ("forearm",), np.array([5]), np.zeros((0, 2), np.int64))
-    both = Cylinders.concat([cyl, forearm])
-    k = len(names)
-    extra = [(i, k) for i, n in enumerate(names) if n.startswith("palm") or n == "thumb_1"]
-    return Cylinders(both.p0, both.p1, both.radius, both.names, both.parts,
-                     np.concatenate([both.adjacent, np.array(extra, np.int64)]))
 
 
 @dataclass
@@ -564,15 +547,14 @@ class _Hand:
             rest = self.model(shape=torch.as_tensor(self.shape[None]))
         self.rest_joints21 = rest.joints[0].numpy().astype(float)
         rest16 = rest.joints_mano[0].numpy().astype(float)
-        cyl = _with_forearm(hand_cylinders(rest, model=self.model),
-                            rest.vertices[0].numpy().astype(float)[self.model.wrist_loop])
+        cyl = hand_cylinders(rest, model=self.model)
         from .lcs import DIP_FOLLOWS_PIP, DIP_PIP_RATIO
 
         # natural hands: each finger's DIP follows its PIP (the paper's +-60 deg: independent)
         followers = ({dip: (pip, DIP_PIP_RATIO) for dip, pip in DIP_FOLLOWS_PIP.items()}
                      if limits == "anatomical" else None)
         self.rig = _Rig(rest16, self.model.parents, self.art.frames, self.art.lower,
-                        self.art.upper, cyl, np.r_[_hand_attach(), 0], followers=followers)
+                        self.art.upper, cyl, _hand_attach(), followers=followers)
         self.dynamic = True
 
     def mesh(self):
@@ -1149,6 +1131,8 @@ class _Generator:
                 "reapproach_mm": 1e3 * reapproach}
 
     # -- step 5b: mesh-level settle (deviation, see the module text) ---------------------------
+    # (the cylinders already touch, so the meshes are millimetres apart: a settle that wants to
+    # move a body by more than this has diverged, and the scene is rejected)
     def settle(self, centre, mover, u, meshes):
         cfg = self.cfg
         (cv, cf), (mv, mf) = meshes[centre.label], meshes[mover.label]
@@ -1176,6 +1160,9 @@ class _Generator:
                     # moving by less than the gap cannot intersect (distance is 1-Lipschitz);
                     # an oblique gap closes slower: divide by the observed closing rate
                     step = (gap - 0.5 * cfg.contact_tol) / rate
+                    if abs(shift + step) > _MAX_SETTLE:   # the gap does not close this way
+                        raise InteractionError(self.kind, self.seed, "the settle step would move "
+                                               f"the second body by more than {_MAX_SETTLE} m")
                     shift += step
                     m_new = measure(shift)
                     closed = gap - m_new["gap_mm"] * 1e-3 if m_new["inside"] == 0 else step
@@ -1610,29 +1597,36 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
         fv = tb.forearm[0]
         ring = (len(fv) - 1) // 9        # forearm_mesh: 9 rings of the loop, then the far centre
         avoid = (fv[-1] - fv[:ring].mean(0), np.cos(np.deg2rad(50)))
+    # Up to 10 views: a view fails when a body sits behind the camera or ends up entirely out of
+    # view (or behind its own forearm); the first good view is used (same bytes as long as it
+    # is the first one).
+    missing = None
     for _ in range(10):
         R, t, K = frame_camera(tb.vertices, rng, image_size, toward=toward, share=share,
                                focal=focal, margin=margin, avoid=avoid)
         meshes = scene.render_meshes(R, t)
-        if min(m[0][:, 2].min() for m in meshes) > 0.05:  # everything in front of the camera
+        if min(m[0][:, 2].min() for m in meshes) <= 0.05:  # something behind the camera
+            continue
+        target_v = tb.vertices @ R.T + t
+        depth = float(np.linalg.norm(centre @ R.T + t))
+        lights = scene_lights(rng, depth)
+        bg = scene_background(rng, image_size, image_size, photo_prob=photo_prob)
+        # ambient light: bounced off the surroundings, so tinted by the background's mean colour
+        tint = srgb_to_linear(bg.reshape(-1, 3).mean(0) / 255.0)
+        tint = 0.6 + 0.4 * tint / max(float(tint.mean()), 1e-3)
+        ambient = float(rng.uniform(0.06, 0.2)) * tint
+        out = r.render(meshes, K, lights=lights, background=bg, ambient=ambient, alone=True,
+                       occluders=scene.scenery_meshes(R, t))
+        alone = dict(out.alone_masks)
+        missing = [lab for lab, m in alone.items() if not m.any()]
+        if not missing:
             break
-    target_v = tb.vertices @ R.T + t
-    depth = float(np.linalg.norm(centre @ R.T + t))
-    lights = scene_lights(rng, depth)
-    bg = scene_background(rng, image_size, image_size, photo_prob=photo_prob)
-    # ambient light: bounced off the surroundings, so tinted by the background's mean colour
-    tint = srgb_to_linear(bg.reshape(-1, 3).mean(0) / 255.0)
-    tint = 0.6 + 0.4 * tint / max(float(tint.mean()), 1e-3)
-    ambient = float(rng.uniform(0.06, 0.2)) * tint
-    out = r.render(meshes, K, lights=lights, background=bg, ambient=ambient, alone=True,
-                   occluders=scene.scenery_meshes(R, t))
+    else:
+        what = f"body {missing[0]} is not in view" if missing else "no view in front of all bodies"
+        raise InteractionError(scene.kind, scene.seed, f"{what} (10 camera draws)")
     noise = rng.uniform(0.0, 2.0)
     image = np.clip(out.image + rng.normal(0.0, noise, out.image.shape) + 0.5, 0, 255)
     image = image.astype(np.uint8)
-    alone = dict(out.alone_masks)
-    for lab, m in alone.items():
-        if not m.any():
-            raise InteractionError(scene.kind, scene.seed, f"body {lab} is not in view")
     vr = visibility_ratios(out.labels, alone)
     hands = [b for b in scene.bodies if b.kind == "hand"]
     return {
