@@ -12,13 +12,14 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_savez"]
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = False) -> Path:
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = True) -> Path:
     """Write ``data`` to ``path`` atomically; parent folders are created.
 
     Args:
         path: destination file.
         data: the bytes.
-        durable: ``fsync`` the file before the rename.
+        durable: ``fsync`` the file before the rename (a crash then leaves the old or the new
+            file, never a truncated one, even on a power cut).
 
     Returns:
         The written path.

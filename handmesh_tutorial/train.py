@@ -49,7 +49,6 @@ import json
 import math
 import os
 import random
-import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
@@ -61,6 +60,7 @@ from torch import nn
 
 from . import augment as A
 from . import metrics as M
+from ._io import atomic_write_bytes as _atomic_write_bytes
 
 __all__ = [
     "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
@@ -491,23 +491,6 @@ def make_datasets(config: TrainConfig):
 
 # --------------------------------------------------------------------------------------------
 # files
-
-
-def _atomic_write_bytes(path: Path, data: bytes, durable: bool = True) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            if durable:  # on disk before the rename: a crash leaves the old or the new file
-                fh.flush()
-                os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def _write_csv(path: Path, rows: Sequence[Mapping], columns: Sequence[str],
