@@ -17,9 +17,20 @@ mesh ``(B, V_{L-1}, channels[-1])`` to vertex coordinates on the finest mesh ``(
   The output head reads the finest branch (optionally all branches upsampled and concatenated).
 
 With the same ``num_blocks`` both have the same depth: ``2 * num_blocks`` spiral convolutions per
-level (single) or per stage (multi) on every input-to-output path, plus the head; see
-:attr:`SinglePathDecoder.depth`. The fusion and transition layers are per-vertex ``Linear`` maps,
-which HRNet counts as 1x1 convolutions, not as spatial depth.
+level (single) or per stage (multi) on every input-to-output path, plus the head when it is a
+spiral convolution; see :attr:`SinglePathDecoder.depth`. The fusion and transition layers are
+per-vertex ``Linear`` maps, which HRNet counts as 1x1 convolutions, not as spatial depth.
+
+**Output head** (``head``, measured with :func:`handmesh_tutorial.fit.fit_decoder`, 32 posed
+hands): ``"linear"`` (default), a per-vertex ``Linear`` on the finest features; ``"spiral"``, a
+:class:`~handmesh_tutorial.spiral.SpiralConv` as in CMR/MobRecon (slower and slightly worse in
+the fit: 1.48 vs 1.16 mm); ``"pyramid"``, a ``Linear`` on every level, upsampled and summed
+(:class:`PyramidHead`; worse in the fit). By default the head starts at zero (``zero_head``), so
+the decoder's first output is all zeros instead of a random field: with the Xavier-initialised
+spiral head the first output of the default decoder was ~0.6 m of noise (after the model's
+``output_scale``), and 300 fit steps left 10 mm of error and a crumpled surface; with a zero head
+2.1 mm. :class:`~handmesh_tutorial.model.MSMRNet` reads the output as a deformation of its
+template, so it starts exactly at the template.
 """
 
 from __future__ import annotations
@@ -40,7 +51,7 @@ from .blocks import (
 from .spiral import SpiralConv, spiral_indices
 
 __all__ = ["hierarchy_spirals", "SinglePathDecoder", "MultiPathDecoder", "DecoderStage",
-           "count_spiral_convs"]
+           "PyramidHead", "count_spiral_convs", "HEADS"]
 
 
 def hierarchy_spirals(hierarchy, length: int = 9, dilation: int = 1) -> list:
@@ -83,6 +94,61 @@ def _check(hierarchy, spirals, channels) -> int:
     return levels
 
 
+class PyramidHead(nn.Module):
+    """Output head on every level: ``sum_l U_{0<-l} Linear_l(x_l)``.
+
+    Each level predicts its own ``out_channels`` per vertex with a per-vertex ``Linear``; the
+    coarser predictions are upsampled to the finest mesh (barycentric, chained) and summed, so
+    coarse levels contribute smooth, low-frequency shape and finer levels add detail (a Laplacian
+    pyramid of the output). Equals a linear head on all branches upsampled and concatenated,
+    but upsamples ``out_channels`` instead of ``sum(channels)`` features.
+
+    Args:
+        channels: channels per level, finest first.
+        up: hierarchy upsampling matrices, ``up[l]`` ``(V_l, V_{l+1})``.
+        out_channels: outputs per vertex.
+
+    Shapes:
+        list of ``(B, V_l, C_l)`` (finest first) -> ``(B, V_0, out_channels)``.
+    """
+
+    def __init__(self, channels: Sequence[int], up: Sequence, out_channels: int = 3):
+        super().__init__()
+        self.linears = nn.ModuleList(nn.Linear(c, out_channels) for c in channels)
+        self.upsample = nn.ModuleList(
+            [nn.Identity()] + [SparseVertexMap(compose_up(up, 0, lv))
+                               for lv in range(1, len(channels))])
+
+    def forward(self, xs: Sequence[torch.Tensor]) -> torch.Tensor:
+        """Args: xs, one ``(B, V_l, C_l)`` per level, finest first."""
+        if len(xs) != len(self.linears):
+            raise ValueError(f"expected {len(self.linears)} levels, got {len(xs)}")
+        out = self.linears[0](xs[0])
+        for lin, up, x in zip(self.linears[1:], self.upsample[1:], xs[1:], strict=True):
+            out = out + up(lin(x))
+        return out
+
+
+HEADS = ("spiral", "linear", "pyramid")
+
+
+def _head(kind: str, channels: Sequence[int], out_channels: int, indices, up) -> nn.Module:
+    if kind == "spiral":
+        return SpiralConv(channels[0], out_channels, indices)
+    if kind == "linear":
+        return nn.Linear(channels[0], out_channels)
+    if kind == "pyramid":
+        return PyramidHead(channels, up, out_channels)
+    raise ValueError(f"head must be one of {HEADS}, got {kind!r}")
+
+
+def _zero(head: nn.Module) -> None:
+    for m in head.modules():
+        if isinstance(m, nn.Linear):
+            nn.init.zeros_(m.weight)
+            nn.init.zeros_(m.bias)
+
+
 def _stem(in_channels: int, out_channels: int) -> nn.Module:
     # Decouples the width of the coarse input (set by the FC, shared by both decoders) from the
     # width of the first decoder level.
@@ -105,13 +171,16 @@ class SinglePathDecoder(nn.Module):
         out_channels: output channels per vertex (3 for xyz).
         in_channels: channels of the coarse input ``C_in`` (default ``channels[-1]``); when it
             differs, a stem ``ELU(LN(Linear))`` maps it to ``channels[-1]``.
+        head: ``"linear"``, ``"spiral"`` or ``"pyramid"`` (see the module docstring).
+        zero_head: initialise the head's weights and bias to zero (output 0 at the start).
 
     Shapes:
         ``(B, V_{L-1}, C_in) -> (B, V_0, out_channels)``.
     """
 
     def __init__(self, hierarchy, spirals: Sequence, channels: Sequence[int],
-                 num_blocks: int = 1, out_channels: int = 3, in_channels: int | None = None):
+                 num_blocks: int = 1, out_channels: int = 3, in_channels: int | None = None,
+                 head: str = "linear", zero_head: bool = True):
         super().__init__()
         n = _check(hierarchy, spirals, channels)
         self.channels = list(channels)
@@ -129,11 +198,15 @@ class SinglePathDecoder(nn.Module):
             self.levels.append(nn.Sequential(*blocks))
             if lv > 0:
                 self.upsample.append(SparseVertexMap(hierarchy.up[lv - 1]))
-        self.head = SpiralConv(channels[0], out_channels, spirals[0])
+        self.head_kind = head
+        self.head = _head(head, channels, out_channels, spirals[0], hierarchy.up)
+        if zero_head:
+            _zero(self.head)
 
     @property
     def depth(self) -> int:
-        """Spiral convolutions on the longest input-to-output path (all of them, here)."""
+        """Spiral convolutions on the longest input-to-output path (all of them, here; the
+        head counts only when it is a spiral convolution)."""
         return count_spiral_convs(self)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -142,8 +215,12 @@ class SinglePathDecoder(nn.Module):
             raise ValueError(f"expected coarse features (B, {self.in_vertices}, "
                              f"{self.in_channels}), got {tuple(x.shape)}")
         x = self.levels[0](self.stem(x))
+        feats = [x]
         for up, blocks in zip(self.upsample, self.levels[1:], strict=True):
             x = blocks(up(x))
+            feats.append(x)
+        if self.head_kind == "pyramid":
+            return self.head(feats[::-1])
         return self.head(x)
 
 
@@ -190,7 +267,8 @@ class MultiPathDecoder(nn.Module):
     ``s > 1`` a transition creates the new finest branch from the previous finest one:
     ``ELU(up(LN(Linear(x))))``. The last stage's fusion keeps only the finest output (HRNet V1),
     unless ``fuse_head``, in which case every branch is upsampled to the finest mesh and
-    concatenated before the head (HRNet V2 representation head).
+    concatenated before the head (HRNet V2 representation head), or ``head="pyramid"``, which
+    reads every branch too.
 
     Args:
         hierarchy: mesh hierarchy with ``.down`` and ``.up`` (scipy sparse), finest first.
@@ -201,6 +279,8 @@ class MultiPathDecoder(nn.Module):
         fuse_head: feed the head all branches (upsampled, concatenated) instead of the finest.
         in_channels: channels of the coarse input ``C_in`` (default ``channels[-1]``); when it
             differs, a stem ``ELU(LN(Linear))`` maps it to ``channels[-1]``.
+        head: ``"linear"``, ``"spiral"`` or ``"pyramid"`` (see the module docstring).
+        zero_head: initialise the head's weights and bias to zero (output 0 at the start).
 
     Shapes:
         ``(B, V_{L-1}, C_in) -> (B, V_0, out_channels)``.
@@ -208,7 +288,7 @@ class MultiPathDecoder(nn.Module):
 
     def __init__(self, hierarchy, spirals: Sequence, channels: Sequence[int],
                  num_blocks: int = 1, out_channels: int = 3, fuse_head: bool = False,
-                 in_channels: int | None = None):
+                 in_channels: int | None = None, head: str = "linear", zero_head: bool = True):
         super().__init__()
         n = _check(hierarchy, spirals, channels)
         self.channels = list(channels)
@@ -228,9 +308,13 @@ class MultiPathDecoder(nn.Module):
                     channel_map(channels[prev], channels[new]),
                     SparseVertexMap(hierarchy.up[new]), nn.ELU()))
             last = s == n - 1
-            out_levels = levels[:1] if last and not fuse_head else None
+            out_levels = levels[:1] if last and not (fuse_head or head == "pyramid") else None
             self.stages.append(DecoderStage(levels, [channels[lv] for lv in levels], hierarchy,
                                             spirals, num_blocks, out_levels))
+        self.head_kind = head
+        if fuse_head and head == "pyramid":
+            raise ValueError("fuse_head and head='pyramid' exclude each other (the pyramid head "
+                             "already reads every branch)")
         if fuse_head:
             self.head_upsample = nn.ModuleList(
                 [nn.Identity()] + [SparseVertexMap(compose_up(hierarchy.up, 0, lv))
@@ -239,14 +323,17 @@ class MultiPathDecoder(nn.Module):
         else:
             self.head_upsample = None
             head_in = channels[0]
-        self.head = SpiralConv(head_in, out_channels, spirals[0])
+        self.head = _head(head, [head_in] if fuse_head else channels, out_channels, spirals[0],
+                          hierarchy.up)
+        if zero_head:
+            _zero(self.head)
 
     @property
     def depth(self) -> int:
         """Spiral convolutions on the longest input-to-output path.
 
         Every path crosses each stage once through one branch's blocks, so this is the sum over
-        stages of the deepest branch, plus the head.
+        stages of the deepest branch, plus the head when it is a spiral convolution.
         """
         per_stage = [max(count_spiral_convs(b) for b in st.group.branches) for st in self.stages]
         return sum(per_stage) + count_spiral_convs(self.head)
@@ -264,4 +351,6 @@ class MultiPathDecoder(nn.Module):
         if self.head_upsample is not None:
             ups = [up(f) for up, f in zip(self.head_upsample, xs, strict=True)]
             return self.head(torch.cat(ups, dim=-1))
+        if self.head_kind == "pyramid":
+            return self.head(xs)
         return self.head(xs[0])

@@ -8,8 +8,28 @@ Paper section "Multi-path Mesh Decoder" (architecture figure) and Table 3 (ablat
    to one ``C``-channel token per coarsest-mesh vertex, ``(B, V_c, C)``;
 3. ``transformer`` (:class:`~handmesh_tutorial.blocks.CoarseMeshTransformer`, or identity when
    ``attention=False``): long-range interactions between the coarse vertices;
-4. ``decoder`` (:mod:`handmesh_tutorial.decoder`, single- or multi-path) to ``(B, V, 3)``;
+4. ``decoder`` (:mod:`handmesh_tutorial.decoder`, single- or multi-path) to a per-vertex field
+   ``(B, V, 12)`` (or ``(B, V, 3)``), then ``smoothing`` (a fixed sparse Laplacian smoothing of
+   that field) and :meth:`MSMRNet.vertices_from_field` to vertices ``(B, V, 3)``;
 5. joints ``(B, J, 3)`` = the template's joint regressor ``(J, V)`` applied to the vertices.
+
+**What the decoder predicts** (``output`` of :func:`build_model`). The paper's decoder regresses
+vertex coordinates. Fitting it to known hands (:func:`handmesh_tutorial.fit.fit_decoder`, an
+auto-decoder: one learnable code per hand instead of an image) showed why every trained model
+came out as crumpled foil: the finest-level features differ from vertex to vertex, so the
+regressed coordinates carry vertex-level noise, and the surface is very sensitive to it (0.3 mm
+of independent noise per vertex already gives ~3 degrees of roughness,
+:func:`handmesh_tutorial.surface.roughness_deg`). Smoothing the output removes the noise, but not
+when the output is a position or an offset from the template: a bent finger moves its vertices by
+a *rotation* of the template, and the offsets of a thin curved finger are themselves rough (two
+smoothing steps on exact offsets already cost 0.95 mm and 3.2 degrees). The default
+``output="affine"`` therefore predicts, per vertex, an affine map ``A_v`` and a translation
+``t_v`` applied to the root-centred template vertex ``p_v``: ``v = (I + A_v) p_v + t_v``. A
+skinned hand is exactly of this form with ``A_v, t_v`` the skinning-weighted blends of the bone
+transforms, which are smooth (two smoothing steps on exact fields cost 0.35 mm and 1.1 degrees),
+so the field is smoothed before it is applied (``smoothing_length``). With the head starting at
+zero the model's first output is the template itself. ``"offset"`` (``v = p_v + s * d_v``) and
+``"xyz"`` (``v = s * d_v``, the paper's) are kept for comparison.
 
 The FC is kept modest by a small coarse width ``C`` (``latent_channels``, default 16); in CMR
 the FC is ~73% of the decoder's parameters; with a ResNet-18, our hand (49 coarse vertices)
@@ -29,14 +49,16 @@ import numpy as np
 import torch
 from torch import nn
 
-from .blocks import CoarseMeshTransformer
+from .blocks import CoarseMeshTransformer, SparseVertexMap
 from .decoder import MultiPathDecoder, SinglePathDecoder, hierarchy_spirals
 from .encoder import build_encoder
 from .sampling import mesh_hierarchy
+from .surface import smoothing_matrix, smoothing_steps
 
-__all__ = ["MeshTemplate", "as_template", "MSMRNet", "build_model", "parameter_counts",
-           "parameter_table", "DEFAULT_SINGLE_CHANNELS", "DEFAULT_MULTI_CHANNELS",
-           "DEFAULT_LATENT_CHANNELS"]
+__all__ = ["MeshTemplate", "as_template", "root_centred_template", "MSMRNet", "build_model",
+           "parameter_counts", "parameter_table", "DEFAULT_SINGLE_CHANNELS",
+           "DEFAULT_MULTI_CHANNELS", "DEFAULT_LATENT_CHANNELS", "DEFAULT_SMOOTHING_LENGTH",
+           "OUTPUTS"]
 
 #: Per-level decoder channels of the single-path baseline, finest level first.
 DEFAULT_SINGLE_CHANNELS = (32, 32, 64, 64, 128)
@@ -45,6 +67,11 @@ DEFAULT_SINGLE_CHANNELS = (32, 32, 64, 64, 128)
 #: multi-path decoder plus transformer has ~20-25% more parameters than the single path at the
 #: same depth (``benchmarks/model.py`` prints the ratio).
 DEFAULT_MULTI_CHANNELS = (16, 24, 32, 48, 64)
+#: Default ``smoothing_length`` of :func:`build_model`, metres: 3 smoothing steps on the open
+#: hand (mean edge 7.3 mm), 0 on a 200-vertex hand, ~6 on a 1,600-vertex one.
+DEFAULT_SMOOTHING_LENGTH = 0.009
+#: What the decoder's per-vertex output means (:meth:`MSMRNet.vertices_from_field`).
+OUTPUTS = ("xyz", "offset", "affine")
 #: Channels per coarse-mesh token (output of the FC, width of the transformer).
 DEFAULT_LATENT_CHANNELS = 16
 
@@ -120,6 +147,22 @@ def as_template(template=None) -> MeshTemplate:
     return MeshTemplate(v, f.astype(np.int64), jr)
 
 
+def root_centred_template(template) -> np.ndarray:
+    """Template vertices centred like the training targets.
+
+    Args:
+        template: anything :func:`as_template` accepts.
+
+    Returns:
+        ``(V, 3)`` float64 vertices minus the root keypoint (joint 9, the middle-finger MCP,
+        for a 21-joint regressor; the vertex centroid otherwise), metres.
+    """
+    t = as_template(template)
+    root = (t.joint_regressor[9] @ t.vertices if len(t.joint_regressor) == 21
+            else t.vertices.mean(0))
+    return t.vertices - root
+
+
 def _numpy(x):
     return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else x
 
@@ -139,8 +182,15 @@ class MSMRNet(nn.Module):
         joint_regressor: ``(J, V)`` array or tensor.
         transformer: module on ``(B, V_c, C)`` or ``None`` (no attention).
         output_scale: metres per decoder output unit (the decoder's layer-normalised features
-            give O(1) outputs; 0.1 m puts them at hand size).
+            give O(1) outputs; 0.1 m puts them at hand size); for ``output="affine"`` it scales
+            the translation ``t_v`` only.
         faces: ``(F, 3)`` faces of the output mesh (kept for plotting and export).
+        template_vertices: ``(V, 3)`` root-centred template (:func:`root_centred_template`),
+            needed by ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
+        output: ``"affine"``, ``"offset"`` or ``"xyz"``: how :meth:`vertices_from_field`
+            reads the decoder's output (12, 3 or 3 channels per vertex).
+        smoothing: ``(V, V)`` sparse matrix applied to the decoder's output field (e.g.
+            :func:`~handmesh_tutorial.surface.smoothing_matrix`), or ``None``.
 
     Shapes:
         ``images (B, 3, H, W)`` -> ``{"vertices": (B, V, 3), "joints": (B, J, 3)}``, metres.
@@ -148,8 +198,14 @@ class MSMRNet(nn.Module):
 
     def __init__(self, encoder: nn.Module, decoder: nn.Module, coarse_vertices: int,
                  latent_channels: int, joint_regressor, transformer: nn.Module | None = None,
-                 output_scale: float = 0.1, faces=None):
+                 output_scale: float = 0.1, faces=None, template_vertices=None,
+                 output: str = "xyz", smoothing=None):
         super().__init__()
+        if output not in OUTPUTS:
+            raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+        if output != "xyz" and template_vertices is None:
+            raise ValueError(f"output={output!r} needs template_vertices")
+        self.output = output
         self.encoder = encoder
         self.coarse_vertices = coarse_vertices
         self.latent_channels = latent_channels
@@ -160,6 +216,12 @@ class MSMRNet(nn.Module):
         self.faces = None if faces is None else np.asarray(faces)
         jr = torch.as_tensor(np.asarray(_numpy(joint_regressor)), dtype=torch.float32)
         self.register_buffer("joint_regressor", jr, persistent=False)
+        if template_vertices is None:
+            self.template = None
+        else:
+            tv = torch.as_tensor(np.asarray(_numpy(template_vertices)), dtype=torch.float32)
+            self.register_buffer("template", tv, persistent=False)
+        self.smoothing = nn.Identity() if smoothing is None else SparseVertexMap(smoothing)
 
     def decode(self, features: torch.Tensor) -> dict[str, torch.Tensor]:
         """Everything after the encoder.
@@ -175,9 +237,31 @@ class MSMRNet(nn.Module):
                              f"{tuple(features.shape)}")
         tokens = self.latent_to_mesh(features).reshape(-1, self.coarse_vertices,
                                                        self.latent_channels)
-        vertices = self.decoder(self.transformer(tokens)) * self.output_scale
+        raw = self.smoothing(self.decoder(self.transformer(tokens)))
+        vertices = self.vertices_from_field(raw)
         joints = torch.einsum("jv,bvc->bjc", self.joint_regressor.to(vertices.dtype), vertices)
         return {"vertices": vertices, "joints": joints}
+
+    def vertices_from_field(self, raw: torch.Tensor) -> torch.Tensor:
+        """Vertices from the decoder's per-vertex output field.
+
+        Args:
+            raw: ``(B, V, 3)`` (``output`` ``"xyz"`` or ``"offset"``) or ``(B, V, 12)``
+                (``"affine"``: 9 entries of ``A_v - I`` row-major, then 3 of ``t_v``).
+
+        Returns:
+            ``(B, V, 3)`` vertices, metres: ``s * raw`` (xyz), ``p_v + s * raw`` (offset) or
+            ``(I + A_v) p_v + s * t_v`` (affine), with ``p_v`` the root-centred template and
+            ``s`` the ``output_scale``.
+        """
+        if self.output == "xyz":
+            return raw * self.output_scale
+        tmpl = self.template.to(raw.dtype)
+        if self.output == "offset":
+            return tmpl + raw * self.output_scale
+        lin = raw[..., :9].unflatten(-1, (3, 3))
+        return (tmpl + torch.einsum("bvrc,vc->bvr", lin, tmpl)
+                + raw[..., 9:] * self.output_scale)
 
     def forward(self, images: torch.Tensor) -> dict[str, torch.Tensor]:
         """Args: images ``(B, 3, H, W)`` float. Returns ``{"vertices", "joints"}`` (metres)."""
@@ -190,7 +274,9 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
                 dilation: int = 1, num_blocks: int = 1,
                 factors: Sequence[float] = (2, 2, 2, 2), num_heads: int = 2,
                 transformer_layers: int = 1, fuse_head: bool = False,
-                output_scale: float = 0.1, hierarchy=None) -> MSMRNet:
+                output_scale: float = 0.1, hierarchy=None, output: str = "affine",
+                smoothing_length: float = DEFAULT_SMOOTHING_LENGTH, zero_head: bool = True,
+                head: str = "linear") -> MSMRNet:
     """Build MSMR-Net (or the single-path / no-attention ablations of the paper's Table 3).
 
     Args:
@@ -210,7 +296,18 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
         num_heads: attention heads (must divide ``latent_channels``).
         transformer_layers: transformer blocks.
         fuse_head: multi-path only; head on all branches upsampled and concatenated.
-        output_scale: metres per decoder output unit.
+        output_scale: metres per decoder output unit (the translation part for ``"affine"``).
+        output: what the decoder predicts per vertex: ``"affine"`` (default; ``I + A_v`` and
+            ``t_v`` applied to the template vertex), ``"offset"`` (from the template) or ``"xyz"``
+            (coordinates, as the paper). See the module docstring.
+        smoothing_length: metres; the decoder's output field is smoothed by
+            :func:`~handmesh_tutorial.surface.smoothing_matrix` with
+            :func:`~handmesh_tutorial.surface.smoothing_steps` steps for this length (0 = none;
+            default :data:`DEFAULT_SMOOTHING_LENGTH`).
+        zero_head: start the decoder's head at zero, so the first output is the template
+            (``"affine"``, ``"offset"``) or zeros (``"xyz"``).
+        head: the decoder's output head, ``"linear"``, ``"spiral"`` or ``"pyramid"``
+            (:mod:`handmesh_tutorial.decoder`).
         hierarchy: a precomputed :class:`~handmesh_tutorial.sampling.MeshHierarchy` of the
             template (default: computed, cached on disk by ``mesh_hierarchy``).
 
@@ -238,17 +335,25 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
     enc = build_encoder(encoder) if isinstance(encoder, str) else encoder
     if not hasattr(enc, "out_features"):
         raise ValueError("a custom encoder needs an attribute out_features (its output width D)")
+    if output not in OUTPUTS:
+        raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+    out_ch = 12 if output == "affine" else 3
     if decoder == "multi":
         dec = MultiPathDecoder(hierarchy, spirals, channels, num_blocks, fuse_head=fuse_head,
-                               in_channels=latent_channels)
+                               in_channels=latent_channels, head=head, out_channels=out_ch,
+                               zero_head=zero_head)
     else:
         dec = SinglePathDecoder(hierarchy, spirals, channels, num_blocks,
-                                in_channels=latent_channels)
+                                in_channels=latent_channels, head=head, out_channels=out_ch,
+                                zero_head=zero_head)
     coarse = len(spirals[-1])
     transformer = (CoarseMeshTransformer(coarse, latent_channels, num_heads, transformer_layers)
                    if attention else None)
+    steps = smoothing_steps(tmpl.vertices, tmpl.faces, smoothing_length)
+    smooth = smoothing_matrix(tmpl.faces, steps, len(tmpl.vertices)) if steps else None
     model = MSMRNet(enc, dec, coarse, latent_channels, tmpl.joint_regressor, transformer,
-                    output_scale, faces=tmpl.faces)
+                    output_scale, faces=tmpl.faces, template_vertices=root_centred_template(tmpl),
+                    output=output, smoothing=smooth)
     model.hierarchy = hierarchy
     model.spirals = spirals
     return model

@@ -10,6 +10,7 @@ import torch
 import trimesh
 
 from handmesh_tutorial import decoder as dec
+from handmesh_tutorial.blocks import compose_up
 from handmesh_tutorial.sampling import mesh_hierarchy
 from handmesh_tutorial.spiral import SpiralConv
 
@@ -33,13 +34,15 @@ def _make(kind, hier, channels=SMALL, **kw):
 
 
 @pytest.mark.parametrize("kind,kw", [("single", {}), ("multi", {}), ("multi", {"fuse_head": True}),
-                                     ("single", {"in_channels": 5, "num_blocks": 2})])
+                                     ("single", {"in_channels": 5, "num_blocks": 2}),
+                                     ("single", {"head": "spiral"}), ("multi", {"head": "pyramid"}),
+                                     ("single", {"head": "pyramid", "out_channels": 12})])
 def test_forward_backward_shapes_and_finite_grads(hier, kind, kw):
     torch.manual_seed(0)
-    d = _make(kind, hier, **kw)
+    d = _make(kind, hier, zero_head=False, **kw)
     x = torch.randn(2, hier.sizes[-1], kw.get("in_channels", SMALL[-1]), requires_grad=True)
     y = d(x)
-    assert y.shape == (2, hier.sizes[0], 3)
+    assert y.shape == (2, hier.sizes[0], kw.get("out_channels", 3))
     y.square().mean().backward()
     grads = [p.grad for p in d.parameters()]
     assert all(g is not None and torch.isfinite(g).all() for g in grads)
@@ -60,12 +63,12 @@ def test_multi_path_structure_follows_the_paper(hier):
     assert len(d.transitions) == n - 1
 
 
-@pytest.mark.parametrize("num_blocks", [1, 2])
-def test_single_and_multi_have_the_same_depth(hier, num_blocks):
-    single = _make("single", hier, num_blocks=num_blocks)
-    multi = _make("multi", hier, num_blocks=num_blocks)
+@pytest.mark.parametrize("num_blocks,head", [(1, "linear"), (2, "linear"), (1, "spiral")])
+def test_single_and_multi_have_the_same_depth(hier, num_blocks, head):
+    single = _make("single", hier, num_blocks=num_blocks, head=head)
+    multi = _make("multi", hier, num_blocks=num_blocks, head=head)
     n = len(hier.sizes)
-    assert single.depth == multi.depth == 2 * num_blocks * n + 1
+    assert single.depth == multi.depth == 2 * num_blocks * n + (head == "spiral")
     # Independent check for the single path: count SpiralConv calls in one forward pass.
     calls = []
     hooks = [m.register_forward_hook(lambda *a: calls.append(1))
@@ -92,13 +95,38 @@ def _permuted(hier, seed=0):
 def test_decoders_are_equivariant_to_vertex_relabelling(hier, kind):
     perm_h, perms = _permuted(hier, seed=4)
     torch.manual_seed(0)
-    d = _make(kind, hier, fuse_head=True) if kind == "multi" else _make(kind, hier)
-    d_p = _make(kind, perm_h, fuse_head=True) if kind == "multi" else _make(kind, perm_h)
+    kw = {"fuse_head": True} if kind == "multi" else {"head": "spiral"}
+    d = _make(kind, hier, zero_head=False, **kw)
+    d_p = _make(kind, perm_h, zero_head=False, **kw)
     d_p.load_state_dict(d.state_dict())
     x = torch.randn(2, hier.sizes[-1], SMALL[-1])
     y = d(x)
     y_p = d_p(x[:, torch.from_numpy(perms[-1])])
     torch.testing.assert_close(y_p, y[:, torch.from_numpy(perms[0])], rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("kind", ["single", "multi"])
+@pytest.mark.parametrize("head", dec.HEADS)
+def test_zero_head_outputs_zero_and_still_learns(hier, kind, head):
+    torch.manual_seed(0)
+    d = _make(kind, hier, head=head)
+    x = torch.randn(2, hier.sizes[-1], SMALL[-1])
+    y = d(x)
+    assert torch.equal(y, torch.zeros_like(y))
+    y.sum().backward()
+    head_grads = [p.grad for p in d.head.parameters()]
+    assert any(g is not None and g.abs().sum() > 0 for g in head_grads)
+
+
+def test_pyramid_head_sums_upsampled_levels(hier):
+    torch.manual_seed(0)
+    d = _make("single", hier, head="pyramid", zero_head=False)
+    feats = [torch.randn(1, n, c) for n, c in zip(hier.sizes, SMALL, strict=True)]
+    want = d.head.linears[0](feats[0])
+    for lv in range(1, len(feats)):
+        up = torch.from_numpy(compose_up(hier.up, 0, lv).toarray()).float()
+        want = want + up @ d.head.linears[lv](feats[lv])
+    torch.testing.assert_close(d.head(feats), want, rtol=1e-4, atol=1e-5)
 
 
 def test_decoder_input_and_config_errors(hier):
@@ -111,6 +139,10 @@ def test_decoder_input_and_config_errors(hier):
                           spirals=hier.spirals)
     with pytest.raises(ValueError, match=r"up\[1\] has shape"):
         dec.MultiPathDecoder(bad, hier.spirals, SMALL)
+    with pytest.raises(ValueError, match="head must be one of"):
+        _make("single", hier, head="conv")
+    with pytest.raises(ValueError, match="exclude each other"):
+        _make("multi", hier, head="pyramid", fuse_head=True)
 
 
 # ----------------------------------------------------------------------------------------------

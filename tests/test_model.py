@@ -54,12 +54,13 @@ def test_model_forward_shapes_joints_and_names(sphere, decoder, attention):
 
 
 def test_model_backward_reaches_every_part(sphere):
-    net = _build(sphere)
+    net = _build(sphere, zero_head=False)
     out = net(torch.randn(2, 3, 64, 64))
     (out["vertices"].abs().mean() + out["joints"].abs().mean()).backward()
     for part in ("encoder", "latent_to_mesh", "transformer", "decoder"):
         grads = [p.grad for p in getattr(net, part).parameters()]
         assert all(g is not None and torch.isfinite(g).all() for g in grads), part
+        assert sum(g.abs().sum() for g in grads) > 0, part
 
 
 def test_fc_output_matches_coarse_mesh(sphere):
@@ -72,13 +73,14 @@ def test_fc_output_matches_coarse_mesh(sphere):
 
 def test_weights_only_state_dict_round_trip(sphere, tmp_path):
     torch.manual_seed(0)
-    net = _build(sphere).eval()
+    net = _build(sphere, zero_head=False).eval()
     path = tmp_path / "model.pt"
     torch.save(net.state_dict(), path)
     sd = torch.load(path, weights_only=True)
-    assert not any("index" in k or "indices" in k or "joint_regressor" in k for k in sd)
+    assert not any("index" in k or "indices" in k or "joint_regressor" in k
+                   or k.startswith("template") for k in sd)
     torch.manual_seed(1)
-    other = _build(sphere).eval()
+    other = _build(sphere, zero_head=False).eval()
     x = torch.randn(1, 3, 64, 64)
     with torch.no_grad():
         assert not torch.allclose(other(x)["vertices"], net(x)["vertices"])
@@ -140,3 +142,53 @@ def test_default_template_is_the_open_hand():
         out = net(torch.randn(1, 3, 64, 64))
     assert out["vertices"].shape == (1, hand.num_vertices, 3)
     assert out["joints"].shape == (1, 21, 3)
+
+
+@pytest.mark.parametrize("decoder", ["multi", "single"])
+@pytest.mark.parametrize("output", ["affine", "offset"])
+def test_output_at_initialisation_is_the_root_centred_template(sphere, decoder, output):
+    tmpl, _ = sphere
+    net = _build(sphere, decoder=decoder, output=output).eval()
+    with torch.no_grad():
+        out = net(torch.randn(2, 3, 64, 64))
+    want = torch.as_tensor(M.root_centred_template(tmpl), dtype=torch.float32)
+    torch.testing.assert_close(out["vertices"], want.expand(2, -1, -1))
+    # centred on the template's joint 9 (the root of the training targets)
+    torch.testing.assert_close(out["joints"][:, 9], torch.zeros(2, 3), atol=1e-6, rtol=0)
+
+
+def test_vertices_from_field_parameterisations(sphere):
+    tmpl, _ = sphere
+    p = torch.as_tensor(M.root_centred_template(tmpl), dtype=torch.float32)
+    v = len(p)
+    rot = torch.tensor([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    shift = torch.tensor([0.01, -0.02, 0.03])
+    affine = _build(sphere, output="affine", smoothing_length=0.0)
+    raw = torch.cat([(rot - torch.eye(3)).reshape(9), shift / affine.output_scale])
+    got = affine.vertices_from_field(raw.expand(1, v, 12))
+    # a constant field is a rigid motion of the whole template
+    torch.testing.assert_close(got[0], p @ rot.T + shift)
+    offset = _build(sphere, output="offset")
+    d = torch.randn(1, v, 3)
+    torch.testing.assert_close(offset.vertices_from_field(d), p + 0.1 * d)
+    xyz = _build(sphere, output="xyz")
+    torch.testing.assert_close(xyz.vertices_from_field(d), 0.1 * d)
+    assert affine.decoder.head.out_features == 12 and xyz.decoder.head.out_features == 3
+    with pytest.raises(ValueError, match="output must be one of"):
+        _build(sphere, output="mesh")
+
+
+def test_output_smoothing_follows_the_length(sphere):
+    tmpl, _ = sphere
+    from handmesh_tutorial.surface import mean_edge_length
+
+    e = mean_edge_length(tmpl.vertices, tmpl.faces)
+    assert isinstance(_build(sphere, smoothing_length=0.0).smoothing, torch.nn.Identity)
+    net = _build(sphere, smoothing_length=e)  # sigma = e: two steps
+    dense = net.smoothing.to_dense().double()
+    from handmesh_tutorial.surface import smoothing_matrix
+
+    want = torch.from_numpy(smoothing_matrix(tmpl.faces, 2).toarray())
+    torch.testing.assert_close(dense, want, rtol=1e-6, atol=1e-7)
+    # a smoothed constant (rigid) field is unchanged: the template still comes out at init
+    torch.testing.assert_close(dense.sum(1), torch.ones(len(dense), dtype=torch.float64))
