@@ -19,6 +19,7 @@ one CPU thread (``benchmarks/decoder_fit.py``; about two CPU minutes for the mul
 | decoder | what it predicts | error | roughness | flipped |
 |---|---|---|---|---|
 | multi, before | xyz, Xavier spiral head | 5.0 mm | 49.5 deg | 12% |
+| single, before | xyz, Xavier spiral head | 3.9 mm | 32.2 deg | 3.9% |
 | multi, now | affine map of template, zero linear head, 9 mm smoothing | 0.65 mm | 3.6 deg | 0 |
 | single, now | same | 0.71 mm | 3.7 deg | 0 |
 
