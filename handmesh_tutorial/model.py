@@ -190,7 +190,9 @@ class MSMRNet(nn.Module):
         output: ``"affine"``, ``"offset"`` or ``"xyz"``: how :meth:`vertices_from_field`
             reads the decoder's output (12, 3 or 3 channels per vertex).
         smoothing: ``(V, V)`` sparse matrix applied to the decoder's output field (e.g.
-            :func:`~handmesh_tutorial.surface.smoothing_matrix`), or ``None``.
+            :func:`~handmesh_tutorial.surface.smoothing_matrix`), a sequence of them applied in
+            order (``k`` one-step matrices are cheaper than their ``k``-step product, whose rows
+            hold the whole ``k``-ring), or ``None``.
 
     Shapes:
         ``images (B, 3, H, W)`` -> ``{"vertices": (B, V, 3), "joints": (B, J, 3)}``, metres.
@@ -221,7 +223,12 @@ class MSMRNet(nn.Module):
         else:
             tv = torch.as_tensor(np.asarray(_numpy(template_vertices)), dtype=torch.float32)
             self.register_buffer("template", tv, persistent=False)
-        self.smoothing = nn.Identity() if smoothing is None else SparseVertexMap(smoothing)
+        if smoothing is None:
+            self.smoothing = nn.Identity()
+        elif isinstance(smoothing, list | tuple):
+            self.smoothing = nn.Sequential(*[SparseVertexMap(m) for m in smoothing])
+        else:
+            self.smoothing = SparseVertexMap(smoothing)
 
     def decode(self, features: torch.Tensor) -> dict[str, torch.Tensor]:
         """Everything after the encoder.
@@ -350,7 +357,7 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
     transformer = (CoarseMeshTransformer(coarse, latent_channels, num_heads, transformer_layers)
                    if attention else None)
     steps = smoothing_steps(tmpl.vertices, tmpl.faces, smoothing_length)
-    smooth = smoothing_matrix(tmpl.faces, steps, len(tmpl.vertices)) if steps else None
+    smooth = [smoothing_matrix(tmpl.faces, 1, len(tmpl.vertices))] * steps if steps else None
     model = MSMRNet(enc, dec, coarse, latent_channels, tmpl.joint_regressor, transformer,
                     output_scale, faces=tmpl.faces, template_vertices=root_centred_template(tmpl),
                     output=output, smoothing=smooth)
