@@ -140,6 +140,24 @@ def _unit(v) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
+def _boundary_loop(faces: np.ndarray) -> np.ndarray:
+    """The vertices of the mesh's single boundary loop, in order along the loop."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    key = {tuple(x) for x in e.tolist()}
+    boundary = [(a, b) for a, b in e.tolist() if (b, a) not in key]   # half-edges with no twin
+    nxt = dict(boundary)
+    if len(nxt) != len(boundary):
+        raise ValueError("the boundary is not a set of simple loops")
+    start = boundary[0][0]
+    loop = [start]
+    while nxt[loop[-1]] != start:
+        loop.append(nxt[loop[-1]])
+    if len(loop) != len(boundary):
+        raise ValueError(f"expected one boundary loop (the wrist), found {len(boundary)} boundary "
+                         f"edges of which one loop has {len(loop)}")
+    return np.asarray(loop, np.int64)
+
+
 def _adjacency(f: np.ndarray, nv: int) -> sp.csr_matrix:
     """(V,V) 0/1 symmetric vertex adjacency of a triangle mesh."""
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
@@ -746,14 +764,7 @@ class HandModel(nn.Module):
         boundary half-edges, as an outward face glued to the rim does (see :func:`forearm_mesh`).
         """
         skin = self.faces[~np.asarray(self.template.cap_faces, bool)]
-        e = np.concatenate([skin[:, [0, 1]], skin[:, [1, 2]], skin[:, [2, 0]]])
-        half = {(int(a), int(b)) for a, b in e}
-        prev = {b: a for a, b in half if (b, a) not in half}    # boundary a -> b; walk b -> a
-        start = next(iter(sorted(prev)))
-        loop = [start]
-        while prev[loop[-1]] != start:
-            loop.append(prev[loop[-1]])
-        return np.asarray(loop, np.int64)
+        return _boundary_loop(skin)[::-1].copy()   # the boundary half-edges, walked backwards
 
     @property
     def num_vertices(self) -> int:

