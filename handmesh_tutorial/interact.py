@@ -1594,9 +1594,8 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     # never look along the target's forearm from the elbow: the forearm would hide the hand
     avoid = None
     if tb.forearm is not None:
-        fv = tb.forearm[0]
-        ring = (len(fv) - 1) // 9        # forearm_mesh: 9 rings of the loop, then the far centre
-        avoid = (fv[-1] - fv[:ring].mean(0), np.cos(np.deg2rad(50)))
+        fv = tb.forearm[0]   # every ring's centroid and the far end (last vertex) are on the axis
+        avoid = (fv[-1] - fv.mean(0), np.cos(np.deg2rad(50)))
     # Up to 10 views: a view fails when a body sits behind the camera or ends up entirely out of
     # view (or behind its own forearm); the first good view is used (same bytes as long as it
     # is the first one).
