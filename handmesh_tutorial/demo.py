@@ -84,17 +84,19 @@ import numpy as np
 
 __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "train_config", "plot_overlays",
            "plot_loss_curves", "write_report", "headline", "parse_headline", "HEADLINE",
-           "constant_baseline", "MODEL_ROW", "BASELINE_ROW"]
+           "MODEL_ROW", "BASELINE_ROW"]
 
-#: Row names of the headline table.
-MODEL_ROW, BASELINE_ROW = "MSMR-Net", "mean hand (constant)"
+#: Row names of the headline table: the trained network and the rest-hand baseline (the
+#: template's open hand predicted for every image, :func:`handmesh_tutorial.train.evaluate`).
+MODEL_ROW, BASELINE_ROW = "MSMR-Net", "rest hand (no network)"
 
 #: Scores in the report's headline table: (eval.json key, column title, format).
 HEADLINE = (("mpjpe", "MPJPE (mm)", "{:.2f}"), ("pa_mpjpe", "PA-MPJPE (mm)", "{:.2f}"),
             ("pa_mpvpe", "PA-MPVPE (mm)", "{:.2f}"),
             ("f_at_5mm", "F@5mm", "{:.3f}"), ("f_at_15mm", "F@15mm", "{:.3f}"),
             ("auc_joints", "AUC joints 0-50mm", "{:.3f}"),
-            ("auc_joints_20mm", "AUC joints 0-20mm", "{:.3f}"))
+            ("auc_joints_20mm", "AUC joints 0-20mm", "{:.3f}"),
+            ("roughness_deg", "roughness (deg)", "{:.1f}"), ("flipped", "flipped faces", "{:.3f}"))
 
 
 @dataclass
@@ -180,7 +182,8 @@ class DemoResult:
             ``total``) of this call.
         config: the :class:`DemoConfig` used.
         train_epochs: epochs completed by the training run.
-        baseline_scores: scores of :func:`constant_baseline` on the same test set.
+        baseline_scores: scores of the rest-hand baseline on the same test scenes.
+        comparison: markdown, model / rest hand per VR bin, scene kind and overall.
     """
 
     out_dir: Path
@@ -193,6 +196,7 @@ class DemoResult:
     config: DemoConfig
     train_epochs: int = 0
     baseline_scores: dict | None = None
+    comparison: str = ""
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -345,57 +349,14 @@ def plot_loss_curves(history: list, step_losses: list):
     return fig
 
 
-def constant_baseline(train_root, test_root) -> dict:
-    """Scores of the best *constant* answer: one fixed mesh predicted for every test image.
-
-    The mesh is the per-coordinate median of the training targets (root-relative, left hands
-    mirrored to right: exactly what the network is trained to output, see
-    :class:`~handmesh_tutorial.augment.InterSHTorchDataset` without augmentation): the minimiser
-    of the L1 vertex loss over the training set for a network that ignores its input. A trained
-    model that does not beat it clearly has learnt nothing from the images; the plateau of the
-    loss at the start of training is this answer.
-
-    Args:
-        train_root: INTER-SH training root.
-        test_root: INTER-SH test root.
-
-    Returns:
-        :func:`~handmesh_tutorial.metrics.freihand_scores` of the constant prediction on the
-        test set (root-relative, so equal to scores in the original camera frames: mirroring and
-        translation preserve distances).
-    """
-    from .dataset import InterSHDataset
-    from .metrics import freihand_scores
-
-    def targets(root):  # reads only annotation.json / .npz (no images): fast
-        ds = InterSHDataset(root)
-        vs, js = [], []
-        for i in range(len(ds)):
-            ann = ds.annotation(i)
-            t = ann["target"]
-            with np.load(ds.sample_dir(i) / "annotation.npz", allow_pickle=False) as z:
-                v, j = z[f"vertices_{t}"].astype(np.float64), z[f"joints_{t}"].astype(np.float64)
-            flip = np.array([-1.0 if ann["sides"][t] == "left" else 1.0, 1.0, 1.0])
-            vs.append((v - j[9]) * flip)  # root-relative, left hands mirrored to right
-            js.append((j - j[9]) * flip)
-        return np.stack(vs), np.stack(js)
-
-    train_v, train_j = targets(train_root)
-    test_v, test_j = targets(test_root)
-    n = len(test_v)
-    return freihand_scores(pred_joints=np.repeat(np.median(train_j, 0)[None], n, 0),
-                           gt_joints=test_j,
-                           pred_verts=np.repeat(np.median(train_v, 0)[None], n, 0),
-                           gt_verts=test_v)
-
-
 def headline(scores: dict, baseline: dict | None = None) -> str:
     """The headline scores as a markdown table (formats of :data:`HEADLINE`).
 
     Args:
         scores: ``eval.json`` ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`),
             the row :data:`MODEL_ROW`.
-        baseline: optional scores of :func:`constant_baseline`, the row :data:`BASELINE_ROW`.
+        baseline: optional scores of the rest-hand baseline on the same scenes (``eval.json``
+            ``baseline.scores``), the row :data:`BASELINE_ROW`.
 
     Returns:
         A markdown table.
@@ -403,14 +364,14 @@ def headline(scores: dict, baseline: dict | None = None) -> str:
     head = "| | " + " | ".join(t for _, t, _ in HEADLINE) + " |"
     sep = "|---|" + "---|" * len(HEADLINE)
     rows = [(MODEL_ROW, scores)] + ([(BASELINE_ROW, baseline)] if baseline else [])
-    lines = [head, sep] + ["| " + name + " | " + " | ".join(f.format(sc[k]) for k, _, f in HEADLINE)
-                           + " |" for name, sc in rows]
+    lines = [head, sep] + ["| " + name + " | " + " | ".join(
+        f.format(sc[k]) if k in sc else "-" for k, _, f in HEADLINE) + " |" for name, sc in rows]
     return "\n".join(lines)
 
 
 def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: DemoConfig,
                  seconds: dict, figures: dict, counts: dict, train_info: dict,
-                 baseline: dict | None = None) -> Path:
+                 baseline: dict | None = None, comparison: str = "") -> Path:
     """Write ``report.md`` (atomically).
 
     Args:
@@ -423,7 +384,9 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         counts: ``train``/``test`` scene counts and VR histograms.
         train_info: ``epochs``, ``steps``, ``checkpoint``, ``parameters``, ``size_ratio``
             (mean predicted / true bounding-box diagonal over the test scenes).
-        baseline: scores of :func:`constant_baseline` (a second row of the headline table).
+        baseline: scores of the rest-hand baseline (a second row of the headline table).
+        comparison: model / rest hand per VR bin and scene kind (``evaluate``'s
+            ``comparison``).
 
     Returns:
         The report path.
@@ -447,9 +410,12 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         "",
         "FreiHAND protocol (MPJPE root-relative, root = joint 9; PA- = after Procrustes "
         "alignment; F-scores on aligned vertices; AUC of the 3D PCK of aligned joints), over all "
-        "test scenes, target hand only. The second row is the best input-independent answer, "
-        "one median training hand predicted for every image (`constant_baseline`): what the "
-        "network must beat to have learnt anything from the images.",
+        "test scenes, target hand only. The second row needs no network: the template's open "
+        "rest-pose hand predicted for every image. After alignment it is the bar a model must "
+        "clear to have learnt the hand's articulation (its MPJPE, without alignment, is not "
+        "meaningful: it never turns). Roughness: mean |dihedral-angle difference| to the true "
+        "surface over interior edges (crumpled meshes score tens of degrees); flipped faces: "
+        "share of faces whose normal points against the true one after alignment.",
         "",
         headline(scores, baseline),
         "",
@@ -459,6 +425,9 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         "",
         table,
         "",
+        *(["## Model / rest hand per VR bin and scene kind", "",
+           "Each cell: the network's score / the rest hand's, on the same scenes.", "",
+           comparison, ""] if comparison else []),
         "## Figures",
         "",
     ]
@@ -622,21 +591,26 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
                   "checkpoint": os.path.relpath(ckpt, out),
                   "parameters": parameter_counts(res.model)["total"],
                   "size_ratio": float(np.mean(ratios))}
-    baseline = constant_baseline(out / "data" / "train", out / "data" / "test")
+    baseline = ev["baseline"]["scores"]
     seconds["report"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
     files["report"] = write_report(out / "report.md", scores=ev["scores"], table=ev["table"],
                                    config=cfg, seconds=seconds, figures=figures, counts=counts,
-                                   train_info=train_info, baseline=baseline)
+                                   train_info=train_info, baseline=baseline,
+                                   comparison=ev["comparison"])
     summary = {"config": asdict(cfg), "seed": seed, "scores": ev["scores"],
-               "baseline_scores": baseline,
-               "vr_table": ev["vr_table"], "seconds": seconds, "counts": counts,
+               "baseline_scores": baseline, "baseline": BASELINE_ROW,
+               "vr_table": ev["vr_table"], "kind_table": ev["kind_table"],
+               "baseline_vr_table": ev["baseline"]["vr_table"],
+               "baseline_kind_table": ev["baseline"]["kind_table"], "seconds": seconds,
+               "counts": counts,
                "train": train_info, "files": {k: str(v) for k, v in files.items()}}
     files["json"] = out / "demo.json"
     _atomic_write_text(files["json"], json.dumps(_json_safe(summary), indent=1))
     return DemoResult(out_dir=out, report=files["report"], scores=ev["scores"],
                       vr_table=ev["vr_table"], table=ev["table"], files=files, seconds=seconds,
-                      config=cfg, train_epochs=res.epochs, baseline_scores=baseline)
+                      config=cfg, train_epochs=res.epochs, baseline_scores=baseline,
+                      comparison=ev["comparison"])
 
 
 def _json_safe(obj):
@@ -674,5 +648,5 @@ def parse_headline(report: str, row: str = MODEL_ROW) -> dict:
         found[cells[0]] = cells[1:]
     if row not in found:
         raise ValueError(f"the headline table has no row {row!r} (rows: {list(found)})")
-    vals = [float(x) for x in found[row]]
+    vals = [math.nan if x == "-" else float(x) for x in found[row]]
     return {k: v for (k, _, _), v in zip(HEADLINE, vals, strict=True)}

@@ -503,8 +503,9 @@ def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,
     Returns:
         One dict per bin with ``bin`` (label), ``lo``, ``hi``, ``count``, ``mpjpe``,
         ``rr_mpjpe`` (root-relative), ``pa_mpjpe`` (mm), ``auc`` (aligned joints, in [0,1]) and,
-        when vertices were scored, ``pa_mpvpe`` (mm), ``f_at_5mm``, ``f_at_15mm``. Empty bins
-        have ``count`` 0 and NaN scores.
+        when vertices were scored, ``pa_mpvpe`` (mm), ``f_at_5mm``, ``f_at_15mm``; the
+        :data:`SURFACE_KEYS` averaged when ``per_sample`` holds them. Empty bins have ``count``
+        0 and NaN scores.
     """
     v = np.asarray(vr, dtype=np.float64).ravel()
     n = per_sample["joint_err"].shape[0]
@@ -514,37 +515,115 @@ def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,
     labels = VR_BIN_LABELS if tuple(map(tuple, bins)) == VR_BINS else [
         f"[{lo:.2f}, {hi:.2f}" + ("]" if k == len(bins) - 1 else ")")
         for k, (lo, hi) in enumerate(bins)]
-    has_verts = "vert_err_pa" in per_sample
     rows = []
     for k, (lo, hi) in enumerate(bins):
-        sel = idx == k
-        row = {"bin": labels[k], "lo": lo, "hi": hi, "count": int(sel.sum())}
-        empty = row["count"] == 0
-
-        def mm(key, sel=sel, empty=empty):
-            return math.nan if empty else 1000.0 * float(per_sample[key][sel].mean())
-
-        row["mpjpe"] = mm("joint_err")
-        row["rr_mpjpe"] = mm("joint_err_rr")
-        row["pa_mpjpe"] = mm("joint_err_pa")
-        row["auc"] = (math.nan if empty else
-                      auc(pck_curve(per_sample["joint_err_pa"][sel], thresholds), thresholds))
-        if has_verts:
-            row["pa_mpvpe"] = mm("vert_err_pa")
-            ths = list(np.round(np.asarray(per_sample["fscore_thresholds"]) * 1000, 6))
-            for th_mm in (5.0, 15.0):
-                if th_mm in ths:
-                    j = ths.index(th_mm)
-                    row[f"f_at_{int(th_mm)}mm"] = (math.nan if empty else
-                                                   float(per_sample["fscore"][sel, j].mean()))
+        row = {"bin": labels[k], "lo": lo, "hi": hi}
+        row.update(_group_scores(per_sample, idx == k, thresholds))
         rows.append(row)
     return rows
+
+
+#: Per-sample surface scores that group rows average when ``per_sample`` holds them
+#: (:func:`handmesh_tutorial.surface.roughness_deg`, ``flipped_face_fraction``).
+SURFACE_KEYS = ("roughness_deg", "flipped")
+
+
+def _group_scores(per_sample: dict, sel: np.ndarray, thresholds) -> dict:
+    """Mean scores of the samples ``sel`` (bool mask): a row of the VR / kind tables."""
+    row = {"count": int(sel.sum())}
+    empty = row["count"] == 0
+
+    def mm(key):
+        return math.nan if empty else 1000.0 * float(per_sample[key][sel].mean())
+
+    row["mpjpe"] = mm("joint_err")
+    row["rr_mpjpe"] = mm("joint_err_rr")
+    row["pa_mpjpe"] = mm("joint_err_pa")
+    row["auc"] = (math.nan if empty else
+                  auc(pck_curve(per_sample["joint_err_pa"][sel], thresholds), thresholds))
+    if "vert_err_pa" in per_sample:
+        row["pa_mpvpe"] = mm("vert_err_pa")
+        ths = list(np.round(np.asarray(per_sample["fscore_thresholds"]) * 1000, 6))
+        for th_mm in (5.0, 15.0):
+            if th_mm in ths:
+                j = ths.index(th_mm)
+                row[f"f_at_{int(th_mm)}mm"] = (math.nan if empty else
+                                               float(per_sample["fscore"][sel, j].mean()))
+    for key in SURFACE_KEYS:
+        if key in per_sample:
+            row[key] = math.nan if empty else float(np.asarray(per_sample[key])[sel].mean())
+    return row
+
+
+def scores_by_group(per_sample: dict, labels, order=None,
+                    thresholds=PAPER_THRESHOLDS) -> list[dict]:
+    """A table of scores per group of samples, e.g. per scene kind (rows as in
+    :func:`scores_by_vr_bin`).
+
+    Args:
+        per_sample: output of :func:`per_sample_scores` for N samples (optionally with the
+            :data:`SURFACE_KEYS` added, ``(N,)`` each).
+        labels: ``(N,)`` group label of each sample (``None`` = in no group).
+        order: the groups to report, in order (default: the distinct labels, sorted); a group
+            with no sample gets ``count`` 0 and NaN scores.
+        thresholds: PCK thresholds (metres) of the AUC.
+
+    Returns:
+        One dict per group with ``bin`` (the label) and the scores of :func:`scores_by_vr_bin`.
+    """
+    lab = np.array([None if x is None else str(x) for x in labels], dtype=object)
+    n = per_sample["joint_err"].shape[0]
+    if lab.shape[0] != n:
+        raise ValueError(f"labels has {lab.shape[0]} values but per_sample has {n} samples")
+    if order is None:
+        order = sorted({x for x in lab if x is not None})
+    return [{"bin": str(g), **_group_scores(per_sample, lab == str(g), thresholds)}
+            for g in order]
+
+
+def comparison_table(rows: list[dict], baseline_rows: list[dict],
+                     columns=("pa_mpjpe", "pa_mpvpe", "f_at_15mm", "roughness_deg", "flipped"),
+                     first: str = "group") -> str:
+    """Markdown table of a model beside a baseline: each cell ``model / baseline``.
+
+    Args:
+        rows: the model's rows (:func:`scores_by_vr_bin`, :func:`scores_by_group`, or an
+            overall row with ``bin`` ``"all"``).
+        baseline_rows: the baseline's rows on the same samples, same order and labels.
+        columns: score keys to show (those missing from the rows are left out).
+        first: title of the label column.
+
+    Returns:
+        The table (str).
+
+    Raises:
+        ValueError: the two lists do not have the same labels.
+    """
+    if [r.get("bin") for r in rows] != [r.get("bin") for r in baseline_rows]:
+        raise ValueError(f"rows {[r.get('bin') for r in rows]} and baseline rows "
+                         f"{[r.get('bin') for r in baseline_rows]} differ")
+    known = {k: (title, fmt) for k, title, fmt in _COLUMNS}
+    cols = [k for k in columns if rows and k in rows[0] and k in baseline_rows[0]]
+    header = [first, "N"] + [known.get(k, (k, ""))[0] for k in cols]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+
+    def cell(val, fmt):
+        return "-" if isinstance(val, float) and math.isnan(val) else fmt.format(val)
+
+    for r, b in zip(rows, baseline_rows, strict=True):
+        cells = [str(r.get("bin", "")), str(r.get("count", ""))]
+        for k in cols:
+            fmt = known.get(k, (k, "{:.4g}"))[1]
+            cells.append(f"{cell(r[k], fmt)} / {cell(b[k], fmt)}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 _COLUMNS = (("count", "N", "{:d}"), ("auc", "AUC 0-20mm", "{:.3f}"),
             ("pa_mpjpe", "PA-MPJPE (mm)", "{:.2f}"), ("pa_mpvpe", "PA-MPVPE (mm)", "{:.2f}"),
             ("mpjpe", "MPJPE (mm)", "{:.2f}"), ("rr_mpjpe", "RR-MPJPE (mm)", "{:.2f}"),
-            ("f_at_5mm", "F@5mm", "{:.3f}"), ("f_at_15mm", "F@15mm", "{:.3f}"))
+            ("f_at_5mm", "F@5mm", "{:.3f}"), ("f_at_15mm", "F@15mm", "{:.3f}"),
+            ("roughness_deg", "roughness (deg)", "{:.1f}"), ("flipped", "flipped faces", "{:.1%}"))
 
 
 def format_table(rows: list[dict], columns=None) -> str:

@@ -61,6 +61,7 @@ from torch import nn
 from . import augment as A
 from . import metrics as M
 from ._io import atomic_write_bytes as _atomic_write_bytes
+from .dataset import KINDS
 
 __all__ = [
     "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
@@ -1023,11 +1024,98 @@ def _broadcast_row(row: dict, world: int) -> dict:
 # evaluation
 
 
+#: Name of the rest-hand baseline in tables and reports.
+REST_HAND = "rest hand (no network)"
+
+
+def rest_hand_predictions(template_vertices, joint_regressor, num: int):
+    """The rest-hand baseline's answer for ``num`` images: the same open hand every time.
+
+    Args:
+        template_vertices: ``(V, 3)`` root-centred template (the network frame's rest hand,
+            e.g. :func:`~handmesh_tutorial.model.root_centred_template`), metres.
+        joint_regressor: ``(21, V)`` regressor the network uses for its joints.
+        num: number of predictions.
+
+    Returns:
+        ``(vertices (num, V, 3), joints (num, 21, 3))`` float32 tensors, metres.
+    """
+    tv = torch.as_tensor(np.asarray(_to_numpy(template_vertices)), dtype=torch.float32)
+    jr = torch.as_tensor(np.asarray(_to_numpy(joint_regressor)), dtype=torch.float32)
+    if tv.ndim != 2 or tv.shape[1] != 3 or jr.ndim != 2 or jr.shape[1] != tv.shape[0]:
+        raise ValueError(f"template_vertices must be (V, 3) and joint_regressor (J, V), got "
+                         f"{tuple(tv.shape)} and {tuple(jr.shape)}")
+    return tv.expand(num, -1, -1).clone(), (jr @ tv).expand(num, -1, -1).clone()
+
+
+def _rest_template(template):
+    from .model import root_centred_template
+
+    return root_centred_template(template)
+
+
+def _to_numpy(x):
+    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else x
+
+
+def _item_kinds(dataset, index: np.ndarray) -> list | None:
+    """Scene kind of each evaluated item (INTER-SH readers only), else ``None``."""
+    base = dataset
+    while isinstance(base, torch.utils.data.Subset):
+        base = base.dataset
+    source = getattr(base, "source", None)
+    if source is None or not hasattr(source, "annotation"):
+        return None
+    return [source.annotation(int(i)).get("kind") for i in index]
+
+
+def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kinds,
+                       faces) -> dict:
+    """Scores, per-sample errors and the VR / kind / overall rows of one set of predictions."""
+    from .surface import flipped_face_fraction, roughness_deg
+
+    errors = M.per_sample_scores(pred_joints=pred_joints, gt_joints=r["joints"],
+                                 pred_verts=pred_vertices, gt_verts=r["vertices"])
+    scores = M.freihand_scores(pred_joints=pred_joints, gt_joints=r["joints"],
+                               pred_verts=pred_vertices, gt_verts=r["vertices"])
+    if faces is not None:
+        pv, gv = pred_vertices.double().numpy(), r["vertices"].double().numpy()
+        errors["roughness_deg"] = roughness_deg(pv, gv, faces)
+        errors["flipped"] = flipped_face_fraction(pv, gv, faces)
+        scores["roughness_deg"] = float(errors["roughness_deg"].mean())
+        scores["flipped"] = float(errors["flipped"].mean())
+    per_sample = {
+        "index": r["index"].numpy(), "vr": vr, "mirrored": r["mirrored"].numpy(),
+        "mpjpe": 1000 * errors["joint_err"].mean(1), "mpvpe": 1000 * errors["vert_err"].mean(1),
+        "pa_mpjpe": 1000 * errors["joint_err_pa"].mean(1),
+        "pa_mpvpe": 1000 * errors["vert_err_pa"].mean(1),
+        "f_at_5mm": errors["fscore"][:, 0], "f_at_15mm": errors["fscore"][:, 1],
+    }
+    for key in M.SURFACE_KEYS:
+        if key in errors:
+            per_sample[key] = errors[key]
+    if kinds is not None:
+        per_sample["kind"] = np.array([str(k) for k in kinds])
+    vr_table = M.scores_by_vr_bin(errors, vr) if np.isfinite(vr).any() else []
+    kind_table = [] if kinds is None else M.scores_by_group(
+        errors, kinds, order=[k for k in KINDS if k in set(kinds)])
+    overall = {"bin": "all", "count": len(vr), "mpjpe": scores["mpjpe"],
+               "rr_mpjpe": 1000 * float(errors["joint_err_rr"].mean()),
+               "pa_mpjpe": scores["pa_mpjpe"], "auc": scores["auc_joints_20mm"],
+               "pa_mpvpe": scores["pa_mpvpe"], "f_at_5mm": scores["f_at_5mm"],
+               "f_at_15mm": scores["f_at_15mm"]}
+    for key in M.SURFACE_KEYS:
+        if key in scores:
+            overall[key] = scores[key]
+    return {"errors": errors, "scores": scores, "per_sample": per_sample, "vr_table": vr_table,
+            "kind_table": kind_table, "overall": overall}
+
+
 def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None = None,
              split: str = "evaluation", image_size: int | None = None, batch_size: int = 16,
              device: str = "auto", out_dir: str | os.PathLike | None = None,
              camera_frame: bool = True, num_samples: int | None = None, template=None,
-             progress: bool = True, threads: int | None = None) -> dict:
+             progress: bool = True, threads: int | None = None, baseline: bool = True) -> dict:
     """Evaluate a trained network: FreiHAND-style scores, per-sample errors, VR table, figures.
 
     Every item is the deterministic crop of its target hand (no augmentation); errors are
@@ -1055,16 +1143,28 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         template: template for loading a checkpoint (see :func:`load_checkpoint`).
         progress: tqdm bar.
         threads: ``torch.set_num_threads`` value.
+        baseline: also score the **rest-hand baseline** on the same items: the network's
+            template (the open rest-pose hand, root-centred) predicted for every image, no
+            network at all (:func:`rest_hand_predictions`). After Procrustes alignment it is
+            the bar a model must clear to have learnt the hand's articulation.
 
     Returns:
         dict with ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`: mm, AUC,
-        F-scores), ``per_sample`` (``index``, ``vr``, ``mirrored`` and per-sample ``mpjpe``,
-        ``mpvpe``, ``pa_mpjpe``, ``pa_mpvpe`` in mm, ``f_at_5mm``, ``f_at_15mm``; (N,) arrays),
-        ``errors`` (:func:`~handmesh_tutorial.metrics.per_sample_scores`, metres),
-        ``vr_table`` (rows of :func:`~handmesh_tutorial.metrics.scores_by_vr_bin` over the
-        target hands' VR; empty when no sample has a VR), ``table`` (markdown),
-        ``predictions`` (``vertices`` (N, V, 3), ``joints`` (N, 21, 3) numpy, metres),
-        ``num_samples`` and ``files`` (paths written).
+        F-scores, plus the surface scores ``roughness_deg`` and ``flipped`` when the network
+        has ``faces``: :func:`~handmesh_tutorial.surface.roughness_deg`, the mean
+        :func:`~handmesh_tutorial.surface.flipped_face_fraction`), ``per_sample`` (``index``,
+        ``vr``, ``mirrored``, ``kind`` (INTER-SH) and per-sample ``mpjpe``, ``mpvpe``,
+        ``pa_mpjpe``, ``pa_mpvpe`` in mm, ``f_at_5mm``, ``f_at_15mm``, ``roughness_deg``,
+        ``flipped``; (N,) arrays), ``errors``
+        (:func:`~handmesh_tutorial.metrics.per_sample_scores`, metres), ``vr_table`` (rows of
+        :func:`~handmesh_tutorial.metrics.scores_by_vr_bin` over the target hands' VR; empty
+        when no sample has a VR), ``kind_table`` (rows of
+        :func:`~handmesh_tutorial.metrics.scores_by_group` per scene kind, INTER-SH only, else
+        empty), ``table`` (markdown), ``baseline`` (with ``baseline=True``: the rest hand's
+        ``scores``, ``per_sample``, ``errors``, ``vr_table``, ``kind_table`` on the same items, else
+        ``None``), ``comparison`` (markdown, model / rest hand per VR bin, kind and overall;
+        ``""`` without baseline), ``predictions`` (``vertices`` (N, V, 3), ``joints``
+        (N, 21, 3) numpy, metres), ``num_samples`` and ``files`` (paths written).
     """
     if threads is not None:
         torch.set_num_threads(int(threads))
@@ -1100,26 +1200,25 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         raise ValueError("the evaluation set is empty")
 
     r = _run_dataset(net, dataset, batch_size, dev, progress=progress, desc="evaluate")
-    errors = M.per_sample_scores(pred_joints=r["pred_joints"], gt_joints=r["joints"],
-                                 pred_verts=r["pred_vertices"], gt_verts=r["vertices"])
-    scores = M.freihand_scores(pred_joints=r["pred_joints"], gt_joints=r["joints"],
-                               pred_verts=r["pred_vertices"], gt_verts=r["vertices"])
+    faces = getattr(net, "faces", None)
+    kinds = _item_kinds(dataset, r["index"].numpy())
     vr = r["vr"].double().numpy()
-    per_sample = {
-        "index": r["index"].numpy(), "vr": vr, "mirrored": r["mirrored"].numpy(),
-        "mpjpe": 1000 * errors["joint_err"].mean(1), "mpvpe": 1000 * errors["vert_err"].mean(1),
-        "pa_mpjpe": 1000 * errors["joint_err_pa"].mean(1),
-        "pa_mpvpe": 1000 * errors["vert_err_pa"].mean(1),
-        "f_at_5mm": errors["fscore"][:, 0], "f_at_15mm": errors["fscore"][:, 1],
-    }
-    has_vr = bool(np.isfinite(vr).any())
-    vr_table = M.scores_by_vr_bin(errors, vr) if has_vr else []
-    overall = {"bin": "all", "count": len(vr), "mpjpe": scores["mpjpe"],
-               "rr_mpjpe": 1000 * float(errors["joint_err_rr"].mean()),
-               "pa_mpjpe": scores["pa_mpjpe"], "auc": scores["auc_joints_20mm"],
-               "pa_mpvpe": scores["pa_mpvpe"], "f_at_5mm": scores["f_at_5mm"],
-               "f_at_15mm": scores["f_at_15mm"]}
-    table = M.format_table([*vr_table, overall])
+    model = _score_predictions(r["pred_joints"], r["pred_vertices"], r, vr, kinds, faces)
+    rest = None
+    if baseline:
+        tv = getattr(net, "template", None)
+        rest_v, rest_j = rest_hand_predictions(
+            tv if tv is not None else _rest_template(resolve_template(template)),
+            net.joint_regressor, len(vr))
+        rest = _score_predictions(rest_j, rest_v, r, vr, kinds, faces)
+    table = M.format_table([*model["vr_table"], *model["kind_table"], model["overall"]])
+    comparison = ""
+    if rest is not None:
+        comparison = M.comparison_table(
+            [*model["vr_table"], *model["kind_table"], model["overall"]],
+            [*rest["vr_table"], *rest["kind_table"], rest["overall"]], first="VR bin / kind")
+    scores, errors, per_sample = model["scores"], model["errors"], model["per_sample"]
+    vr_table = model["vr_table"]
     if camera_frame:
         batch = {"root": r["root"], "R": r["R"], "mirrored": r["mirrored"]}
         pv, pj = A.to_camera(r["pred_vertices"], batch), A.to_camera(r["pred_joints"], batch)
@@ -1127,7 +1226,10 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         pv, pj = r["pred_vertices"], r["pred_joints"]
     result = {
         "scores": scores, "per_sample": per_sample, "errors": errors, "vr_table": vr_table,
-        "table": table, "num_samples": int(len(vr)),
+        "kind_table": model["kind_table"], "table": table, "num_samples": int(len(vr)),
+        "baseline": None if rest is None else {k: rest[k] for k in (
+            "scores", "per_sample", "errors", "vr_table", "kind_table")},
+        "comparison": comparison,
         "predictions": {"vertices": pv.numpy(), "joints": pj.numpy(),
                         "frame": "camera" if camera_frame else "network"},
         "files": {},
@@ -1145,8 +1247,15 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     files = {}
     summary = {"checkpoint": source, "scores": res["scores"], "vr_table": res["vr_table"],
-               "num_samples": res["num_samples"],
+               "kind_table": res["kind_table"], "num_samples": res["num_samples"],
                "per_sample": {k: v.tolist() for k, v in res["per_sample"].items()},
+               "baseline": None if res["baseline"] is None else {
+                   "name": REST_HAND, "scores": res["baseline"]["scores"],
+                   "vr_table": res["baseline"]["vr_table"],
+                   "kind_table": res["baseline"]["kind_table"],
+                   "per_sample": {k: v.tolist()
+                                  for k, v in res["baseline"]["per_sample"].items()}},
+               "comparison": res["comparison"],
                "predictions_frame": res["predictions"]["frame"]}
     files["json"] = out / "eval.json"
     _write_json(files["json"], summary)
@@ -1159,9 +1268,11 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
     _atomic_write_bytes(files["predictions"], buf.getvalue())
 
     fig, ax = plt.subplots(figsize=(5, 3.6))
-    viz.plot_pck_curves(ax, {"joints (PA)": errors["joint_err_pa"],
-                             "vertices (PA)": errors["vert_err_pa"],
-                             "joints (root-rel.)": errors["joint_err_rr"]})
+    curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors["vert_err_pa"],
+              "joints (root-rel.)": errors["joint_err_rr"]}
+    if res["baseline"] is not None:  # the bar to clear, on the same samples
+        curves["rest hand, joints (PA)"] = res["baseline"]["errors"]["joint_err_pa"]
+    viz.plot_pck_curves(ax, curves)
     ax.set_title(f"3D PCK, {res['num_samples']} samples")
     files["pck"] = viz.save_figure(fig, out / "pck.png", dpi=90)
     plt.close(fig)

@@ -286,6 +286,53 @@ def test_evaluate_vr_table_predictions_and_files(toy_root, tmp_path):
                                rtol=1e-5)
 
 
+def _umeyama_pa_mpjpe(pred, gt):
+    """Independent PA-MPJPE (mm): Umeyama similarity alignment, reflections allowed."""
+    out = []
+    for p, g in zip(pred, gt, strict=True):
+        pc, gc = p - p.mean(0), g - g.mean(0)
+        u, w, vt = np.linalg.svd(gc.T @ pc)
+        rot = u @ vt
+        scale = w.sum() / (pc ** 2).sum()
+        out.append(1000 * np.linalg.norm(scale * pc @ rot.T + g.mean(0) - g, axis=1).mean())
+    return np.array(out)
+
+
+def test_evaluate_scores_the_rest_hand_baseline_beside_the_model(toy_root, tmp_path):
+    """An untrained network (zero head) outputs the template: its scores equal the rest hand's;
+    the baseline's PA-MPJPE equals an independent Umeyama alignment of the template joints."""
+    torch.manual_seed(0)
+    cfg = T.TrainConfig(data=str(toy_root), out_dir=str(tmp_path / "run"), **TINY)
+    net = T.build_model_from_config(cfg)
+    ev = T.evaluate(net, toy_root, image_size=32, progress=False, out_dir=tmp_path / "ev")
+    base = ev["baseline"]
+    for k in ("pa_mpjpe", "pa_mpvpe", "f_at_15mm", "roughness_deg", "flipped"):
+        assert ev["scores"][k] == pytest.approx(base["scores"][k], rel=1e-4, abs=1e-6), k
+    tmpl = net.template.double().numpy()
+    tj = net.joint_regressor.double().numpy() @ tmpl
+    gt = ev["errors"]["joint_err"]  # shape check only: (N, 21)
+    assert gt.shape == (8, 21)
+    ds = A.InterSHTorchDataset(toy_root, 32, train=False)
+    gj = np.stack([ds[i]["joints"].double().numpy() for i in range(len(ds))])
+    np.testing.assert_allclose(base["per_sample"]["pa_mpjpe"],
+                               _umeyama_pa_mpjpe(np.broadcast_to(tj, gj.shape), gj), rtol=1e-4)
+    # the toy hands are posed: the rest hand's surface differs from theirs
+    assert base["scores"]["roughness_deg"] > 0.5
+    assert 0.0 <= base["scores"]["flipped"] < 1.0
+    assert [r["bin"] for r in ev["kind_table"]] == ["hand-hand"]
+    assert ev["kind_table"][0]["count"] == 8
+    assert "| hand-hand | 8 |" in ev["comparison"] and "| all | 8 |" in ev["comparison"]
+    pa = f"{ev['scores']['pa_mpjpe']:.2f} / {base['scores']['pa_mpjpe']:.2f}"
+    assert pa in ev["comparison"]
+    import json
+
+    saved = json.loads((tmp_path / "ev" / "eval.json").read_text())
+    assert saved["baseline"]["scores"]["pa_mpjpe"] == pytest.approx(base["scores"]["pa_mpjpe"])
+    assert saved["per_sample"]["kind"] == ["hand-hand"] * 8
+    none = T.evaluate(net, toy_root, image_size=32, progress=False, baseline=False)
+    assert none["baseline"] is None and none["comparison"] == ""
+
+
 def test_cli_train_and_evaluate(toy_root, tmp_path, capsys):
     out = tmp_path / "cli"
     code = cli_main(["train", "--data", str(toy_root), "--out", str(out), "--epochs", "1",
