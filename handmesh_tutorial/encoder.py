@@ -159,8 +159,17 @@ class ResNet(nn.Module):
 
     def forward_features(self, images: torch.Tensor) -> torch.Tensor:
         """The last feature map ``(B, D, H/32, W/32)``."""
+        return self.forward_stages(images)[-1]
+
+    def forward_stages(self, images: torch.Tensor) -> list[torch.Tensor]:
+        """The four stage outputs, strides 4, 8, 16, 32 (``D/8``, ``D/4``, ``D/2``, ``D``
+        channels)."""
         x = self.maxpool(self.relu(self.bn1(self.conv1(images))))
-        return self.layer4(self.layer3(self.layer2(self.layer1(x))))
+        out = []
+        for layer in (self.layer1, self.layer2, self.layer3, self.layer4):
+            x = layer(x)
+            out.append(x)
+        return out
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         """Args: images ``(B, 3, H, W)``. Returns the pooled features ``(B, D)``."""

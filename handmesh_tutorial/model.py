@@ -52,6 +52,7 @@ from torch import nn
 from .blocks import CoarseMeshTransformer, SparseVertexMap
 from .decoder import MultiPathDecoder, SinglePathDecoder, hierarchy_spirals
 from .encoder import build_encoder
+from .keypoints import KeypointEncoder
 from .sampling import mesh_hierarchy
 from .surface import smoothing_matrix, smoothing_steps
 
@@ -271,8 +272,15 @@ class MSMRNet(nn.Module):
                 + raw[..., 9:] * self.output_scale)
 
     def forward(self, images: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Args: images ``(B, 3, H, W)`` float. Returns ``{"vertices", "joints"}`` (metres)."""
-        return self.decode(self.encoder(images))
+        """Args: images ``(B, 3, H, W)`` float. Returns ``{"vertices", "joints"}`` (metres), and
+        ``uv`` ``(B, J, 2)`` (normalised 2D keypoints) with a
+        :class:`~handmesh_tutorial.keypoints.KeypointEncoder`."""
+        enc = self.encoder(images)
+        if isinstance(enc, dict):  # a keypoint encoder: features + 2D keypoints
+            out = self.decode(enc["features"])
+            out["uv"] = enc["uv"]
+            return out
+        return self.decode(enc)
 
 
 def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
@@ -283,7 +291,7 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
                 transformer_layers: int = 1, fuse_head: bool = False,
                 output_scale: float = 0.1, hierarchy=None, output: str = "affine",
                 smoothing_length: float = DEFAULT_SMOOTHING_LENGTH, zero_head: bool = True,
-                head: str = "linear") -> MSMRNet:
+                head: str = "linear", keypoints: bool = False) -> MSMRNet:
     """Build MSMR-Net (or the single-path / no-attention ablations of the paper's Table 3).
 
     Args:
@@ -315,6 +323,11 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
             (``"affine"``, ``"offset"``) or zeros (``"xyz"``).
         head: the decoder's output head, ``"linear"``, ``"spiral"`` or ``"pyramid"``
             (:mod:`handmesh_tutorial.decoder`).
+        keypoints: wrap a ResNet encoder in a
+            :class:`~handmesh_tutorial.keypoints.KeypointEncoder` (2D keypoint head, features
+            pooled at the predicted joints; the model then also returns ``uv``). Not in the
+            paper; what lets training from scratch on a CPU learn articulation (see
+            :mod:`handmesh_tutorial.keypoints`).
         hierarchy: a precomputed :class:`~handmesh_tutorial.sampling.MeshHierarchy` of the
             template (default: computed, cached on disk by ``mesh_hierarchy``).
 
@@ -342,6 +355,8 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
     enc = build_encoder(encoder) if isinstance(encoder, str) else encoder
     if not hasattr(enc, "out_features"):
         raise ValueError("a custom encoder needs an attribute out_features (its output width D)")
+    if keypoints:
+        enc = KeypointEncoder(enc, num_joints=len(tmpl.joint_regressor))
     if output not in OUTPUTS:
         raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
     out_ch = 12 if output == "affine" else 3

@@ -62,11 +62,14 @@ from . import augment as A
 from . import metrics as M
 from ._io import atomic_write_bytes as _atomic_write_bytes
 from .dataset import KINDS
+from .keypoints import keypoint_loss, normalised_keypoints
+from .losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
 
 __all__ = [
     "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
     "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
-    "resolve_template", "save_template", "template_hash", "vertex_loss", "toy_sample",
+    "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
+    "rest_hand_predictions", "REST_HAND", "toy_sample",
     "CHECKPOINT_FORMAT", "METRIC_COLUMNS",
 ]
 
@@ -130,6 +133,12 @@ class TrainConfig:
         box_scale: crop margin around the projected target mesh (INTER-SH).
         progress: show tqdm bars (rank 0).
         durable: fsync checkpoints and logs before renaming them into place.
+        keypoint_weight: weight of the 2D keypoint loss (needs ``model_kwargs={"keypoints":
+            True}``); 0 = off, as the paper.
+        aligned_weight: weight of the L1 loss of Procrustes-aligned joints; 0 = off.
+        edge_weight: weight of the edge-length loss; 0 = off.
+        normal_weight: weight of the normal loss; 0 = off. (The four terms:
+            :func:`training_loss`, :mod:`handmesh_tutorial.losses`.)
     """
 
     data: str | None = None
@@ -164,6 +173,10 @@ class TrainConfig:
     box_scale: float = 1.5
     progress: bool = True
     durable: bool = True
+    keypoint_weight: float = 0.0
+    aligned_weight: float = 0.0
+    edge_weight: float = 0.0
+    normal_weight: float = 0.0
 
     def __post_init__(self):
         for name in ("data", "val_data", "template"):
@@ -185,6 +198,14 @@ class TrainConfig:
             raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
         if not self.lr > 0:
             raise ValueError(f"lr must be positive, got {self.lr}")
+        for name in ("keypoint_weight", "aligned_weight", "edge_weight", "normal_weight"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 0:
+                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
+            setattr(self, name, float(v))
+        if self.keypoint_weight and not self.model_kwargs.get("keypoints", False):
+            raise ValueError("keypoint_weight > 0 needs model_kwargs={'keypoints': True} (a "
+                             "model with a 2D keypoint head)")
         if self.num_workers < 0:
             raise ValueError(f"num_workers must be >= 0, got {self.num_workers}")
 
@@ -351,21 +372,6 @@ def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
     return build_model(encoder=config.encoder, decoder=config.decoder,
                        attention=config.attention, template=tmpl, channels=config.channels,
                        latent_channels=config.latent_channels, **config.model_kwargs)
-
-
-def vertex_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """The paper's L1 vertex loss, as a mean over vertices and coordinates.
-
-    Args:
-        pred: ``(B, V, 3)`` predicted vertices, metres.
-        target: ``(B, V, 3)`` ground truth (root-centred), metres.
-
-    Returns:
-        Scalar tensor: ``mean |pred - target|`` (metres).
-    """
-    if pred.shape != target.shape:
-        raise ValueError(f"pred {tuple(pred.shape)} and target {tuple(target.shape)} differ")
-    return (pred - target).abs().mean()
 
 
 # --------------------------------------------------------------------------------------------
@@ -805,25 +811,82 @@ def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
 # training
 
 
-def _train_step(net, batch: dict, chunks: int, device: torch.device, ddp: bool) -> float:
-    """Forward/backward over ``chunks`` equal micro-batches; returns the mean chunk loss."""
+def training_loss(out: dict, batch: Mapping, config: TrainConfig,
+                  faces: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
+    """The objective of one (micro-)batch: the paper's L1 vertex loss plus the optional terms.
+
+    Args:
+        out: the network's output (``vertices``, ``joints``, and ``uv`` with a keypoint
+            encoder).
+        batch: the items (``vertices``, ``joints``, ``root``, ``K``), on ``out``'s device.
+        config: weights ``keypoint_weight``, ``aligned_weight``, ``edge_weight``,
+            ``normal_weight`` (0 = term off; see :mod:`handmesh_tutorial.losses`) and
+            ``image_size``.
+        faces: ``(F, 3)`` int64 faces (needed by the edge and normal terms).
+
+    Returns:
+        ``(total, parts)``: the scalar to minimise and a dict of each active term's value
+        (floats; ``vertex`` in metres).
+
+    Raises:
+        ValueError: a keypoint weight without a ``uv`` output, or a mesh term without faces.
+    """
+    loss = vertex_loss(out["vertices"], batch["vertices"])
+    parts = {"vertex": float(loss.detach())}
+
+    def add(name, weight, value):
+        nonlocal loss
+        loss = loss + weight * value
+        parts[name] = float(value.detach())
+
+    if config.keypoint_weight:
+        if "uv" not in out:
+            raise ValueError("keypoint_weight > 0 needs a model with a keypoint encoder "
+                             "(model_kwargs={'keypoints': True})")
+        target = normalised_keypoints(batch["joints"], batch["root"], batch["K"],
+                                      config.image_size)
+        add("keypoint", config.keypoint_weight, keypoint_loss(out["uv"], target))
+    if config.aligned_weight:
+        add("aligned", config.aligned_weight, aligned_joint_loss(out["joints"], batch["joints"]))
+    if config.edge_weight or config.normal_weight:
+        if faces is None:
+            raise ValueError("edge_weight / normal_weight need the mesh faces")
+        if config.edge_weight:
+            add("edge", config.edge_weight,
+                edge_length_loss(out["vertices"], batch["vertices"], faces))
+        if config.normal_weight:
+            add("normal", config.normal_weight,
+                normal_loss(out["vertices"], batch["vertices"], faces))
+    return loss, parts
+
+
+def _train_step(net, batch: dict, chunks: int, device: torch.device, ddp: bool,
+                config: TrainConfig, faces: torch.Tensor | None) -> float:
+    """Forward/backward over ``chunks`` equal micro-batches.
+
+    Returns the mean chunk L1 vertex loss (metres; comparable across recipes), or NaN when the
+    objective was not finite."""
     import contextlib
 
-    images, target = batch["image"], batch["vertices"]
+    images = batch["image"]
     n = images.shape[0]
     if n % chunks:
         raise RuntimeError(f"batch of {n} not divisible into {chunks} micro-batches")
     per = n // chunks
     total = 0.0
+    keys = ("vertices", "joints", "root", "K")
     for c in range(chunks):
         sl = slice(c * per, (c + 1) * per)
         sync = (not ddp) or c == chunks - 1
         ctx = contextlib.nullcontext() if sync else net.no_sync()
         with ctx:
             out = net(images[sl].to(device, non_blocking=True))
-            loss = vertex_loss(out["vertices"], target[sl].to(device, non_blocking=True))
+            part = {k: batch[k][sl].to(device, non_blocking=True) for k in keys if k in batch}
+            loss, parts = training_loss(out, part, config, faces)
             (loss / chunks).backward()
-        total += float(loss.detach()) / chunks
+        if not math.isfinite(float(loss.detach())):
+            return math.nan
+        total += parts["vertex"] / chunks
     return total
 
 
@@ -898,6 +961,7 @@ def _train(config, resume, dataset, val_dataset, template, callback, device, ran
     np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it
     random.seed(config.seed)
     net = build_model_from_config(config, tmpl).to(device)
+    faces = torch.as_tensor(np.asarray(tmpl.faces), dtype=torch.int64, device=device)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=config.lr_step, gamma=config.lr_gamma)
 
@@ -955,7 +1019,8 @@ def _train(config, resume, dataset, val_dataset, template, callback, device, ran
                    disable=not (config.progress and is_main), leave=False)
         for batch in bar:
             opt.zero_grad(set_to_none=True)
-            loss = _train_step(model, batch, config.micro_batches, device, world > 1)
+            loss = _train_step(model, batch, config.micro_batches, device, world > 1,
+                               config, faces)
             loss = _mean_over_ranks(loss, world, device)
             if not math.isfinite(loss):
                 raise FloatingPointError(

@@ -349,3 +349,37 @@ def test_cli_train_and_evaluate(toy_root, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "PA-MPJPE" in text and "[0.95, 1.00]" in text
     assert (tmp_path / "ev" / "eval.json").exists()
+
+
+def test_cpu_recipe_terms_train_and_each_changes_the_objective(samples, tmp_path):
+    """The optional loss terms: each one active shows up in training_loss's parts and adds to
+    the objective; a keypoint weight without a keypoint head is refused up front."""
+    tr, _ = _data(samples)
+    batch = {k: torch.stack([tr[i][k] for i in range(4)]) for k in
+             ("image", "vertices", "joints", "root", "K")}
+    cfg = T.TrainConfig(out_dir=str(tmp_path / "r"), model_kwargs={"keypoints": True},
+                        keypoint_weight=0.1, aligned_weight=1.0, edge_weight=1.0,
+                        normal_weight=0.1, **TINY)
+    torch.manual_seed(0)
+    net = T.build_model_from_config(cfg)
+    out = net(batch["image"])
+    assert out["uv"].shape == (4, 21, 2)
+    faces = torch.as_tensor(np.asarray(net.faces), dtype=torch.int64)
+    total, parts = T.training_loss(out, batch, cfg, faces)
+    assert set(parts) == {"vertex", "keypoint", "aligned", "edge", "normal"}
+    weights = {"vertex": 1.0, "keypoint": 0.1, "aligned": 1.0, "edge": 1.0, "normal": 0.1}
+    assert float(total.detach()) == pytest.approx(sum(weights[k] * v for k, v in parts.items()),
+                                                  rel=1e-5)
+    plain = T.TrainConfig(out_dir=str(tmp_path / "p"), **TINY)
+    assert set(T.training_loss(out, batch, plain, faces)[1]) == {"vertex"}
+    with pytest.raises(ValueError, match="keypoint_weight > 0 needs model_kwargs"):
+        T.TrainConfig(out_dir=str(tmp_path / "x"), keypoint_weight=0.1, **TINY)
+    with pytest.raises(ValueError, match="edge_weight must be a number >= 0"):
+        T.TrainConfig(out_dir=str(tmp_path / "x"), edge_weight=-1, **TINY)
+    res = T.train(T.TrainConfig(out_dir=str(tmp_path / "run"), epochs=1, batch_size=2,
+                                model_kwargs={"keypoints": True}, keypoint_weight=0.1,
+                                aligned_weight=1.0, edge_weight=1.0, normal_weight=0.1, **TINY),
+                  dataset=tr)
+    assert res.steps == 2 and all(math.isfinite(x) for x in res.step_losses)
+    net2, ck = T.load_checkpoint(res.checkpoint)
+    assert ck["config"]["keypoint_weight"] == 0.1 and "uv" in net2(batch["image"])
