@@ -14,7 +14,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from . import demo
     from .budget import budget
 
-    cfg = demo.DemoConfig.from_budget(budget(args.budget))
+    cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe)
     res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress)
     print(f"handmesh demo: report written to {res.report} ({res.seconds['total'] / 60:.1f} min "
           f"this run; budget tier {cfg.budget})")
@@ -137,6 +137,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     demo.add_argument("--budget", choices=("smoke", "default", "full"), default=None,
                       help="size tier (default: HANDMESH_BUDGET, else default)")
+    demo.add_argument("--recipe", choices=("cpu", "paper"), default="cpu",
+                      help="training recipe: 'cpu' (default: 2D keypoint head, global-rotation "
+                      "head, keypoint and aligned-joint losses beside L1) or 'paper' (L1 vertex "
+                      "loss only)")
     demo.add_argument("--no-progress", action="store_true", help="no progress bars")
     demo.set_defaults(func=_cmd_demo)
 

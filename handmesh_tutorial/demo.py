@@ -84,7 +84,19 @@ import numpy as np
 
 __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "train_config", "plot_overlays",
            "plot_loss_curves", "write_report", "headline", "parse_headline", "HEADLINE",
-           "MODEL_ROW", "BASELINE_ROW"]
+           "MODEL_ROW", "BASELINE_ROW", "RECIPES"]
+
+#: Training recipes (:class:`~handmesh_tutorial.train.TrainConfig` fields on top of
+#: :func:`train_config`): the paper's (one L1 vertex loss, an encoder that ends in global
+#: average pooling) and the CPU recipe, which adds a 2D keypoint head whose features are pooled
+#: at the joints (:mod:`handmesh_tutorial.keypoints`), a global-rotation head
+#: (:mod:`handmesh_tutorial.rotation`) and the keypoint and aligned-joint losses
+#: (:mod:`handmesh_tutorial.losses`). Why: docs page "Training from scratch on a CPU".
+RECIPES = {
+    "paper": {},
+    "cpu": {"model_kwargs": {"keypoints": True, "global_rotation": True},
+            "keypoint_weight": 0.5, "aligned_weight": 1.0},
+}
 
 #: Row names of the headline table: the trained network and the rest-hand baseline (the
 #: template's open hand predicted for every image, :func:`handmesh_tutorial.train.evaluate`).
@@ -115,6 +127,9 @@ class DemoConfig:
         decoder: ``"multi"`` or ``"single"``.
         attention: coarse-mesh transformer on.
         augment: random crop / scale / rotation / colour jitter of training crops.
+        recipe: ``"cpu"`` (default; :data:`RECIPES`: 2D keypoint head with pose pooling, a
+            global-rotation head, keypoint and aligned-joint losses beside the paper's L1) or
+            ``"paper"`` (L1 vertex loss only, global-pooling encoder).
         balance_train: VR-balance the training scenes too (about 5x slower to generate).
         threads: torch threads.
         workers: data-generation processes.
@@ -133,6 +148,7 @@ class DemoConfig:
     decoder: str = "multi"
     attention: bool = True
     augment: bool = False
+    recipe: str = "cpu"
     balance_train: bool = False
     threads: int = 2
     workers: int = 2
@@ -309,13 +325,16 @@ def plot_overlays(samples: list, pred_vertices, faces, titles: list | None = Non
     return fig
 
 
-def plot_loss_curves(history: list, step_losses: list):
+def plot_loss_curves(history: list, step_losses: list, baseline: dict | None = None):
     """Figure: training loss per step and per epoch, validation PA-MPJPE / PA-MPVPE per epoch.
 
     Args:
         history: rows of ``metrics.csv`` (dicts with ``epoch``, ``step``, ``train_loss`` in
             metres, ``val_pa_mpjpe``, ``val_pa_mpvpe`` in mm).
         step_losses: training loss of every step, metres.
+        baseline: scores of the rest-hand baseline on the validation scenes
+            (:func:`~handmesh_tutorial.train.rest_hand_scores`): dashed lines at its
+            PA-MPJPE and PA-MPVPE, the bar the curves must go under.
 
     Returns:
         The matplotlib figure.
@@ -339,7 +358,11 @@ def plot_loss_curves(history: list, step_losses: list):
                        ("val_mpjpe", "MPJPE (root-rel.)")):
         vals = [r.get(key, math.nan) for r in history]
         if np.isfinite(vals).any():
-            b.plot(e, vals, "o-", ms=3, label=label)
+            line = b.plot(e, vals, "o-", ms=3, label=label)[0]
+            base_key = key[len("val_"):]
+            if baseline is not None and base_key in baseline and base_key != "mpjpe":
+                b.axhline(baseline[base_key], ls="--", lw=1, color=line.get_color(),
+                          label=f"{label}, rest hand (no network)")
     b.set_xlabel("epoch")
     b.set_ylabel("validation error (mm)")
     b.set_title("validation (10% of the training scenes)")
@@ -402,7 +425,11 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         f"{config.render_size} px, network "
         f"crops of {config.image_size} px. MSMR-Net ({config.encoder} encoder, "
         f"{config.decoder}-path decoder, attention {'on' if config.attention else 'off'}, "
-        f"{train_info['parameters'] / 1e6:.1f} M parameters) trained from scratch on CPU for "
+        f"{train_info['parameters'] / 1e6:.1f} M parameters; recipe `{config.recipe}`"
+        + (": 2D keypoint head with features pooled at the joints, global-rotation head, "
+           "keypoint and aligned-joint losses beside the paper's L1" if config.recipe == "cpu"
+           else ": the paper's L1 only")
+        + ") trained from scratch on CPU for "
         f"{train_info['epochs']} epochs ({train_info['steps']} steps, batch "
         f"{config.batch_size}, Adam lr {config.lr:g}).",
         "",
@@ -465,7 +492,8 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
     """The demo's :class:`~handmesh_tutorial.train.TrainConfig` (notebooks 08-10 train with it).
 
     10% of ``data`` is held out for per-epoch validation; the learning rate is halved once,
-    after three quarters of the epochs; crops are cached in memory; CPU.
+    after three quarters of the epochs; crops are cached in memory; CPU; the loss terms and
+    keypoint head of ``config.recipe`` (:data:`RECIPES`).
 
     Args:
         config: the demo's sizes and choices.
@@ -481,12 +509,14 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
     """
     from .train import TrainConfig
 
+    if config.recipe not in RECIPES:
+        raise ValueError(f"recipe must be one of {sorted(RECIPES)}, got {config.recipe!r}")
     kw = dict(data=str(data), out_dir=str(out_dir), val_fraction=0.1,
               image_size=config.image_size, epochs=config.epochs, batch_size=config.batch_size,
               lr=config.lr, lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
               encoder=config.encoder, decoder=config.decoder, attention=config.attention,
               seed=seed, device="cpu", threads=config.threads, cache_data=True,
-              progress=progress)
+              progress=progress, **RECIPES[config.recipe])
     kw.update(overrides)
     return TrainConfig(**kw)
 
@@ -569,7 +599,9 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     files = dict(ev["files"])
     files["overlays"] = viz.save_figure(fig, out / "overlays.png", dpi=80)
     plt.close(fig)
-    fig = plot_loss_curves(res.history, res.step_losses)
+    val_ds = T.make_datasets(tcfg)[1]
+    val_rest = T.rest_hand_scores(val_ds) if val_ds is not None and len(val_ds) else None
+    fig = plot_loss_curves(res.history, res.step_losses, val_rest)
     files["loss"] = viz.save_figure(fig, out / "loss.png", dpi=90)
     plt.close(fig)
     figures = {"Predicted meshes (blue) vs ground truth (green) on held-out images, best to "

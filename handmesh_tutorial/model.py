@@ -53,6 +53,7 @@ from .blocks import CoarseMeshTransformer, SparseVertexMap
 from .decoder import MultiPathDecoder, SinglePathDecoder, hierarchy_spirals
 from .encoder import build_encoder
 from .keypoints import KeypointEncoder
+from .rotation import GlobalRotationHead
 from .sampling import mesh_hierarchy
 from .surface import smoothing_matrix, smoothing_steps
 
@@ -194,6 +195,8 @@ class MSMRNet(nn.Module):
             :func:`~handmesh_tutorial.surface.smoothing_matrix`), a sequence of them applied in
             order (``k`` one-step matrices are cheaper than their ``k``-step product, whose rows
             hold the whole ``k``-ring), or ``None``.
+        global_rotation: turn the decoded mesh by a rotation predicted from the features
+            (:class:`~handmesh_tutorial.rotation.GlobalRotationHead`; not in the paper).
 
     Shapes:
         ``images (B, 3, H, W)`` -> ``{"vertices": (B, V, 3), "joints": (B, J, 3)}``, metres.
@@ -202,7 +205,7 @@ class MSMRNet(nn.Module):
     def __init__(self, encoder: nn.Module, decoder: nn.Module, coarse_vertices: int,
                  latent_channels: int, joint_regressor, transformer: nn.Module | None = None,
                  output_scale: float = 0.1, faces=None, template_vertices=None,
-                 output: str = "xyz", smoothing=None):
+                 output: str = "xyz", smoothing=None, global_rotation: bool = False):
         super().__init__()
         if output not in OUTPUTS:
             raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
@@ -224,6 +227,8 @@ class MSMRNet(nn.Module):
         else:
             tv = torch.as_tensor(np.asarray(_numpy(template_vertices)), dtype=torch.float32)
             self.register_buffer("template", tv, persistent=False)
+        # the hand's orientation from the features; the decoder's mesh is turned by it
+        self.rotation = GlobalRotationHead(encoder.out_features) if global_rotation else None
         if smoothing is None:
             self.smoothing = nn.Identity()
         elif isinstance(smoothing, list | tuple):
@@ -247,6 +252,8 @@ class MSMRNet(nn.Module):
                                                        self.latent_channels)
         raw = self.smoothing(self.decoder(self.transformer(tokens)))
         vertices = self.vertices_from_field(raw)
+        if self.rotation is not None:  # about the root, the origin of the network frame
+            vertices = vertices @ self.rotation(features).transpose(1, 2).to(vertices.dtype)
         joints = torch.einsum("jv,bvc->bjc", self.joint_regressor.to(vertices.dtype), vertices)
         return {"vertices": vertices, "joints": joints}
 
@@ -291,7 +298,8 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
                 transformer_layers: int = 1, fuse_head: bool = False,
                 output_scale: float = 0.1, hierarchy=None, output: str = "affine",
                 smoothing_length: float = DEFAULT_SMOOTHING_LENGTH, zero_head: bool = True,
-                head: str = "linear", keypoints: bool = False) -> MSMRNet:
+                head: str = "linear", keypoints: bool = False,
+                global_rotation: bool = False) -> MSMRNet:
     """Build MSMR-Net (or the single-path / no-attention ablations of the paper's Table 3).
 
     Args:
@@ -328,6 +336,8 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
             pooled at the predicted joints; the model then also returns ``uv``). Not in the
             paper; what lets training from scratch on a CPU learn articulation (see
             :mod:`handmesh_tutorial.keypoints`).
+        global_rotation: predict the hand's orientation with a separate head and turn the
+            decoded mesh by it (:mod:`handmesh_tutorial.rotation`; not in the paper).
         hierarchy: a precomputed :class:`~handmesh_tutorial.sampling.MeshHierarchy` of the
             template (default: computed, cached on disk by ``mesh_hierarchy``).
 
@@ -375,7 +385,7 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
     smooth = [smoothing_matrix(tmpl.faces, 1, len(tmpl.vertices))] * steps if steps else None
     model = MSMRNet(enc, dec, coarse, latent_channels, tmpl.joint_regressor, transformer,
                     output_scale, faces=tmpl.faces, template_vertices=root_centred_template(tmpl),
-                    output=output, smoothing=smooth)
+                    output=output, smoothing=smooth, global_rotation=global_rotation)
     model.hierarchy = hierarchy
     model.spirals = spirals
     return model

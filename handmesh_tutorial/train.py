@@ -69,7 +69,7 @@ __all__ = [
     "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
     "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
     "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
-    "rest_hand_predictions", "REST_HAND", "toy_sample",
+    "rest_hand_predictions", "rest_hand_scores", "REST_HAND", "toy_sample",
     "CHECKPOINT_FORMAT", "METRIC_COLUMNS",
 ]
 
@@ -1117,6 +1117,28 @@ def _rest_template(template):
     from .model import root_centred_template
 
     return root_centred_template(template)
+
+
+def rest_hand_scores(dataset, template=None) -> dict:
+    """FreiHAND-style scores of the rest-hand baseline on a dataset's targets (no network).
+
+    Args:
+        dataset: a :class:`~handmesh_tutorial.augment.HandCropDataset` (or a ``Subset`` of one);
+            only its ``vertices`` and ``joints`` are read.
+        template: the network's template (default: the library's hand).
+
+    Returns:
+        :func:`~handmesh_tutorial.metrics.freihand_scores` of the template's root-centred open
+        hand predicted for every item (mm, AUC, F-scores).
+    """
+    tmpl = resolve_template(template)
+    if len(dataset) == 0:
+        raise ValueError("the dataset is empty")
+    items = [dataset[i] for i in range(len(dataset))]
+    gv = torch.stack([it["vertices"] for it in items])
+    gj = torch.stack([it["joints"] for it in items])
+    rv, rj = rest_hand_predictions(_rest_template(tmpl), tmpl.joint_regressor, len(items))
+    return M.freihand_scores(pred_joints=rj, gt_joints=gj, pred_verts=rv, gt_verts=gv)
 
 
 def _to_numpy(x):

@@ -185,3 +185,15 @@ def test_plot_mesh_on_image_projects_with_K():
     with pytest.raises(ValueError, match="K must be"):
         hmt.viz.plot_mesh_on_image(ax, None, v, f, np.eye(2))
     plt.close(fig)
+
+
+def test_recipes_reach_the_training_config(smoke_run, tmp_path):
+    ck = torch.load(smoke_run / "train" / "checkpoint_last.pt", weights_only=True)
+    cfg = ck["config"]
+    assert cfg["model_kwargs"] == {"keypoints": True, "global_rotation": True}
+    assert (cfg["keypoint_weight"], cfg["aligned_weight"]) == (0.5, 1.0)
+    assert "recipe `cpu`" in (smoke_run / "report.md").read_text()
+    paper = demo.train_config(demo.DemoConfig(recipe="paper"), tmp_path, tmp_path / "t")
+    assert paper.model_kwargs == {} and paper.keypoint_weight == 0 and paper.aligned_weight == 0
+    with pytest.raises(ValueError, match=r"recipe must be one of \['cpu', 'paper'\], got 'x'"):
+        demo.train_config(demo.DemoConfig(recipe="x"), tmp_path, tmp_path / "t")
