@@ -19,8 +19,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"handmesh demo: report written to {res.report} ({res.seconds['total'] / 60:.1f} min "
           f"this run; budget tier {cfg.budget})")
     print(f"held-out: {res.scores['num_samples']} scenes; '{demo.BASELINE_ROW}' = the "
-          "template's open hand predicted for every image, the bar to clear after alignment")
-    print(demo.headline(res.scores, res.baseline_scores))
+          f"template's open hand and '{demo.MEAN_ROW}' = the Procrustes mean of the training "
+          "meshes, each predicted for every image: the bars to clear after alignment")
+    print(demo.headline(res.scores, res.baseline_scores, res.mean_hand_scores))
     print(res.comparison or res.table)
     for name in ("overlays", "loss", "pck", "vr", "json"):
         if name in res.files:

@@ -84,7 +84,7 @@ import numpy as np
 
 __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "train_config", "plot_overlays",
            "plot_loss_curves", "write_report", "headline", "parse_headline", "HEADLINE",
-           "MODEL_ROW", "BASELINE_ROW", "RECIPES"]
+           "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES"]
 
 #: Training recipes (:class:`~handmesh_tutorial.train.TrainConfig` fields on top of
 #: :func:`train_config`): the paper's (one L1 vertex loss, an encoder that ends in global
@@ -98,9 +98,11 @@ RECIPES = {
             "keypoint_weight": 0.5, "aligned_weight": 1.0},
 }
 
-#: Row names of the headline table: the trained network and the rest-hand baseline (the
-#: template's open hand predicted for every image, :func:`handmesh_tutorial.train.evaluate`).
-MODEL_ROW, BASELINE_ROW = "MSMR-Net", "rest hand (no network)"
+#: Row names of the headline table: the trained network and the two constant baselines of
+#: :func:`handmesh_tutorial.train.evaluate`: the rest hand (the template's open hand) and the
+#: mean training hand (:func:`handmesh_tutorial.train.mean_hand`), each predicted for every image.
+MODEL_ROW, BASELINE_ROW, MEAN_ROW = ("MSMR-Net", "rest hand (no network)",
+                                     "mean training hand (no network)")
 
 #: Scores in the report's headline table: (eval.json key, column title, format).
 HEADLINE = (("mpjpe", "MPJPE (mm)", "{:.2f}"), ("pa_mpjpe", "PA-MPJPE (mm)", "{:.2f}"),
@@ -199,7 +201,8 @@ class DemoResult:
         config: the :class:`DemoConfig` used.
         train_epochs: epochs completed by the training run.
         baseline_scores: scores of the rest-hand baseline on the same test scenes.
-        comparison: markdown, model / rest hand per VR bin, scene kind and overall.
+        comparison: markdown, model / rest hand / mean hand per VR bin, scene kind and overall.
+        mean_hand_scores: scores of the mean training hand on the same test scenes.
     """
 
     out_dir: Path
@@ -213,6 +216,7 @@ class DemoResult:
     train_epochs: int = 0
     baseline_scores: dict | None = None
     comparison: str = ""
+    mean_hand_scores: dict | None = None
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -325,16 +329,17 @@ def plot_overlays(samples: list, pred_vertices, faces, titles: list | None = Non
     return fig
 
 
-def plot_loss_curves(history: list, step_losses: list, baseline: dict | None = None):
+def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = None):
     """Figure: training loss per step and per epoch, validation PA-MPJPE / PA-MPVPE per epoch.
 
     Args:
         history: rows of ``metrics.csv`` (dicts with ``epoch``, ``step``, ``train_loss`` in
             metres, ``val_pa_mpjpe``, ``val_pa_mpvpe`` in mm).
         step_losses: training loss of every step, metres.
-        baseline: scores of the rest-hand baseline on the validation scenes
-            (:func:`~handmesh_tutorial.train.rest_hand_scores`): dashed lines at its
-            PA-MPJPE and PA-MPVPE, the bar the curves must go under.
+        baselines: ``{name: scores}`` of constant baselines on the validation scenes
+            (:func:`~handmesh_tutorial.train.constant_hand_scores`: the rest hand, the mean
+            training hand): dashed / dotted lines at their PA-MPJPE and PA-MPVPE, the bars the
+            curves must go under.
 
     Returns:
         The matplotlib figure.
@@ -360,9 +365,11 @@ def plot_loss_curves(history: list, step_losses: list, baseline: dict | None = N
         if np.isfinite(vals).any():
             line = b.plot(e, vals, "o-", ms=3, label=label)[0]
             base_key = key[len("val_"):]
-            if baseline is not None and base_key in baseline and base_key != "mpjpe":
-                b.axhline(baseline[base_key], ls="--", lw=1, color=line.get_color(),
-                          label=f"{label}, rest hand (no network)")
+            for (name, sc), style in zip((baselines or {}).items(), ("--", ":", "-."),
+                                         strict=False):
+                if base_key in sc and base_key != "mpjpe":
+                    b.axhline(sc[base_key], ls=style, lw=1, color=line.get_color(),
+                              label=f"{label}, {name}")
     b.set_xlabel("epoch")
     b.set_ylabel("validation error (mm)")
     b.set_title("validation (10% of the training scenes)")
@@ -372,7 +379,7 @@ def plot_loss_curves(history: list, step_losses: list, baseline: dict | None = N
     return fig
 
 
-def headline(scores: dict, baseline: dict | None = None) -> str:
+def headline(scores: dict, baseline: dict | None = None, mean: dict | None = None) -> str:
     """The headline scores as a markdown table (formats of :data:`HEADLINE`).
 
     Args:
@@ -380,13 +387,16 @@ def headline(scores: dict, baseline: dict | None = None) -> str:
             the row :data:`MODEL_ROW`.
         baseline: optional scores of the rest-hand baseline on the same scenes (``eval.json``
             ``baseline.scores``), the row :data:`BASELINE_ROW`.
+        mean: optional scores of the mean training hand (``eval.json``
+            ``mean_hand_baseline.scores``), the row :data:`MEAN_ROW`.
 
     Returns:
         A markdown table.
     """
     head = "| | " + " | ".join(t for _, t, _ in HEADLINE) + " |"
     sep = "|---|" + "---|" * len(HEADLINE)
-    rows = [(MODEL_ROW, scores)] + ([(BASELINE_ROW, baseline)] if baseline else [])
+    rows = ([(MODEL_ROW, scores)] + ([(BASELINE_ROW, baseline)] if baseline else [])
+            + ([(MEAN_ROW, mean)] if mean else []))
     lines = [head, sep] + ["| " + name + " | " + " | ".join(
         f.format(sc[k]) if k in sc else "-" for k, _, f in HEADLINE) + " |" for name, sc in rows]
     return "\n".join(lines)
@@ -394,7 +404,8 @@ def headline(scores: dict, baseline: dict | None = None) -> str:
 
 def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: DemoConfig,
                  seconds: dict, figures: dict, counts: dict, train_info: dict,
-                 baseline: dict | None = None, comparison: str = "") -> Path:
+                 baseline: dict | None = None, comparison: str = "",
+                 mean: dict | None = None) -> Path:
     """Write ``report.md`` (atomically).
 
     Args:
@@ -408,6 +419,7 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         train_info: ``epochs``, ``steps``, ``checkpoint``, ``parameters``, ``size_ratio``
             (mean predicted / true bounding-box diagonal over the test scenes).
         baseline: scores of the rest-hand baseline (a second row of the headline table).
+        mean: scores of the mean training hand (a third row).
         comparison: model / rest hand per VR bin and scene kind (``evaluate``'s
             ``comparison``).
 
@@ -437,14 +449,17 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         "",
         "FreiHAND protocol (MPJPE root-relative, root = joint 9; PA- = after Procrustes "
         "alignment; F-scores on aligned vertices; AUC of the 3D PCK of aligned joints), over all "
-        "test scenes, target hand only. The second row needs no network: the template's open "
-        "rest-pose hand predicted for every image. After alignment it is the bar a model must "
-        "clear to have learnt the hand's articulation (its MPJPE, without alignment, is not "
-        "meaningful: it never turns). Roughness: mean |dihedral-angle difference| to the true "
-        "surface over interior edges (crumpled meshes score tens of degrees); flipped faces: "
-        "share of faces whose normal points against the true one after alignment.",
+        "test scenes, target hand only. The other rows need no network, each predicts one "
+        "constant mesh for every image: the template's open rest-pose hand, and the mean "
+        "training hand (the Procrustes mean of the training meshes: the data's average "
+        "articulation). After alignment they are the bars to clear: below the rest hand, a "
+        "model has learnt the data's typical pose; below the mean hand, it reads each hand's "
+        "pose from its image. (Their MPJPE, without alignment, is not meaningful: they never "
+        "turn.) Roughness: mean |dihedral-angle difference| to the true surface over interior "
+        "edges (crumpled meshes score tens of degrees); flipped faces: share of faces whose "
+        "normal points against the true one after alignment.",
         "",
-        headline(scores, baseline),
+        headline(scores, baseline, mean),
         "",
         "## Scores per visibility-ratio bin (paper Table 2 layout)",
         "",
@@ -452,8 +467,9 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         "",
         table,
         "",
-        *(["## Model / rest hand per VR bin and scene kind", "",
-           "Each cell: the network's score / the rest hand's, on the same scenes.", "",
+        *(["## Model / rest hand / mean hand per VR bin and scene kind", "",
+           "Each cell: the network's score / the rest hand's"
+           + (" / the mean training hand's" if mean else "") + ", on the same scenes.", "",
            comparison, ""] if comparison else []),
         "## Figures",
         "",
@@ -580,8 +596,13 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
 
     say(f"[3/4] evaluating {ckpt.name} on the {cfg.test_samples} held-out scenes")
     t = time.perf_counter()
+    train_ds, val_ds = T.make_datasets(tcfg)
+    mean = T.mean_hand(train_ds)  # the data's average articulation: the second constant bar
     ev = T.evaluate(ckpt, str(out / "data" / "test"), out_dir=out / "eval", device="cpu",
-                    threads=cfg.threads, progress=progress)
+                    threads=cfg.threads, progress=progress, mean_hand=mean)
+    val_baselines = None if val_ds is None or not len(val_ds) else {
+        "rest hand": T.constant_hand_scores(val_ds),
+        "mean hand": T.constant_hand_scores(val_ds, mean)}
     seconds["evaluate"] = time.perf_counter() - t
 
     say("[4/4] drawing figures and writing the report")
@@ -599,9 +620,7 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     files = dict(ev["files"])
     files["overlays"] = viz.save_figure(fig, out / "overlays.png", dpi=80)
     plt.close(fig)
-    val_ds = T.make_datasets(tcfg)[1]
-    val_rest = T.rest_hand_scores(val_ds) if val_ds is not None and len(val_ds) else None
-    fig = plot_loss_curves(res.history, res.step_losses, val_rest)
+    fig = plot_loss_curves(res.history, res.step_losses, val_baselines)
     files["loss"] = viz.save_figure(fig, out / "loss.png", dpi=90)
     plt.close(fig)
     figures = {"Predicted meshes (blue) vs ground truth (green) on held-out images, best to "
@@ -624,14 +643,16 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
                   "parameters": parameter_counts(res.model)["total"],
                   "size_ratio": float(np.mean(ratios))}
     baseline = ev["baseline"]["scores"]
+    mean_scores = ev["mean_hand_baseline"]["scores"]
     seconds["report"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
     files["report"] = write_report(out / "report.md", scores=ev["scores"], table=ev["table"],
                                    config=cfg, seconds=seconds, figures=figures, counts=counts,
                                    train_info=train_info, baseline=baseline,
-                                   comparison=ev["comparison"])
+                                   comparison=ev["comparison"], mean=mean_scores)
     summary = {"config": asdict(cfg), "seed": seed, "scores": ev["scores"],
                "baseline_scores": baseline, "baseline": BASELINE_ROW,
+               "mean_hand_scores": mean_scores, "mean_hand": MEAN_ROW,
                "vr_table": ev["vr_table"], "kind_table": ev["kind_table"],
                "baseline_vr_table": ev["baseline"]["vr_table"],
                "baseline_kind_table": ev["baseline"]["kind_table"], "seconds": seconds,
@@ -642,7 +663,7 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     return DemoResult(out_dir=out, report=files["report"], scores=ev["scores"],
                       vr_table=ev["vr_table"], table=ev["table"], files=files, seconds=seconds,
                       config=cfg, train_epochs=res.epochs, baseline_scores=baseline,
-                      comparison=ev["comparison"])
+                      comparison=ev["comparison"], mean_hand_scores=mean_scores)
 
 
 def _json_safe(obj):
@@ -662,7 +683,7 @@ def parse_headline(report: str, row: str = MODEL_ROW) -> dict:
 
     Args:
         report: the text of ``report.md``.
-        row: :data:`MODEL_ROW` or :data:`BASELINE_ROW`.
+        row: :data:`MODEL_ROW`, :data:`BASELINE_ROW` or :data:`MEAN_ROW`.
 
     Returns:
         {score key: float} for the keys of :data:`HEADLINE`.

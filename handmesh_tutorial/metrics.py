@@ -581,15 +581,16 @@ def scores_by_group(per_sample: dict, labels, order=None,
             for g in order]
 
 
-def comparison_table(rows: list[dict], baseline_rows: list[dict],
+def comparison_table(rows: list[dict], *baseline_rows: list[dict],
                      columns=("pa_mpjpe", "pa_mpvpe", "f_at_15mm", "roughness_deg", "flipped"),
                      first: str = "group") -> str:
-    """Markdown table of a model beside a baseline: each cell ``model / baseline``.
+    """Markdown table of a model beside one or more baselines: each cell ``model / baseline``
+    (``model / baseline 1 / baseline 2 ...``).
 
     Args:
         rows: the model's rows (:func:`scores_by_vr_bin`, :func:`scores_by_group`, or an
             overall row with ``bin`` ``"all"``).
-        baseline_rows: the baseline's rows on the same samples, same order and labels.
+        *baseline_rows: each baseline's rows on the same samples, same order and labels.
         columns: score keys to show (those missing from the rows are left out).
         first: title of the label column.
 
@@ -597,24 +598,30 @@ def comparison_table(rows: list[dict], baseline_rows: list[dict],
         The table (str).
 
     Raises:
-        ValueError: the two lists do not have the same labels.
+        ValueError: no baseline, or a baseline's labels differ from the model's.
     """
-    if [r.get("bin") for r in rows] != [r.get("bin") for r in baseline_rows]:
-        raise ValueError(f"rows {[r.get('bin') for r in rows]} and baseline rows "
-                         f"{[r.get('bin') for r in baseline_rows]} differ")
+    if not baseline_rows:
+        raise ValueError("give at least one baseline's rows")
+    labels = [r.get("bin") for r in rows]
+    for b in baseline_rows:
+        if [r.get("bin") for r in b] != labels:
+            raise ValueError(f"rows {labels} and baseline rows {[r.get('bin') for r in b]} "
+                             "differ")
     known = {k: (title, fmt) for k, title, fmt in _COLUMNS}
-    cols = [k for k in columns if rows and k in rows[0] and k in baseline_rows[0]]
+    cols = [k for k in columns if rows and k in rows[0]
+            and all(k in b[0] for b in baseline_rows)]
     header = [first, "N"] + [known.get(k, (k, ""))[0] for k in cols]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
 
     def cell(val, fmt):
         return "-" if isinstance(val, float) and math.isnan(val) else fmt.format(val)
 
-    for r, b in zip(rows, baseline_rows, strict=True):
+    for i, r in enumerate(rows):
         cells = [str(r.get("bin", "")), str(r.get("count", ""))]
         for k in cols:
             fmt = known.get(k, (k, "{:.4g}"))[1]
-            cells.append(f"{cell(r[k], fmt)} / {cell(b[k], fmt)}")
+            cells.append(" / ".join(cell(x[k], fmt) for x in
+                                    (r, *(b[i] for b in baseline_rows))))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

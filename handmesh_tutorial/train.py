@@ -69,8 +69,8 @@ __all__ = [
     "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
     "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
     "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
-    "rest_hand_predictions", "rest_hand_scores", "REST_HAND", "toy_sample",
-    "CHECKPOINT_FORMAT", "METRIC_COLUMNS",
+    "rest_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND", "MEAN_HAND",
+    "toy_sample", "CHECKPOINT_FORMAT", "METRIC_COLUMNS",
 ]
 
 #: ``format`` entry of every checkpoint written by :func:`save_checkpoint`.
@@ -1089,8 +1089,8 @@ def _broadcast_row(row: dict, world: int) -> dict:
 # evaluation
 
 
-#: Name of the rest-hand baseline in tables and reports.
-REST_HAND = "rest hand (no network)"
+#: Names of the two constant baselines in tables and reports.
+REST_HAND, MEAN_HAND = "rest hand (no network)", "mean training hand (no network)"
 
 
 def rest_hand_predictions(template_vertices, joint_regressor, num: int):
@@ -1113,23 +1113,62 @@ def rest_hand_predictions(template_vertices, joint_regressor, num: int):
     return tv.expand(num, -1, -1).clone(), (jr @ tv).expand(num, -1, -1).clone()
 
 
+def mean_hand(dataset, template=None, iterations: int = 5) -> np.ndarray:
+    """The mean training hand: the generalised Procrustes mean of a dataset's target meshes.
+
+    Each target is aligned to the current mean by a similarity transform (rotations only, no
+    reflection) and the aligned meshes are averaged, ``iterations`` times, starting from the rest
+    hand. The result is the average *articulation* of the data with orientation and size removed:
+    predicted for every image it is a constant answer, like the rest hand, but the best one for
+    the aligned metrics. A network whose PA- errors are not below it has learnt the data's mean
+    pose, not to read each hand's pose from its image.
+
+    Args:
+        dataset: a :class:`~handmesh_tutorial.augment.HandCropDataset` (e.g. the training split
+            of :func:`make_datasets`); only ``vertices`` are read.
+        template: the network's template (default: the library's hand).
+        iterations: alignment-and-average rounds (the mean changes by < 0.01 mm after 3 on
+            INTER-SH).
+
+    Returns:
+        ``(V, 3)`` float64 vertices in the network frame (aligned to the root-centred rest hand,
+        then joint 9 moved to the origin), metres.
+    """
+    tmpl = resolve_template(template)
+    if len(dataset) == 0:
+        raise ValueError("the dataset is empty")
+    rest = _rest_template(tmpl)
+    verts = np.stack([dataset[i]["vertices"].double().numpy() for i in range(len(dataset))])
+    if verts.shape[1:] != rest.shape:
+        raise ValueError(f"the dataset's vertices {verts.shape[1:]} do not match the template's "
+                         f"{rest.shape}")
+    mean = rest
+    for _ in range(int(iterations)):
+        mean = M.procrustes_align(verts, np.broadcast_to(mean, verts.shape),
+                                  allow_reflection=False).mean(0)
+    mean = M.procrustes_align(mean[None], rest[None], allow_reflection=False)[0]
+    return mean - tmpl.joint_regressor[9] @ mean
+
+
 def _rest_template(template):
     from .model import root_centred_template
 
     return root_centred_template(template)
 
 
-def rest_hand_scores(dataset, template=None) -> dict:
-    """FreiHAND-style scores of the rest-hand baseline on a dataset's targets (no network).
+def constant_hand_scores(dataset, vertices=None, template=None) -> dict:
+    """FreiHAND-style scores of one constant mesh predicted for every item (no network).
 
     Args:
         dataset: a :class:`~handmesh_tutorial.augment.HandCropDataset` (or a ``Subset`` of one);
             only its ``vertices`` and ``joints`` are read.
-        template: the network's template (default: the library's hand).
+        vertices: ``(V, 3)`` the constant mesh in the network frame, e.g. :func:`mean_hand`;
+            default the rest hand (the template's root-centred open hand).
+        template: the network's template (default: the library's hand); its joint regressor
+            gives the constant mesh's joints.
 
     Returns:
-        :func:`~handmesh_tutorial.metrics.freihand_scores` of the template's root-centred open
-        hand predicted for every item (mm, AUC, F-scores).
+        :func:`~handmesh_tutorial.metrics.freihand_scores` (mm, AUC, F-scores).
     """
     tmpl = resolve_template(template)
     if len(dataset) == 0:
@@ -1137,7 +1176,8 @@ def rest_hand_scores(dataset, template=None) -> dict:
     items = [dataset[i] for i in range(len(dataset))]
     gv = torch.stack([it["vertices"] for it in items])
     gj = torch.stack([it["joints"] for it in items])
-    rv, rj = rest_hand_predictions(_rest_template(tmpl), tmpl.joint_regressor, len(items))
+    const = _rest_template(tmpl) if vertices is None else vertices
+    rv, rj = rest_hand_predictions(const, tmpl.joint_regressor, len(items))
     return M.freihand_scores(pred_joints=rj, gt_joints=gj, pred_verts=rv, gt_verts=gv)
 
 
@@ -1202,7 +1242,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
              split: str = "evaluation", image_size: int | None = None, batch_size: int = 16,
              device: str = "auto", out_dir: str | os.PathLike | None = None,
              camera_frame: bool = True, num_samples: int | None = None, template=None,
-             progress: bool = True, threads: int | None = None, baseline: bool = True) -> dict:
+             progress: bool = True, threads: int | None = None, baseline: bool = True,
+             mean_hand=None) -> dict:
     """Evaluate a trained network: FreiHAND-style scores, per-sample errors, VR table, figures.
 
     Every item is the deterministic crop of its target hand (no augmentation); errors are
@@ -1234,6 +1275,9 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             template (the open rest-pose hand, root-centred) predicted for every image, no
             network at all (:func:`rest_hand_predictions`). After Procrustes alignment it is
             the bar a model must clear to have learnt the hand's articulation.
+        mean_hand: ``(V, 3)`` network-frame vertices of a second constant baseline scored
+            the same way, normally :func:`mean_hand` of the training data (the data's average
+            articulation): the bar a model must clear to read *each* hand's pose from its image.
 
     Returns:
         dict with ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`: mm, AUC,
@@ -1249,7 +1293,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         :func:`~handmesh_tutorial.metrics.scores_by_group` per scene kind, INTER-SH only, else
         empty), ``table`` (markdown), ``baseline`` (with ``baseline=True``: the rest hand's
         ``scores``, ``per_sample``, ``errors``, ``vr_table``, ``kind_table`` on the same items, else
-        ``None``), ``comparison`` (markdown, model / rest hand per VR bin, kind and overall;
+        ``None``), ``mean_hand_baseline`` (the same for ``mean_hand``, or ``None``),
+        ``comparison`` (markdown, model / rest hand [/ mean hand] per VR bin, kind and overall;
         ``""`` without baseline), ``predictions`` (``vertices`` (N, V, 3), ``joints``
         (N, 21, 3) numpy, metres), ``num_samples`` and ``files`` (paths written).
     """
@@ -1298,12 +1343,20 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             tv if tv is not None else _rest_template(resolve_template(template)),
             net.joint_regressor, len(vr))
         rest = _score_predictions(rest_j, rest_v, r, vr, kinds, faces)
+    mean = None
+    if mean_hand is not None:
+        mv = np.asarray(_to_numpy(mean_hand), dtype=np.float64)
+        if mv.shape != tuple(r["vertices"].shape[1:]):
+            raise ValueError(f"mean_hand must be {tuple(r['vertices'].shape[1:])}, got "
+                             f"{mv.shape}")
+        mean_v, mean_j = rest_hand_predictions(mv, net.joint_regressor, len(vr))
+        mean = _score_predictions(mean_j, mean_v, r, vr, kinds, faces)
     table = M.format_table([*model["vr_table"], *model["kind_table"], model["overall"]])
     comparison = ""
     if rest is not None:
         comparison = M.comparison_table(
-            [*model["vr_table"], *model["kind_table"], model["overall"]],
-            [*rest["vr_table"], *rest["kind_table"], rest["overall"]], first="VR bin / kind")
+            *[[*x["vr_table"], *x["kind_table"], x["overall"]]
+              for x in (model, rest, mean) if x is not None], first="VR bin / kind")
     scores, errors, per_sample = model["scores"], model["errors"], model["per_sample"]
     vr_table = model["vr_table"]
     if camera_frame:
@@ -1315,6 +1368,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         "scores": scores, "per_sample": per_sample, "errors": errors, "vr_table": vr_table,
         "kind_table": model["kind_table"], "table": table, "num_samples": int(len(vr)),
         "baseline": None if rest is None else {k: rest[k] for k in (
+            "scores", "per_sample", "errors", "vr_table", "kind_table")},
+        "mean_hand_baseline": None if mean is None else {k: mean[k] for k in (
             "scores", "per_sample", "errors", "vr_table", "kind_table")},
         "comparison": comparison,
         "predictions": {"vertices": pv.numpy(), "joints": pj.numpy(),
@@ -1342,6 +1397,10 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
                    "kind_table": res["baseline"]["kind_table"],
                    "per_sample": {k: v.tolist()
                                   for k, v in res["baseline"]["per_sample"].items()}},
+               "mean_hand_baseline": None if res["mean_hand_baseline"] is None else {
+                   "name": MEAN_HAND, "scores": res["mean_hand_baseline"]["scores"],
+                   "vr_table": res["mean_hand_baseline"]["vr_table"],
+                   "kind_table": res["mean_hand_baseline"]["kind_table"]},
                "comparison": res["comparison"],
                "predictions_frame": res["predictions"]["frame"]}
     files["json"] = out / "eval.json"
@@ -1359,6 +1418,8 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
               "joints (root-rel.)": errors["joint_err_rr"]}
     if res["baseline"] is not None:  # the bar to clear, on the same samples
         curves["rest hand, joints (PA)"] = res["baseline"]["errors"]["joint_err_pa"]
+    if res["mean_hand_baseline"] is not None:
+        curves["mean hand, joints (PA)"] = res["mean_hand_baseline"]["errors"]["joint_err_pa"]
     viz.plot_pck_curves(ax, curves)
     ax.set_title(f"3D PCK, {res['num_samples']} samples")
     files["pck"] = viz.save_figure(fig, out / "pck.png", dpi=90)

@@ -113,7 +113,10 @@ def test_rest_hand_baseline_row_equals_an_independent_computation(smoke_run):
     summary = json.loads((out / "demo.json").read_text())
     assert summary["baseline"] == demo.BASELINE_ROW
     assert summary["baseline_scores"]["pa_mpjpe"] == pytest.approx(want["pa_mpjpe"], abs=1e-3)
-    assert "Model / rest hand per VR bin and scene kind" in (out / "report.md").read_text()
+    assert "Model / rest hand / mean hand per VR bin and scene kind" in (
+        out / "report.md").read_text()
+    mean = demo.parse_headline((out / "report.md").read_text(), demo.MEAN_ROW)
+    assert mean["pa_mpjpe"] == pytest.approx(round(summary["mean_hand_scores"]["pa_mpjpe"], 2))
 
 
 def test_demo_resumes(smoke_run):

@@ -383,3 +383,44 @@ def test_cpu_recipe_terms_train_and_each_changes_the_objective(samples, tmp_path
     assert res.steps == 2 and all(math.isfinite(x) for x in res.step_losses)
     net2, ck = T.load_checkpoint(res.checkpoint)
     assert ck["config"]["keypoint_weight"] == 0.1 and "uv" in net2(batch["image"])
+
+
+def test_mean_hand_is_the_procrustes_mean_and_evaluate_scores_it(toy_root, tmp_path):
+    """Rotated, scaled copies of one posed hand average to that hand (up to a similarity);
+    evaluate scores a given mean hand as a third column; bad shapes are named."""
+    from handmesh_tutorial.metrics import procrustes_align
+
+    cfg = T.TrainConfig(data=str(toy_root), out_dir=str(tmp_path / "r"), val_fraction=0.0,
+                        augment=False, **TINY)
+    train_ds = T.make_datasets(cfg)[0]
+    posed = train_ds[0]["vertices"].double().numpy()
+    rng = np.random.default_rng(0)
+
+    class Copies(torch.utils.data.Dataset):
+        def __len__(self):
+            return 6
+
+        def __getitem__(self, i):
+            q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+            rot = q * np.sign(np.linalg.det(q))
+            return {"vertices": torch.tensor((1 + 0.1 * i) * posed @ rot.T)}
+
+    mean = T.mean_hand(Copies())
+    err = np.linalg.norm(procrustes_align(mean[None], posed[None]) - posed, axis=-1).max()
+    assert err < 1e-6
+    tmpl = T.resolve_template(None)
+    assert np.allclose(tmpl.joint_regressor[9] @ mean, 0.0, atol=1e-9)  # root at the origin
+    # the data's mean is closer (after alignment) to the data than the rest hand is
+    mean = T.mean_hand(train_ds)
+    torch.manual_seed(0)
+    net = T.build_model_from_config(cfg)
+    ev = T.evaluate(net, toy_root, image_size=32, progress=False, mean_hand=mean)
+    m, r = ev["mean_hand_baseline"]["scores"], ev["baseline"]["scores"]
+    assert m["pa_mpvpe"] < r["pa_mpvpe"]
+    want = T.constant_hand_scores(A.InterSHTorchDataset(toy_root, 32, train=False), mean)
+    assert m["pa_mpjpe"] == pytest.approx(want["pa_mpjpe"], rel=1e-5)
+    line = next(ln for ln in ev["comparison"].splitlines() if ln.startswith("| all |"))
+    assert line.split("|")[3].strip() == (f"{ev['scores']['pa_mpjpe']:.2f} / {r['pa_mpjpe']:.2f}"
+                                          f" / {m['pa_mpjpe']:.2f}")
+    with pytest.raises(ValueError, match=r"mean_hand must be \(779, 3\), got \(5, 3\)"):
+        T.evaluate(net, toy_root, image_size=32, progress=False, mean_hand=np.zeros((5, 3)))
