@@ -141,6 +141,28 @@ def _build(model_or_config, code_dim: int, template):
     return build_model(**cfg)
 
 
+def _fit_steps(net, codes, target, opt, sched, losses, bs, gen, loss, progress, t0, c0):
+    """The optimisation loop of :func:`fit_decoder` (fills ``losses`` in place)."""
+    n, steps = len(target), len(losses)
+    for step in range(steps):
+        idx = (torch.arange(n) if bs == n
+               else torch.randperm(n, generator=gen)[:bs])
+        pred = net.decode(codes[idx])["vertices"]
+        diff = pred - target[idx]
+        value = diff.abs().mean() if loss == "l1" else diff.square().mean()
+        opt.zero_grad(set_to_none=True)
+        value.backward()
+        opt.step()
+        sched.step()
+        losses[step] = diff.detach().abs().mean().item()
+        if not np.isfinite(losses[step]):
+            raise FloatingPointError(f"loss is {losses[step]} at step {step + 1}")
+        if progress and (step + 1) % max(steps // 10, 1) == 0:
+            print(f"step {step + 1:5d}  L1 {1000 * losses[step]:.3f} mm  "
+                  f"{time.perf_counter() - t0:.0f} s, {time.process_time() - c0:.0f} CPU s",
+                  flush=True)
+
+
 def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: int = 300,
                 seed: int = 0, *, faces=None, lr: float = 1e-3, code_lr: float | None = None,
                 code_dim: int = 64, batch_size: int | None = None, template=None,
@@ -205,23 +227,13 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
     losses = np.zeros(steps)
     bs = n if batch_size is None else min(batch_size, n)
     t0, c0 = time.perf_counter(), time.process_time()
-    for step in range(steps):
-        idx = (torch.arange(n) if bs == n
-               else torch.randperm(n, generator=gen)[:bs])
-        pred = net.decode(codes[idx])["vertices"]
-        diff = pred - target[idx]
-        value = diff.abs().mean() if loss == "l1" else diff.square().mean()
-        opt.zero_grad(set_to_none=True)
-        value.backward()
-        opt.step()
-        sched.step()
-        losses[step] = diff.detach().abs().mean().item()
-        if not np.isfinite(losses[step]):
-            raise FloatingPointError(f"loss is {losses[step]} at step {step + 1}")
-        if progress and (step + 1) % max(steps // 10, 1) == 0:
-            print(f"step {step + 1:5d}  L1 {1000 * losses[step]:.3f} mm  "
-                  f"{time.perf_counter() - t0:.0f} s, {time.process_time() - c0:.0f} CPU s",
-                  flush=True)
+    # Subnormal floats (the raw xyz decoder's activations decay into them) make CPU kernels up
+    # to 10x slower: flush them to zero while fitting (torch's default, off, is restored).
+    torch.set_flush_denormal(True)
+    try:
+        _fit_steps(net, codes, target, opt, sched, losses, bs, gen, loss, progress, t0, c0)
+    finally:
+        torch.set_flush_denormal(False)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     net.eval()
     pred = predict()
