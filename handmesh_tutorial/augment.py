@@ -548,6 +548,12 @@ class HandCropDataset(torch.utils.data.Dataset):
             "index": torch.tensor(int(index), dtype=torch.int64),
         }
 
+    def target_shape(self, i: int) -> np.ndarray:
+        """Item ``i``'s target mesh up to a rotation and translation: ``(V, 3)`` float64 metres,
+        mirrored to a right hand like the item (what shape statistics such as
+        :func:`~handmesh_tutorial.train.mean_hand` need; subclasses read it without the image)."""
+        return self[i]["vertices"].double().numpy()
+
     def vr_values(self) -> np.ndarray:
         """Target VR of every item, ``(N,)`` float64 (NaN when unknown)."""
         return np.array([self._raw(i)[5] for i in self.indices], dtype=np.float64)
@@ -592,6 +598,24 @@ class InterSHTorchDataset(HandCropDataset):
         vr = s.get("vr", {}).get(t, float("nan"))
         return (s["image"], s["K"], s["meshes"][t][0], s["joints"][t], s["sides"][t],
                 float("nan") if vr is None else float(vr))
+
+    def target_shape(self, i: int) -> np.ndarray:
+        """See :meth:`HandCropDataset.target_shape`; reads only the annotation of an on-disk
+        root (no image)."""
+        if not hasattr(self.source, "sample_dir"):
+            return super().target_shape(i)
+        index = self.indices[i]
+        ann = self.source.annotation(index)
+        t = ann["target"]
+        path = self.source.sample_dir(index) / "annotation.npz"
+        with np.load(path, allow_pickle=False) as z:
+            key = f"vertices_{t}"
+            if key not in z.files:
+                raise ValueError(f"{path}: no {key!r} (keys {sorted(z.files)})")
+            v = z[key].astype(np.float64)
+        if ann["sides"][t] == "left" and self.mirror_left:
+            v = v * np.array([-1.0, 1.0, 1.0])
+        return v
 
     def vr_values(self) -> np.ndarray:
         """Target VR of every item (reads only ``annotation.json`` for an on-disk root)."""

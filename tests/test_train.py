@@ -394,6 +394,9 @@ def test_mean_hand_is_the_procrustes_mean_and_evaluate_scores_it(toy_root, tmp_p
                         augment=False, **TINY)
     train_ds = T.make_datasets(cfg)[0]
     posed = train_ds[0]["vertices"].double().numpy()
+    for i in range(len(train_ds)):  # read without the image: the item's mesh up to translation
+        a, b = train_ds.target_shape(i), train_ds[i]["vertices"].double().numpy()
+        np.testing.assert_allclose(a - a.mean(0), b - b.mean(0), atol=1e-6)
     rng = np.random.default_rng(0)
 
     class Copies(torch.utils.data.Dataset):
