@@ -26,6 +26,12 @@ one CPU thread (``benchmarks/decoder_fit.py``; about two CPU minutes for the mul
 For scale: the rest hand against the same targets is 34 mm and 5.3 degrees. With a uniformly
 random global rotation per hand (as the camera-frame training targets) the multi-path decoder
 reaches 2.1 mm and 8.8 degrees (before the fixes 6.3 mm, 59 degrees).
+
+On the MakeHuman hand (779 vertices, the default template since then; notebook 07, 800 steps of
+8 of 32 hands, two threads): paper's xyz output 6.6 mm / 71 degrees / 26% flipped; library
+default multi-path 1.5 mm / 17.1 degrees / 2.1%, single path 1.8 mm / 17.6 degrees / 2.2%; the
+rest hand against those targets 36.5 mm / 11.1 degrees. The roughness there is not yet at the
+procedural hand's level.
 """
 
 from __future__ import annotations
