@@ -415,7 +415,7 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
             (mean predicted / true bounding-box diagonal over the test scenes).
         baseline: scores of the rest-hand baseline (a second row of the headline table).
         mean: scores of the mean training hand (a third row).
-        comparison: model / rest hand per VR bin and scene kind (``evaluate``'s
+        comparison: model / rest hand / mean hand per VR bin and scene kind (``evaluate``'s
             ``comparison``).
 
     Returns:
@@ -650,7 +650,9 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
                "mean_hand_scores": mean_scores, "mean_hand": MEAN_ROW,
                "vr_table": ev["vr_table"], "kind_table": ev["kind_table"],
                "baseline_vr_table": ev["baseline"]["vr_table"],
-               "baseline_kind_table": ev["baseline"]["kind_table"], "seconds": seconds,
+               "baseline_kind_table": ev["baseline"]["kind_table"],
+               "mean_hand_vr_table": ev["mean_hand_baseline"]["vr_table"],
+               "mean_hand_kind_table": ev["mean_hand_baseline"]["kind_table"], "seconds": seconds,
                "counts": counts,
                "train": train_info, "files": {k: str(v) for k, v in files.items()}}
     files["json"] = out / "demo.json"

@@ -1297,9 +1297,10 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         empty), ``table`` (markdown), ``baseline`` (with ``baseline=True``: the rest hand's
         ``scores``, ``per_sample``, ``errors``, ``vr_table``, ``kind_table`` on the same items, else
         ``None``), ``mean_hand_baseline`` (the same for ``mean_hand``, or ``None``),
-        ``comparison`` (markdown, model / rest hand [/ mean hand] per VR bin, kind and overall;
-        ``""`` without baseline), ``predictions`` (``vertices`` (N, V, 3), ``joints``
-        (N, 21, 3) numpy, metres), ``num_samples`` and ``files`` (paths written).
+        ``comparison`` (markdown, model / rest hand / mean hand, those scored, per VR bin, kind
+        and overall; ``""`` without either baseline), ``predictions`` (``vertices``
+        (N, V, 3), ``joints`` (N, 21, 3) numpy, metres), ``num_samples`` and ``files`` (paths
+        written).
     """
     if threads is not None:
         torch.set_num_threads(int(threads))
@@ -1356,7 +1357,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         mean = _score_predictions(mean_j, mean_v, r, vr, kinds, faces)
     table = M.format_table([*model["vr_table"], *model["kind_table"], model["overall"]])
     comparison = ""
-    if rest is not None:
+    if rest is not None or mean is not None:
         comparison = M.comparison_table(
             *[[*x["vr_table"], *x["kind_table"], x["overall"]]
               for x in (model, rest, mean) if x is not None], first="VR bin / kind")
