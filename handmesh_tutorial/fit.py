@@ -36,6 +36,7 @@ procedural hand's level.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -147,26 +148,15 @@ def _build(model_or_config, code_dim: int, template):
     return build_model(**cfg)
 
 
-def _fit_steps(net, codes, target, opt, sched, losses, bs, gen, loss, progress, t0, c0):
-    """The optimisation loop of :func:`fit_decoder` (fills ``losses`` in place)."""
-    n, steps = len(target), len(losses)
-    for step in range(steps):
-        idx = (torch.arange(n) if bs == n
-               else torch.randperm(n, generator=gen)[:bs])
-        pred = net.decode(codes[idx])["vertices"]
-        diff = pred - target[idx]
-        value = diff.abs().mean() if loss == "l1" else diff.square().mean()
-        opt.zero_grad(set_to_none=True)
-        value.backward()
-        opt.step()
-        sched.step()
-        losses[step] = diff.detach().abs().mean().item()
-        if not np.isfinite(losses[step]):
-            raise FloatingPointError(f"loss is {losses[step]} at step {step + 1}")
-        if progress and (step + 1) % max(steps // 10, 1) == 0:
-            print(f"step {step + 1:5d}  L1 {1000 * losses[step]:.3f} mm  "
-                  f"{time.perf_counter() - t0:.0f} s, {time.process_time() - c0:.0f} CPU s",
-                  flush=True)
+@contextlib.contextmanager
+def _flushed_subnormals():
+    """Flush subnormal floats to zero inside the block (torch's default, off, is restored):
+    the raw xyz decoder's activations decay into them and make CPU kernels up to 10x slower."""
+    torch.set_flush_denormal(True)
+    try:
+        yield
+    finally:
+        torch.set_flush_denormal(False)
 
 
 def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: int = 300,
@@ -233,13 +223,24 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
     losses = np.zeros(steps)
     bs = n if batch_size is None else min(batch_size, n)
     t0, c0 = time.perf_counter(), time.process_time()
-    # Subnormal floats (the raw xyz decoder's activations decay into them) make CPU kernels up
-    # to 10x slower: flush them to zero while fitting (torch's default, off, is restored).
-    torch.set_flush_denormal(True)
-    try:
-        _fit_steps(net, codes, target, opt, sched, losses, bs, gen, loss, progress, t0, c0)
-    finally:
-        torch.set_flush_denormal(False)
+    with _flushed_subnormals():
+        for step in range(steps):
+            idx = (torch.arange(n) if bs == n
+                   else torch.randperm(n, generator=gen)[:bs])
+            pred = net.decode(codes[idx])["vertices"]
+            diff = pred - target[idx]
+            value = diff.abs().mean() if loss == "l1" else diff.square().mean()
+            opt.zero_grad(set_to_none=True)
+            value.backward()
+            opt.step()
+            sched.step()
+            losses[step] = diff.detach().abs().mean().item()
+            if not np.isfinite(losses[step]):
+                raise FloatingPointError(f"loss is {losses[step]} at step {step + 1}")
+            if progress and (step + 1) % max(steps // 10, 1) == 0:
+                print(f"step {step + 1:5d}  L1 {1000 * losses[step]:.3f} mm  "
+                      f"{time.perf_counter() - t0:.0f} s, {time.process_time() - c0:.0f} CPU s",
+                      flush=True)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     net.eval()
     pred = predict()

@@ -36,6 +36,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .encoder import ResNet
+from .freihand import project
 
 __all__ = ["KeypointEncoder", "soft_argmax", "normalised_keypoints", "keypoint_loss"]
 
@@ -69,9 +70,7 @@ def normalised_keypoints(joints: torch.Tensor, root: torch.Tensor, K: torch.Tens
     Returns:
         ``(B, J, 2)`` positions in ``[-1, 1]`` (outside when a joint leaves the crop).
     """
-    p = joints + root[:, None, :]
-    q = torch.einsum("bij,bpj->bpi", K.to(p.dtype), p)
-    uv = q[..., :2] / q[..., 2:3]
+    uv = project(joints + root[:, None, :], K)
     return (2 * uv + 1) / image_size - 1
 
 

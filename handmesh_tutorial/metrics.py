@@ -438,6 +438,24 @@ def freihand_scores(*, pred_joints, gt_joints, pred_verts, gt_verts,
     """
     ps = per_sample_scores(pred_joints=pred_joints, gt_joints=gt_joints, pred_verts=pred_verts,
                            gt_verts=gt_verts, allow_reflection=allow_reflection)
+    scores = scores_from_errors(ps)
+    if unaligned_fscore:
+        fu = f_score(pred_verts, gt_verts, FSCORE_THRESHOLDS)["f"]
+        scores["f_at_5mm_unaligned"] = float(fu[:, 0].mean())
+        scores["f_at_15mm_unaligned"] = float(fu[:, 1].mean())
+    return scores
+
+
+def scores_from_errors(ps: dict) -> dict:
+    """The scores of :func:`freihand_scores` from already computed per-sample errors.
+
+    Args:
+        ps: :func:`per_sample_scores` output with vertices (the F-scores at the default
+            thresholds, 5 and 15 mm).
+
+    Returns:
+        The dict of :func:`freihand_scores` without the unaligned F-scores.
+    """
     je, jpa, ve, vpa = ps["joint_err"], ps["joint_err_pa"], ps["vert_err"], ps["vert_err_pa"]
     ft, pt = FREIHAND_THRESHOLDS, PAPER_THRESHOLDS
     s_je, s_jpa, s_ve, s_vpa = (np.sort(e, axis=None) for e in (je, jpa, ve, vpa))  # sort once
@@ -456,10 +474,6 @@ def freihand_scores(*, pred_joints, gt_joints, pred_verts, gt_verts,
         "auc_verts_20mm": auc(_pck_sorted(s_vpa, pt), pt),
         "num_samples": int(je.shape[0]),
     }
-    if unaligned_fscore:
-        fu = f_score(pred_verts, gt_verts, FSCORE_THRESHOLDS)["f"]
-        scores["f_at_5mm_unaligned"] = float(fu[:, 0].mean())
-        scores["f_at_15mm_unaligned"] = float(fu[:, 1].mean())
     return scores
 
 

@@ -69,7 +69,7 @@ __all__ = [
     "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
     "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
     "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
-    "rest_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND", "MEAN_HAND",
+    "constant_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND", "MEAN_HAND",
     "toy_sample", "CHECKPOINT_FORMAT", "METRIC_COLUMNS",
 ]
 
@@ -1093,20 +1093,21 @@ def _broadcast_row(row: dict, world: int) -> dict:
 REST_HAND, MEAN_HAND = "rest hand (no network)", "mean training hand (no network)"
 
 
-def rest_hand_predictions(template_vertices, joint_regressor, num: int):
-    """The rest-hand baseline's answer for ``num`` images: the same open hand every time.
+def constant_hand_predictions(template_vertices, joint_regressor, num: int):
+    """A constant baseline's answer for ``num`` images: the same hand every time.
 
     Args:
-        template_vertices: ``(V, 3)`` root-centred template (the network frame's rest hand,
-            e.g. :func:`~handmesh_tutorial.model.root_centred_template`), metres.
+        template_vertices: ``(V, 3)`` the constant hand in the network frame (the rest hand,
+            :func:`~handmesh_tutorial.model.root_centred_template`, or :func:`mean_hand`),
+            metres; numpy or torch.
         joint_regressor: ``(21, V)`` regressor the network uses for its joints.
         num: number of predictions.
 
     Returns:
         ``(vertices (num, V, 3), joints (num, 21, 3))`` float32 tensors, metres.
     """
-    tv = torch.as_tensor(np.asarray(_to_numpy(template_vertices)), dtype=torch.float32)
-    jr = torch.as_tensor(np.asarray(_to_numpy(joint_regressor)), dtype=torch.float32)
+    tv = torch.as_tensor(template_vertices, dtype=torch.float32).detach().cpu()
+    jr = torch.as_tensor(joint_regressor, dtype=torch.float32).detach().cpu()
     if tv.ndim != 2 or tv.shape[1] != 3 or jr.ndim != 2 or jr.shape[1] != tv.shape[0]:
         raise ValueError(f"template_vertices must be (V, 3) and joint_regressor (J, V), got "
                          f"{tuple(tv.shape)} and {tuple(jr.shape)}")
@@ -1180,12 +1181,8 @@ def constant_hand_scores(dataset, vertices=None, template=None) -> dict:
     gv = torch.stack([it["vertices"] for it in items])
     gj = torch.stack([it["joints"] for it in items])
     const = _rest_template(tmpl) if vertices is None else vertices
-    rv, rj = rest_hand_predictions(const, tmpl.joint_regressor, len(items))
+    rv, rj = constant_hand_predictions(const, tmpl.joint_regressor, len(items))
     return M.freihand_scores(pred_joints=rj, gt_joints=gj, pred_verts=rv, gt_verts=gv)
-
-
-def _to_numpy(x):
-    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else x
 
 
 def _item_kinds(dataset, index: np.ndarray) -> list | None:
@@ -1206,8 +1203,7 @@ def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kind
 
     errors = M.per_sample_scores(pred_joints=pred_joints, gt_joints=r["joints"],
                                  pred_verts=pred_vertices, gt_verts=r["vertices"])
-    scores = M.freihand_scores(pred_joints=pred_joints, gt_joints=r["joints"],
-                               pred_verts=pred_vertices, gt_verts=r["vertices"])
+    scores = M.scores_from_errors(errors)
     if faces is not None:
         pv, gv = pred_vertices.double().numpy(), r["vertices"].double().numpy()
         errors["roughness_deg"] = roughness_deg(pv, gv, faces)
@@ -1276,7 +1272,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         threads: ``torch.set_num_threads`` value.
         baseline: also score the **rest-hand baseline** on the same items: the network's
             template (the open rest-pose hand, root-centred) predicted for every image, no
-            network at all (:func:`rest_hand_predictions`). After Procrustes alignment it is
+            network at all (:func:`constant_hand_predictions`). After Procrustes alignment it is
             the bar a model must clear to have learnt the hand's articulation.
         mean_hand: ``(V, 3)`` network-frame vertices of a second constant baseline scored
             the same way, normally :func:`mean_hand` of the training data (the data's average
@@ -1343,17 +1339,17 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     rest = None
     if baseline:
         tv = getattr(net, "template", None)
-        rest_v, rest_j = rest_hand_predictions(
+        rest_v, rest_j = constant_hand_predictions(
             tv if tv is not None else _rest_template(resolve_template(template)),
             net.joint_regressor, len(vr))
         rest = _score_predictions(rest_j, rest_v, r, vr, kinds, faces)
     mean = None
     if mean_hand is not None:
-        mv = np.asarray(_to_numpy(mean_hand), dtype=np.float64)
+        mv = torch.as_tensor(mean_hand, dtype=torch.float64).detach().cpu().numpy()
         if mv.shape != tuple(r["vertices"].shape[1:]):
             raise ValueError(f"mean_hand must be {tuple(r['vertices'].shape[1:])}, got "
                              f"{mv.shape}")
-        mean_v, mean_j = rest_hand_predictions(mv, net.joint_regressor, len(vr))
+        mean_v, mean_j = constant_hand_predictions(mv, net.joint_regressor, len(vr))
         mean = _score_predictions(mean_j, mean_v, r, vr, kinds, faces)
     table = M.format_table([*model["vr_table"], *model["kind_table"], model["overall"]])
     comparison = ""
