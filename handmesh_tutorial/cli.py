@@ -2,12 +2,23 @@
 
 Each sub-command is a thin wrapper: argument parsing here, the work in the library module that owns
 the concept, so everything the command does can also be called from Python or a notebook.
+
+Errors: a library error prints one line on stderr (``handmesh COMMAND: error: ...``, naming the
+file, key or shape and what to do) and exits with a code that says what kind of problem it was
+(:data:`EXIT_CODES`); ``handmesh --debug COMMAND ...`` shows the full traceback instead.
 """
 
 from __future__ import annotations
 
 import argparse
+import pickle
 import sys
+import traceback
+import zipfile
+
+#: Exit codes of ``handmesh`` (argparse's own usage errors exit with 2).
+EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4,
+              "exists": 5, "interrupted": 130}
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -87,7 +98,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
                      augment=not args.no_augment, progress=not args.no_progress,
                      durable=not args.no_fsync)
     cfg = train.TrainConfig.from_budget(budget(args.budget), **overrides)
-    res = train.train(cfg, resume=args.resume)
+    res = train.train(cfg, resume=args.resume, overwrite=args.overwrite)
     if res.rank != 0:
         return 0
     print(f"handmesh train: {res.epochs} epochs, {res.steps} steps, {res.seconds:.1f} s, "
@@ -130,6 +141,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="handmesh",
         description="MSMR-Net tutorial toolkit: generate INTER-SH scenes, train, evaluate, demo.",
     )
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error instead of one line")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     demo = sub.add_parser("demo", help="generate a VR-balanced INTER-SH set, train MSMR-Net on "
@@ -203,6 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--val-every", type=int, help="validate every N epochs")
     tr.add_argument("--checkpoint-every", type=int, help="checkpoint every N epochs")
     tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint_last.pt")
+    tr.add_argument("--overwrite", action="store_true",
+                    help="start afresh in an OUT that already holds a run (its checkpoints are "
+                    "replaced); without --resume or --overwrite such an OUT is refused")
     tr.add_argument("--no-augment", action="store_true", help="no data augmentation")
     tr.add_argument("--no-progress", action="store_true", help="no progress bars")
     tr.add_argument("--no-fsync", action="store_true",
@@ -237,7 +253,52 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 0
-    return int(args.func(args) or 0)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print(f"handmesh {args.command}: interrupted (rerun the same command to resume)",
+              file=sys.stderr)
+        return EXIT_CODES["interrupted"]
+    except Exception as err:  # noqa: BLE001 - every error becomes one line + an exit code
+        if args.debug:
+            traceback.print_exc()
+        kind = error_kind(err)
+        print(f"handmesh {args.command}: error: {error_message(err)}", file=sys.stderr)
+        if not args.debug:
+            print(f"(exit code {EXIT_CODES[kind]}: {kind}; run `handmesh --debug "
+                  f"{args.command} ...` for the traceback)", file=sys.stderr)
+        return EXIT_CODES[kind]
+
+
+def error_kind(err: BaseException) -> str:
+    """The :data:`EXIT_CODES` key of an exception raised by a sub-command."""
+    if isinstance(err, FileExistsError):
+        return "exists"
+    if isinstance(err, FileNotFoundError | NotADirectoryError | IsADirectoryError):
+        return "not-found"
+    if isinstance(err, ValueError | KeyError | TypeError | IndexError | pickle.UnpicklingError
+                  | zipfile.BadZipFile | EOFError | FloatingPointError):
+        return "bad-input"
+    return "unexpected"
+
+
+def error_message(err: BaseException) -> str:
+    """One line for a user: the library's message, without torch's advice to unpickle.
+
+    ``torch.load(..., weights_only=True)`` refuses a checkpoint that holds more than tensors
+    and plain containers, and its message suggests ``weights_only=False``, which would run
+    whatever code the file carries; that advice is replaced by a warning.
+    """
+    text = str(err) if str(err) else type(err).__name__
+    if isinstance(err, KeyError) and err.args:
+        text = f"missing key {err.args[0]!r}"
+    if "weights_only" in text and "never load" not in text:
+        first = text.strip().splitlines()[0]
+        text = (f"{first.rstrip('.')}. The file holds objects that a safe load refuses; it "
+                "was not written by handmesh or was tampered with. Never load it with "
+                "weights_only=False: that runs any code the file carries.")
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return " ".join(lines) if len(lines) <= 3 else " ".join(lines[:3]) + " ..."
 
 
 if __name__ == "__main__":

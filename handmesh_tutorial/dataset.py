@@ -476,7 +476,15 @@ def _write_folder(directory: Path, files: Mapping[str, bytes], durable: bool) ->
             _write_file(tmp / name, data, durable)
         if durable:
             _fsync_dir(tmp)
-        os.replace(tmp, directory)  # atomic: readers see no folder or a complete one
+        try:
+            os.replace(tmp, directory)  # atomic: readers see no folder or a complete one
+        except OSError:
+            if not directory.is_dir():
+                raise
+            # another writer (e.g. an orphaned worker of a killed run) finished this sample
+            # first; samples are deterministic per index, so its folder is the same: keep it
+            shutil.rmtree(tmp, ignore_errors=True)
+            return
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -824,13 +832,39 @@ def _lock(root: Path) -> Iterator[None]:
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
+#: Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``.
+_TMP_NAME = re.compile(rf"^{re.escape(TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
+#: Files a sample folder can hold (``_encode``): what a half-written sample may contain.
+_SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+)\.png$|^annotation\.(npz|json)$")
+
+
+def _is_own_temporary(p: Path) -> bool:
+    """Whether ``p`` is a temporary that a writer of this module made (and may be removed).
+
+    The name must be ``.tmp-<name>-<pid>-<8 hex>`` (:func:`_write_atomic`,
+    :func:`_write_folder`, :func:`merge_shards`); a folder may hold only sample files, a file
+    must stand for ``meta.json`` or a sample file. Anything else, e.g. a user's
+    ``.tmp-my-notes/``, is left alone.
+    """
+    m = _TMP_NAME.match(p.name)
+    if m is None or p.is_symlink():
+        return False
+    if p.is_dir():
+        return all(c.is_file() and not c.is_symlink() and _SAMPLE_FILE.match(c.name)
+                   for c in p.iterdir())
+    return p.is_file() and (m["name"] == META_FILE or _SAMPLE_FILE.match(m["name"]) is not None)
+
+
 def _clean_stale(folder: Path) -> int:
-    """Remove temporary folders/files left by a killed writer; returns how many."""
+    """Remove the temporaries a killed writer left in ``folder``; returns how many.
+
+    Only this module's own temporaries (:func:`_is_own_temporary`) are removed.
+    """
     n = 0
     if folder.is_dir():
         for p in folder.iterdir():
-            if p.name.startswith(TMP_PREFIX):
-                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+            if p.name.startswith(TMP_PREFIX) and _is_own_temporary(p):
+                shutil.rmtree(p) if p.is_dir() else p.unlink()
                 n += 1
     return n
 
@@ -869,8 +903,40 @@ class _Task:
 _WORKER_TASK: _Task | None = None
 
 
-def _init_worker(task: _Task, worker_init: Callable[[], Any] | None) -> None:
+def _die_with_parent(parent_pid: int) -> None:
+    """Make this worker process exit when the process that started it dies.
+
+    Without it, ``kill -9`` of ``generate``'s main process leaves its workers running (and
+    writing queued samples) for seconds. On Linux the kernel delivers ``SIGKILL`` to the worker
+    when its parent dies (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread polls the
+    parent's pid once a second.
+    """
+    import signal
+    import threading
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig = 1
+        if libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0:
+            if os.getppid() != parent_pid:  # the parent died before prctl took effect
+                os._exit(1)
+            return
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="die-with-parent").start()
+
+
+def _init_worker(task: _Task, worker_init: Callable[[], Any] | None,
+                 parent_pid: int | None = None) -> None:
     global _WORKER_TASK
+    if parent_pid is not None:
+        _die_with_parent(parent_pid)
     _WORKER_TASK = task
     if worker_init is not None:
         worker_init()  # e.g. one OffscreenRenderer per process, kept in a module global
@@ -1250,7 +1316,8 @@ def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | Non
 
         ex = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
                                  mp_context=multiprocessing.get_context(mp_context),
-                                 initializer=_init_worker, initargs=(task, worker_init))
+                                 initializer=_init_worker,
+                                 initargs=(task, worker_init, os.getpid()))
         it, pending = iter(todo), set()
         try:
             # A bounded window of submissions keeps Ctrl-C responsive and memory flat.

@@ -48,8 +48,10 @@ import io
 import json
 import math
 import os
+import pickle
 import random
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -70,7 +72,8 @@ __all__ = [
     "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
     "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
     "constant_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND", "MEAN_HAND",
-    "toy_sample", "CHECKPOINT_FORMAT", "METRIC_COLUMNS",
+    "toy_sample", "existing_run", "remove_stale_temp_files", "CHECKPOINT_FORMAT",
+    "METRIC_COLUMNS", "RUN_CHECKPOINTS",
 ]
 
 #: ``format`` entry of every checkpoint written by :func:`save_checkpoint`.
@@ -620,7 +623,20 @@ def _read_checkpoint(path: str | os.PathLike, map_location="cpu") -> dict:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
-    ck = torch.load(path, map_location=map_location, weights_only=True)
+    try:
+        ck = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as err:
+        # torch's text advises weights_only=False, i.e. running the file's code: say otherwise
+        what = [ln.strip().split(". Please")[0][:120] for ln in str(err).splitlines()
+                if "Unsupported" in ln]
+        raise ValueError(
+            f"{path}: refused: the file holds objects other than tensors and plain containers"
+            + (f" ({what[0]})" if what else "") + ". It was not written by handmesh_tutorial "
+            "or was altered; never load it with weights_only=False, which runs any code it "
+            "carries.") from None
+    except (RuntimeError, EOFError, OSError) as err:
+        raise ValueError(f"{path}: unreadable checkpoint (truncated or not a torch file: "
+                         f"{str(err).strip().splitlines()[0][:120]})") from err
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT:
         got = ck.get("format") if isinstance(ck, dict) else type(ck).__name__
         raise ValueError(f"{path}: not a handmesh_tutorial checkpoint (format {got!r}, "
@@ -890,14 +906,18 @@ def _train_step(net, batch: dict, chunks: int, device: torch.device, ddp: bool,
     return total
 
 
-def train(config: TrainConfig, *, resume: bool = False, dataset=None, val_dataset=None,
-          template=None, callback: Callable[[dict], None] | None = None) -> TrainResult:
+def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False, dataset=None,
+          val_dataset=None, template=None,
+          callback: Callable[[dict], None] | None = None) -> TrainResult:
     """Train MSMR-Net (single process, or one rank of a ``torchrun`` job).
 
     Args:
         config: the run (see :class:`TrainConfig`).
         resume: continue from ``out_dir/checkpoint_last.pt`` (must exist); the architecture
             and template must match; ``epochs`` may be larger than before.
+        overwrite: start afresh in an ``out_dir`` that already holds a run's checkpoints
+            (they are replaced). Without ``resume`` or ``overwrite`` such a folder is refused,
+            so a forgotten ``--resume`` never destroys a run.
         dataset: a training dataset to use instead of ``config.data`` (items as
             :class:`~handmesh_tutorial.augment.HandCropDataset` returns; ``set_epoch`` is called
             when it exists).
@@ -911,6 +931,8 @@ def train(config: TrainConfig, *, resume: bool = False, dataset=None, val_datase
     Raises:
         FloatingPointError: the loss became NaN or infinite (message names epoch and step).
         FileNotFoundError: ``resume`` without a checkpoint, or missing data.
+        FileExistsError: ``out_dir`` holds a run's checkpoints and neither ``resume`` nor
+            ``overwrite`` was given.
         ValueError: inconsistent config, template/data vertex counts that differ, or a
             checkpoint of another architecture.
     """
@@ -925,8 +947,8 @@ def train(config: TrainConfig, *, resume: bool = False, dataset=None, val_datase
         torch.cuda.set_device(device)
     rank, world, owns_pg = _init_distributed(device)
     try:
-        return _train(config, resume, dataset, val_dataset, template, callback, device, rank,
-                      world, t_start, tqdm)
+        return _train(config, resume, overwrite, dataset, val_dataset, template, callback,
+                      device, rank, world, t_start, tqdm)
     finally:
         if owns_pg:
             import torch.distributed as dist
@@ -934,17 +956,60 @@ def train(config: TrainConfig, *, resume: bool = False, dataset=None, val_datase
             dist.destroy_process_group()
 
 
-def _train(config, resume, dataset, val_dataset, template, callback, device, rank, world,
-           t_start, tqdm) -> TrainResult:
+#: Files of a run that a fresh start would replace (:func:`train` refuses them by default).
+RUN_CHECKPOINTS = ("checkpoint_last.pt", "checkpoint_best.pt")
+
+
+def existing_run(out_dir) -> list[str]:
+    """Names of the checkpoints in ``out_dir`` that a fresh (non-resumed) run would replace."""
+    out = Path(out_dir)
+    return [n for n in RUN_CHECKPOINTS if (out / n).exists()]
+
+
+def remove_stale_temp_files(out_dir) -> list[Path]:
+    """Delete the half-written temp files a killed run left in ``out_dir``.
+
+    Only names that this module's atomic writes make (``.<file>.<random>.tmp`` for its own
+    checkpoint, metrics and config files) are removed, never other files of the folder.
+
+    Returns:
+        The removed paths.
+    """
+    own = (*RUN_CHECKPOINTS, "metrics.csv", "steps.csv", "config.json")
+    out = Path(out_dir)
+    gone = []
+    if not out.is_dir():
+        return gone
+    for name in own:
+        for tmp in out.glob(f".{name}.*.tmp"):
+            if tmp.is_file():
+                tmp.unlink()
+                gone.append(tmp)
+    return gone
+
+
+def _train(config, resume, overwrite, dataset, val_dataset, template, callback, device, rank,
+           world, t_start, tqdm) -> TrainResult:
     out = Path(config.out_dir)
     is_main = rank == 0
+    if not resume and not overwrite and (found := existing_run(out)):
+        raise FileExistsError(
+            f"{out} already holds a training run ({', '.join(found)}): resume it "
+            "(train(..., resume=True), handmesh train --resume), replace it (overwrite=True, "
+            "--overwrite) or choose another out_dir")
     if is_main:
         out.mkdir(parents=True, exist_ok=True)
+        remove_stale_temp_files(out)
     tmpl = resolve_template(config.template if template is None else template)
     t_id = template_hash(tmpl)
 
     last, best_path = out / "checkpoint_last.pt", out / "checkpoint_best.pt"
     ck = None
+    if resume and not last.exists() and (out / "config.json").exists():
+        # a run killed before its first checkpoint: nothing to continue, nothing to lose
+        warnings.warn(f"{out}: no checkpoint_last.pt yet (the run stopped before its first "
+                      "checkpoint); starting from epoch 1", stacklevel=3)
+        resume = False
     if resume:  # check before building anything
         ck = _read_checkpoint(last, map_location=device)
         if ck["template_hash"] != t_id:
@@ -978,6 +1043,8 @@ def _train(config, resume, dataset, val_dataset, template, callback, device, ran
         step_losses = [float(x) for x in ck["step_losses"].tolist()]
         best = float(ck["best"])
         rng_to_restore = ck["rng"]
+        if is_main:  # logs written after the checkpoint by a killed run go back to it
+            _write_logs(out, history, step_losses, config.durable)
 
     if dataset is None:
         train_ds, val_ds = make_datasets(config)
@@ -1049,17 +1116,17 @@ def _train(config, resume, dataset, val_dataset, template, callback, device, ran
         if improved:
             best = row["val_pa_mpvpe"]
         if is_main:
-            _write_csv(out / "metrics.csv", history, METRIC_COLUMNS, config.durable)
-            _write_csv(out / "steps.csv",
-                       [{"step": i + 1, "loss": x} for i, x in enumerate(step_losses)],
-                       ("step", "loss"), config.durable)
             kw = dict(model=net, config=config, template_id=t_id, epoch=epoch + 1, step=step,
                       history=history, step_losses=step_losses, best=best,
                       durable=config.durable)
-            if (epoch + 1) % config.checkpoint_every == 0 or last_epoch:
-                save_checkpoint(last, optimizer=opt, scheduler=sched, **kw)
+            # Order matters for a kill between two writes: best before last, so that a resume
+            # from the older last checkpoint redoes this epoch and rewrites best; the CSVs
+            # after both, and a resume rewrites them from the checkpoint's history.
             if improved:  # weights only (no optimiser state): for evaluation, not for resuming
                 save_checkpoint(best_path, **kw)
+            if (epoch + 1) % config.checkpoint_every == 0 or last_epoch:
+                save_checkpoint(last, optimizer=opt, scheduler=sched, **kw)
+            _write_logs(out, history, step_losses, config.durable)
         if callback is not None:
             callback(dict(row))
         _barrier(world)
@@ -1072,6 +1139,13 @@ def _train(config, resume, dataset, val_dataset, template, callback, device, ran
         history=history, step_losses=step_losses, final=dict(history[-1]) if history else {},
         epochs=done, steps=step, seconds=time.perf_counter() - t_start, model=net, rank=rank,
         world_size=world)
+
+
+def _write_logs(out: Path, history: list[dict], step_losses: list[float], durable: bool) -> None:
+    """``metrics.csv`` (one row per epoch) and ``steps.csv`` (one loss per step)."""
+    _write_csv(out / "metrics.csv", history, METRIC_COLUMNS, durable)
+    _write_csv(out / "steps.csv", [{"step": i + 1, "loss": x} for i, x in enumerate(step_losses)],
+               ("step", "loss"), durable)
 
 
 def _broadcast_row(row: dict, world: int) -> dict:

@@ -347,12 +347,27 @@ def test_resume_refuses_different_parameters(tmp_path):
     assert (again.written, again.skipped, again.attempts) == (0, 6, 0)
 
 
-def test_stale_temporaries_are_removed(tmp_path):
+def test_stale_temporaries_are_removed_but_not_a_users_files(tmp_path):
     gen(tmp_path / "r", num=2)
-    (tmp_path / "r" / "samples" / ".tmp-000001-1-ab").mkdir()
-    (tmp_path / "r" / ".tmp-meta.json-1-ab").write_text("{")
+    half = tmp_path / "r" / "samples" / ".tmp-000001-1-0123abcd"
+    half.mkdir()
+    (half / "image.png").write_bytes(b"\x89PNG half")
+    (tmp_path / "r" / "samples" / ".tmp-000002-7-89abcdef").mkdir()
+    (tmp_path / "r" / ".tmp-meta.json-1-0123abcd").write_text("{")
+    # a user's own files that merely start with ".tmp-": never touched
+    notes = tmp_path / "r" / ".tmp-my-notes"
+    notes.mkdir()
+    (notes / "todo.txt").write_text("keep")
+    lookalike = tmp_path / "r" / "samples" / ".tmp-000003-5-0123abcd"
+    lookalike.mkdir()
+    (lookalike / "thesis.tex").write_text("keep")
+    (tmp_path / "r" / ".tmp-plan.txt").write_text("keep")
     s = gen(tmp_path / "r", num=2)
-    assert s.stale_removed == 2 and not list((tmp_path / "r").rglob(".tmp-*"))
+    assert s.stale_removed == 3
+    left = sorted(p.relative_to(tmp_path / "r").as_posix()
+                  for p in (tmp_path / "r").rglob(".tmp-*"))
+    assert left == [".tmp-my-notes", ".tmp-plan.txt", "samples/.tmp-000003-5-0123abcd"]
+    assert (notes / "todo.txt").read_text() == "keep"
 
 
 def test_a_second_writer_is_refused(tmp_path):
@@ -621,3 +636,75 @@ def test_interaction_error_is_a_sample_rejection():
 
     err = InteractionError("hand-chain", 3, "no contact")
     assert isinstance(err, D.SampleRejected) and isinstance(err, RuntimeError)
+
+
+def test_a_sample_finished_by_another_writer_is_kept(tmp_path):
+    # a worker of a killed run may finish sample i while the resumed run writes it too
+    target = tmp_path / "samples" / "000004"
+    target.mkdir(parents=True)
+    (target / "image.png").write_bytes(b"first writer")
+    D._write_folder(target, {"image.png": b"second writer"}, durable=False)
+    assert (target / "image.png").read_bytes() == b"first writer"
+    assert sorted(p.name for p in (tmp_path / "samples").iterdir()) == ["000004"]
+    (tmp_path / "plain").write_text("x")  # a file in the way is still an error
+    with pytest.raises(OSError):
+        D._write_folder(tmp_path / "plain", {"image.png": b"y"}, durable=False)
+
+
+ORPHAN_SCRIPT = textwrap.dedent("""
+    import sys, time
+    from handmesh_tutorial import dataset as D
+
+    def make(seed):
+        time.sleep(0.5)  # slow samples: the workers are busy when the main process dies
+        return D.synthetic_sample(seed, image_size=32, resolution=4)
+
+    if __name__ == "__main__":
+        D.generate_dataset(sys.argv[1], make, 40, 3, "hand-hand", workers=2, progress=False)
+""")
+
+
+def _children(pid: int) -> list[int]:
+    """Pids whose parent is ``pid`` (from /proc)."""
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_workers_die_with_a_killed_main_process(tmp_path):
+    script = tmp_path / "orphans.py"
+    script.write_text(ORPHAN_SCRIPT)
+    root = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, str(script), str(root)])
+    deadline, workers = time.time() + 90, []
+    while time.time() < deadline:  # until both workers have written a sample
+        workers = [k for k in _children(proc.pid) if "spawn_main" in
+                   (Path("/proc") / str(k) / "cmdline").read_text(errors="replace")]
+        if len(workers) == 2 and len(list((root / "samples").glob("0*"))) >= 2:
+            break
+        time.sleep(0.05)
+    assert len(workers) == 2, "the two workers never started"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.time() + 10
+    while time.time() < deadline and any(_alive(w) for w in workers):
+        time.sleep(0.05)
+    assert not any(_alive(w) for w in workers), "workers outlived their parent"
+    n_before = len(list((root / "samples").glob("0*")))
+    time.sleep(1.0)  # nobody writes any more
+    assert len(list((root / "samples").glob("0*"))) == n_before

@@ -75,9 +75,13 @@ def test_generate_shard_and_options(tmp_path, capsys):
     assert np.array_equal(s["image"], dataset.read_sample(root / "samples" / "000003")["image"])
     # a different option (here the default anatomical limits) on the same root is refused,
     # naming the differing key
-    with pytest.raises(ValueError, match="params"):
-        cli.main(["generate", "--kind", "hand-object", "--num", "4", "--seed", "2", "--out",
-                  str(root), "--image-size", "64", "--shard", "1/2", "--quiet"])
+    capsys.readouterr()
+    code = cli.main(["generate", "--kind", "hand-object", "--num", "4", "--seed", "2", "--out",
+                     str(root), "--image-size", "64", "--shard", "1/2", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["bad-input"]
+    assert "meta.json was written with different parameters" in err and "params" in err
+    assert "Traceback" not in err
 
 
 def test_balanced_hand_chain_reports_unreachable_bins_and_fills_the_rest(tmp_path, capsys):

@@ -1,6 +1,7 @@
 """Tests of handmesh_tutorial.train: loop, checkpoints, resume, NaN stop, DDP, evaluate, CLI."""
 
 import csv
+import dataclasses
 import functools
 import math
 import os
@@ -8,6 +9,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -129,6 +131,74 @@ def test_resume_continues_exactly(samples, tmp_path):
     with pytest.raises(FileNotFoundError, match="checkpoint not found"):
         T.train(T.TrainConfig(out_dir=str(tmp_path / "none"), epochs=1, **kw), resume=True,
                 dataset=tr)
+
+
+def test_fresh_run_refuses_an_existing_run_and_cleans_only_its_own_temp_files(samples, tmp_path):
+    tr, va = _data(samples, n_train=4)
+    cfg = T.TrainConfig(out_dir=str(tmp_path / "run"), epochs=1, batch_size=2, **TINY)
+    first = T.train(cfg, dataset=tr)
+    before = (tmp_path / "run" / "checkpoint_last.pt").read_bytes()
+    with pytest.raises(FileExistsError, match=r"checkpoint_last\.pt.*--resume.*--overwrite"):
+        T.train(cfg, dataset=tr)
+    assert (tmp_path / "run" / "checkpoint_last.pt").read_bytes() == before  # nothing lost
+    assert T.existing_run(tmp_path / "run") == ["checkpoint_last.pt"]
+    # a killed run's half-written checkpoint goes; a user's own files stay
+    stale = tmp_path / "run" / ".checkpoint_last.pt.k2j4x9.tmp"
+    stale.write_bytes(b"truncated")
+    mine = [tmp_path / "run" / ".tmp-my-notes.txt", tmp_path / "run" / ".my-file.pt.x.tmp"]
+    for m in mine:
+        m.write_text("keep me")
+    again = T.train(dataclasses.replace(cfg, epochs=2), dataset=tr, resume=True)
+    assert again.steps == 2 * first.steps and not stale.exists()
+    assert all(m.read_text() == "keep me" for m in mine)
+    fresh = T.train(cfg, dataset=tr, overwrite=True)
+    assert fresh.steps == first.steps
+    assert torch.load(fresh.checkpoint, weights_only=True)["epoch"] == 1
+
+
+def test_a_kill_between_checkpoint_writes_leaves_a_consistent_run(samples, tmp_path,
+                                                                  monkeypatch):
+    tr, va = _data(samples, n_train=4)
+    kw = dict(batch_size=2, lr=1e-3, **TINY)
+    T.train(T.TrainConfig(out_dir=str(tmp_path / "ref"), epochs=2, **kw), dataset=tr,
+            val_dataset=va)
+    # the case that matters: epoch 2 improves, so it writes both checkpoints
+    assert torch.load(tmp_path / "ref" / "checkpoint_best.pt", weights_only=True)["epoch"] == 2
+    cfg = T.TrainConfig(out_dir=str(tmp_path / "run"), epochs=2, **kw)
+    T.train(dataclasses.replace(cfg, epochs=1), dataset=tr, val_dataset=va)
+    real_save, saved = T.save_checkpoint, []
+
+    def killed_between_the_two_writes(path, **k):
+        if k["epoch"] == 2 and saved:
+            raise KeyboardInterrupt  # the process dies here, whichever file comes second
+        if k["epoch"] == 2:
+            saved.append(Path(path).name)
+        return real_save(path, **k)
+
+    monkeypatch.setattr(T, "save_checkpoint", killed_between_the_two_writes)
+    with pytest.raises(KeyboardInterrupt):
+        T.train(cfg, dataset=tr, val_dataset=va, resume=True)
+    monkeypatch.setattr(T, "save_checkpoint", real_save)
+    (tmp_path / "run" / "metrics.csv").write_text("garbage from a killed run\n")
+    res = T.train(cfg, dataset=tr, val_dataset=va, resume=True)
+    for name in ("checkpoint_last.pt", "checkpoint_best.pt"):
+        got = torch.load(tmp_path / "run" / name, weights_only=True)
+        want = torch.load(tmp_path / "ref" / name, weights_only=True)
+        assert got["epoch"] == want["epoch"] and got["best"] == want["best"], name
+        assert all(torch.equal(got["model"][k], want["model"][k]) for k in want["model"]), name
+    with open(res.metrics_csv) as fh:
+        assert [int(r["epoch"]) for r in csv.DictReader(fh)] == [1, 2]
+
+
+def test_resume_before_the_first_checkpoint_starts_afresh(samples, tmp_path):
+    tr, _ = _data(samples, n_train=4)
+    cfg = T.TrainConfig(out_dir=str(tmp_path / "run"), epochs=1, batch_size=2, **TINY)
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "config.json").write_text("{}")  # killed before its first checkpoint
+    (tmp_path / "run" / "metrics.csv").write_text("epoch\n1\n")
+    with pytest.warns(UserWarning, match="no checkpoint_last.pt yet"):
+        res = T.train(cfg, dataset=tr, resume=True)
+    assert res.epochs == 1 and res.checkpoint.exists()
 
 
 class _NaNAt(torch.utils.data.Dataset):
@@ -427,3 +497,50 @@ def test_mean_hand_is_the_procrustes_mean_and_evaluate_scores_it(toy_root, tmp_p
                                           f" / {m['pa_mpjpe']:.2f}")
     with pytest.raises(ValueError, match=r"mean_hand must be \(779, 3\), got \(5, 3\)"):
         T.evaluate(net, toy_root, image_size=32, progress=False, mean_hand=np.zeros((5, 3)))
+
+
+class _Payload:
+    """Unpickling this runs ``print``: a stand-in for code hidden in a crafted checkpoint."""
+
+    def __reduce__(self):
+        return (print, ("PAYLOAD RAN",))
+
+
+def test_cli_errors_are_one_line_with_an_exit_code(toy_root, tmp_path, capsys):
+    from handmesh_tutorial.cli import EXIT_CODES
+
+    crafted = tmp_path / "crafted.pt"
+    torch.save({"format": T.CHECKPOINT_FORMAT, "model": _Payload()}, crafted)
+    code = cli_main(["evaluate", "--checkpoint", str(crafted), "--data", str(toy_root),
+                     "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == EXIT_CODES["bad-input"] == 3
+    assert "PAYLOAD RAN" not in out + err and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 2 and lines[0].startswith("handmesh evaluate: error: ")
+    assert str(crafted) in lines[0] and "never load it with weights_only=False" in lines[0]
+    assert "--debug" in lines[1]
+
+    code = cli_main(["evaluate", "--checkpoint", str(tmp_path / "nope.pt"), "--data",
+                     str(toy_root), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == EXIT_CODES["not-found"] == 4 and "nope.pt" in err
+
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(crafted.read_bytes()[:50])
+    code = cli_main(["evaluate", "--checkpoint", str(truncated), "--data", str(toy_root),
+                     "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 3 and "truncated.pt: unreadable checkpoint" in err
+
+    run = ["train", "--data", str(toy_root), "--out", str(tmp_path / "run"), "--epochs", "1",
+           "--batch-size", "4", "--image-size", "32", "--channels", "4,4,8,8,8",
+           "--latent-channels", "8", "--threads", "1", "--no-progress", "--no-fsync"]
+    assert cli_main(run) == 0
+    capsys.readouterr()
+    assert cli_main(run) == EXIT_CODES["exists"] == 5
+    err = capsys.readouterr().err
+    assert "already holds a training run" in err and "--resume" in err
+    assert cli_main(["--debug", *run]) == 5
+    assert "Traceback" in capsys.readouterr().err
+    assert cli_main([*run, "--overwrite"]) == 0
