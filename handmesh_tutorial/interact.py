@@ -66,6 +66,8 @@ __all__ = [
     "FRAME_MARGIN",
     "FRAME_SHARE",
     "KINDS",
+    "MAX_IMAGE_SIZE",
+    "MIN_IMAGE_SIZE",
     "STOP_REASONS",
     "InteractionConfig",
     "InteractionError",
@@ -1648,6 +1650,11 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     }
 
 
+#: Range of ``image_size`` that :func:`generate_interactions` accepts, pixels: below 32 a hand
+#: is a few pixels; above 4096 one image needs gigabytes of render buffers.
+MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, 4096
+
+
 def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: int = 224,
                           workers: int = 1, balance_vr: bool = False,
                           shard: tuple[int, int] | None = None, limits: str = "anatomical",
@@ -1683,8 +1690,18 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
     """
     from .dataset import generate_dataset
 
+    # every argument is checked before anything is written (a bad one never leaves a
+    # meta.json behind that blocks the corrected rerun)
     if kind not in KINDS + ("mixed",):
         raise ValueError(f"kind must be one of {KINDS + ('mixed',)}, got {kind!r}")
+    if isinstance(image_size, bool) or not isinstance(image_size, int | np.integer) \
+            or not MIN_IMAGE_SIZE <= image_size <= MAX_IMAGE_SIZE:
+        raise ValueError(f"image_size must be an integer in [{MIN_IMAGE_SIZE}, "
+                         f"{MAX_IMAGE_SIZE}] pixels, got {image_size!r}")
+    if isinstance(num, bool) or not isinstance(num, int | np.integer) or num < 1:
+        raise ValueError(f"num must be a positive integer, got {num!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
     InteractionConfig(limits=limits)  # validates
     fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits)
     kinds = list(KINDS) if kind == "mixed" else kind

@@ -72,8 +72,8 @@ __all__ = [
     "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
     "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
     "constant_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND", "MEAN_HAND",
-    "toy_sample", "existing_run", "remove_stale_temp_files", "CHECKPOINT_FORMAT",
-    "METRIC_COLUMNS", "RUN_CHECKPOINTS",
+    "toy_sample", "existing_run", "remove_stale_temp_files", "changed_settings",
+    "CHECKPOINT_FORMAT", "METRIC_COLUMNS", "RUN_CHECKPOINTS", "RESUMABLE_KEYS",
 ]
 
 #: ``format`` entry of every checkpoint written by :func:`save_checkpoint`.
@@ -86,6 +86,12 @@ _VAL_KEYS = ("mpjpe", "mpvpe", "pa_mpjpe", "pa_mpvpe", "auc_joints", "auc_verts"
              "f_at_15mm")
 # config keys that define the network: they must match when resuming or loading
 _ARCH_KEYS = ("encoder", "decoder", "attention", "channels", "latent_channels", "model_kwargs")
+#: :class:`TrainConfig` fields a resumed run may change (how long, where, how fast, what is
+#: logged); every other field must equal the checkpoint's, so a run never silently mixes data,
+#: seeds, batch sizes or learning rates.
+RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_workers",
+                  "val_every", "checkpoint_every", "val_batch_size", "progress", "durable")
+_PATH_KEYS = ("data", "val_data", "template")
 
 
 # --------------------------------------------------------------------------------------------
@@ -956,6 +962,29 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
             dist.destroy_process_group()
 
 
+def changed_settings(saved: Mapping, config: TrainConfig) -> dict:
+    """Fields of ``config`` that differ from a checkpoint's ``saved`` config and may not.
+
+    Fields in :data:`RESUMABLE_KEYS` may change; paths (``data``, ``val_data``, ``template``)
+    count as equal when they name the same file or folder.
+
+    Returns:
+        ``{field: (saved value, new value)}``, empty when the run can resume.
+    """
+    now = config.to_dict()
+    diff = {}
+    for k, v in now.items():
+        if k in RESUMABLE_KEYS or k in _ARCH_KEYS:
+            continue
+        old = saved.get(k, TrainConfig.__dataclass_fields__[k].default)
+        if k in _PATH_KEYS and old is not None and v is not None \
+                and os.path.realpath(old) == os.path.realpath(v):
+            continue
+        if old != v:
+            diff[k] = (old, v)
+    return diff
+
+
 #: Files of a run that a fresh start would replace (:func:`train` refuses them by default).
 RUN_CHECKPOINTS = ("checkpoint_last.pt", "checkpoint_best.pt")
 
@@ -1021,6 +1050,12 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
                     if old[k] != config.architecture()[k]}
             raise ValueError(f"{last}: architecture differs from the config (checkpoint, "
                              f"config): {diff}")
+        changed = changed_settings(ck["config"], config)
+        if changed:
+            raise ValueError(
+                f"{last}: cannot resume with other settings (checkpoint, now): {changed}. "
+                f"Resume with the run's settings (only {', '.join(RESUMABLE_KEYS)} may "
+                "change), or start a new run in another out_dir")
 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it

@@ -129,3 +129,14 @@ def test_generate_help_through_the_module_entry_point():
                 "--balance-vr", "--vr-probe", "--shard", "--limits"):
         assert opt in r.stdout
     assert "anatomical (default" in r.stdout and "paper" in r.stdout
+
+
+@pytest.mark.parametrize("size", ["7", "0", "-5", "100000"])
+def test_a_bad_image_size_is_refused_before_anything_is_written(tmp_path, capsys, size):
+    out = tmp_path / "root"
+    code = cli.main(["generate", "--kind", "hand-hand", "--num", "2", "--out", str(out),
+                     "--image-size", size, "--quiet"])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["bad-input"]
+    assert f"image_size must be an integer in [32, 4096] pixels, got {size}" in err
+    assert not out.exists()  # no meta.json to block the corrected rerun

@@ -128,6 +128,13 @@ def test_resume_continues_exactly(samples, tmp_path):
     with pytest.raises(ValueError, match="architecture differs"):
         T.train(T.TrainConfig(out_dir=str(tmp_path / "b"), epochs=3, decoder="single",
                               **{**kw, "channels": None}), resume=True, dataset=tr)
+    for change in ({"lr": 1e-2}, {"seed": 7}, {"batch_size": 4}, {"data": "elsewhere"}):
+        with pytest.raises(ValueError, match=f"other settings.*{next(iter(change))}"):
+            T.train(T.TrainConfig(out_dir=str(tmp_path / "b"), epochs=3, **{**kw, **change}),
+                    resume=True, dataset=tr)
+    assert T.changed_settings(T.TrainConfig(data="x/../x", **kw).to_dict(),
+                              T.TrainConfig(data="x", epochs=9,
+                                            **{**kw, "threads": 2})) == {}
     with pytest.raises(FileNotFoundError, match="checkpoint not found"):
         T.train(T.TrainConfig(out_dir=str(tmp_path / "none"), epochs=1, **kw), resume=True,
                 dataset=tr)
