@@ -51,8 +51,25 @@ def _shard(text: str) -> tuple[int, int]:
     return k, n
 
 
+def _cmd_verify(args: argparse.Namespace) -> int:
+    from .dataset import verify_dataset
+
+    report = verify_dataset(args.root, remove=args.remove_bad, progress=not args.quiet)
+    print(f"handmesh verify: {report}")
+    if report.removed:
+        print("rerun the same `handmesh generate` command to write the removed samples again")
+    return EXIT_CODES["bad-input"] if report.bad and not report.removed else 0
+
+
 def _cmd_generate(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from . import interact
+    from .dataset import META_FILE, verify_dataset
+
+    if args.verify and (Path(args.out) / META_FILE).exists():
+        report = verify_dataset(args.out, remove=True, progress=not args.quiet)
+        print(f"handmesh generate --verify: {report}")
 
     s = interact.generate_interactions(
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,
@@ -182,8 +199,20 @@ def build_parser() -> argparse.ArgumentParser:
                      "paper (+-60 deg about every LCS axis, the paper's generator)")
     gen.add_argument("--no-fsync", action="store_true",
                      help="skip fsync of every file (faster, not safe against power cuts)")
+    gen.add_argument("--verify", action="store_true",
+                     help="before resuming, re-read every sample already in OUT and remove "
+                     "the unreadable or foreign ones, so that this run writes them again")
     gen.add_argument("--quiet", action="store_true", help="no progress bar")
     gen.set_defaults(func=_cmd_generate)
+
+    ver = sub.add_parser("verify", help="re-read every sample of an INTER-SH root and list the "
+                         "unreadable or foreign ones (exit code 3 if any)")
+    ver.add_argument("root", help="the dataset folder (with meta.json)")
+    ver.add_argument("--remove-bad", action="store_true",
+                     help="delete the bad samples; rerunning the same generate command writes "
+                     "them again, byte for byte")
+    ver.add_argument("--quiet", action="store_true", help="no progress bar")
+    ver.set_defaults(func=_cmd_verify)
 
     tr = sub.add_parser("train", help="train MSMR-Net on an INTER-SH (or FreiHAND) root; "
                         "sizes default to the HANDMESH_BUDGET tier; works under torchrun")

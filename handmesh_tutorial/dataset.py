@@ -768,6 +768,78 @@ class InterSHDataset:
         return self._vr
 
 
+@dataclass
+class VerifyReport:
+    """Outcome of :func:`verify_dataset`.
+
+    Attributes:
+        root: the dataset folder.
+        checked: sample entries read.
+        bad: ``[(folder name, reason)]`` of the samples that failed, sorted by name.
+        removed: the bad entries deleted (``remove=True``); rerunning the same ``generate``
+            call then writes exactly these again, with the same bytes as before.
+    """
+
+    root: Path
+    checked: int
+    bad: list[tuple[str, str]]
+    removed: list[str]
+
+    def __str__(self) -> str:
+        lines = [f"{self.root}: {self.checked} samples read, {len(self.bad)} bad"
+                 + (f", {len(self.removed)} removed" if self.removed else "")]
+        lines += [f"  {name}: {why}" for name, why in self.bad]
+        return "\n".join(lines)
+
+
+def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
+                   progress: bool = True) -> VerifyReport:
+    """Re-read every sample of an INTER-SH root and list the ones that are unreadable or foreign.
+
+    Each sample folder must read back (:func:`read_sample`: every file, key, shape, dtype) and
+    agree with ``meta.json`` (kind, image size) and with its own name (index; the seed of the
+    sample-seed rule, :func:`sample_seed`). A file where a sample folder belongs is bad too.
+
+    Args:
+        root: the dataset folder (with ``meta.json``).
+        remove: delete the bad entries, so that rerunning the same ``generate`` regenerates them.
+        progress: tqdm progress bar.
+
+    Returns:
+        A :class:`VerifyReport`.
+    """
+    from tqdm.auto import tqdm
+
+    root = Path(root)
+    ds = InterSHDataset(root)
+    samples = root / SAMPLES_DIR
+    bad: list[tuple[str, str]] = []
+    entries = sorted(p for p in samples.iterdir() if p.name.isdigit()) if samples.is_dir() \
+        else []
+    position = {int(i): k for k, i in enumerate(ds.indices.tolist())}
+    for p in tqdm(entries, disable=not progress, desc="verify", unit="sample"):
+        if not p.is_dir() or p.is_symlink():
+            bad.append((p.name, "not a sample folder (a file or link)"))
+            continue
+        try:
+            s = ds[position[int(p.name)]]
+            if s["seed"] is not None and s["attempt"] is not None and "seed" in ds.meta:
+                want = sample_seed(ds.meta["seed"], int(p.name), int(s["attempt"]))
+                if int(s["seed"]) != want:
+                    raise ValueError(f"{p / 'annotation.json'}: seed {s['seed']}, the seed rule "
+                                     f"of meta.json gives {want} (a sample of another run?)")
+        except (ValueError, KeyError, OSError, TypeError) as err:
+            bad.append((p.name, str(err).splitlines()[0] if str(err) else type(err).__name__))
+    removed = []
+    if remove:
+        for name, _ in bad:
+            target = samples / name
+            shutil.rmtree(target) if target.is_dir() and not target.is_symlink() \
+                else target.unlink()
+            removed.append(name)
+    return VerifyReport(root=root, checked=len(entries), bad=bad, removed=removed)
+
+
 # --------------------------------------------------------------------------------------------
 # generation driver
 # --------------------------------------------------------------------------------------------
@@ -835,7 +907,8 @@ def _lock(root: Path) -> Iterator[None]:
 #: Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``.
 _TMP_NAME = re.compile(rf"^{re.escape(TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
 #: Files a sample folder can hold (``_encode``): what a half-written sample may contain.
-_SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+)\.png$|^annotation\.(npz|json)$")
+_SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+|alone_rgb_\d+)\.png$"
+                          r"|^annotation\.(npz|json)$")
 
 
 def _is_own_temporary(p: Path) -> bool:

@@ -10,6 +10,7 @@ import io
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -708,3 +709,31 @@ def test_workers_die_with_a_killed_main_process(tmp_path):
     n_before = len(list((root / "samples").glob("0*")))
     time.sleep(1.0)  # nobody writes any more
     assert len(list((root / "samples").glob("0*"))) == n_before
+
+
+def test_verify_lists_bad_samples_and_regenerating_them_restores_the_bytes(tmp_path):
+    gen(tmp_path / "ref", num=6)
+    root = tmp_path / "run"
+    gen(root, num=6)
+    s = root / "samples"
+    npz = s / "000001" / "annotation.npz"
+    npz.write_bytes(npz.read_bytes()[:100])  # truncated
+    from PIL import Image
+
+    Image.fromarray(np.zeros((5, 7, 3), np.uint8)).save(s / "000002" / "image.png")  # foreign
+    shutil.rmtree(s / "000004")
+    (s / "000004").write_text("a file where a sample folder belongs")
+    # resuming without a check counts the damaged folders as done; the file is in the way
+    with pytest.raises(NotADirectoryError, match="000004"):
+        gen(root, num=6)
+    report = D.verify_dataset(root, progress=False)
+    assert report.checked == 6 and [n for n, _ in report.bad] == ["000001", "000002", "000004"]
+    why = dict(report.bad)
+    assert "annotation.npz" in why["000001"] and "(5, 7)" in why["000002"]
+    assert "not a sample folder" in why["000004"] and report.removed == []
+    assert "3 bad" in str(report)
+    fixed = D.verify_dataset(root, remove=True, progress=False)
+    assert fixed.removed == ["000001", "000002", "000004"]
+    assert gen(root, num=6).written == 3
+    assert tree(root) == tree(tmp_path / "ref")
+    assert D.verify_dataset(root, progress=False).bad == []

@@ -140,3 +140,20 @@ def test_a_bad_image_size_is_refused_before_anything_is_written(tmp_path, capsys
     assert code == cli.EXIT_CODES["bad-input"]
     assert f"image_size must be an integer in [32, 4096] pixels, got {size}" in err
     assert not out.exists()  # no meta.json to block the corrected rerun
+
+
+def test_verify_command_and_generate_verify(tmp_path, capsys):
+    argv = ["generate", "--kind", "hand-object", "--num", "3", "--seed", "4", "--out",
+            str(tmp_path / "r"), "--image-size", "48", "--quiet", "--no-fsync"]
+    assert cli.main(argv) == 0
+    ref = (tmp_path / "r" / "samples" / "000001" / "annotation.npz").read_bytes()
+    (tmp_path / "r" / "samples" / "000001" / "annotation.npz").write_bytes(ref[:64])
+    capsys.readouterr()
+    assert cli.main(["verify", str(tmp_path / "r"), "--quiet"]) == cli.EXIT_CODES["bad-input"]
+    out = capsys.readouterr().out
+    assert "3 samples read, 1 bad" in out and "000001" in out
+    assert cli.main([*argv, "--verify"]) == 0
+    out = capsys.readouterr().out
+    assert "1 removed" in out and "1 samples written, 2 already present" in out
+    assert (tmp_path / "r" / "samples" / "000001" / "annotation.npz").read_bytes() == ref
+    assert cli.main(["verify", str(tmp_path / "r"), "--quiet"]) == 0
