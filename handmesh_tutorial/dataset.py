@@ -577,7 +577,14 @@ def read_annotation(directory: str | os.PathLike) -> dict:
             raise ValueError(f"{path}: '{key}' must be an object")
         ann[key] = {_label(k, f"{where}: '{key}'"): v for k, v in ann[key].items()}
     for key in ("labels", "hands", "pose_labels", "alone_image_labels"):
+        if not isinstance(ann.get(key, []), list):  # "12" would read as labels 1 and 2
+            raise ValueError(f"{path}: '{key}' must be a list of labels, got "
+                             f"{ann[key]!r}")
         ann[key] = [_label(k, f"{where}: '{key}'") for k in ann.get(key, [])]
+    for lab, v in ann["vr"].items():
+        if isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= 1.0:
+            raise ValueError(f"{path}: 'vr' of label {lab} must be a number in [0, 1], got "
+                             f"{v!r}")
     ann["target"] = _label(ann["target"], f"{where}: 'target'")
     if ann["target"] not in ann["hands"] or ann["target"] not in ann["vr"]:
         raise ValueError(f"{path}: 'target' {ann['target']} is not a hand label with a VR "
@@ -667,6 +674,9 @@ def read_meta(root: str | os.PathLike) -> dict:
     if meta.get("format_version") not in READABLE_FORMAT_VERSIONS:
         raise ValueError(f"{path}: format_version {meta.get('format_version')}, this library "
                          f"reads {list(READABLE_FORMAT_VERSIONS)}")
+    width = meta.get("index_width", MIN_INDEX_WIDTH)
+    if isinstance(width, bool) or not isinstance(width, int) or not 1 <= width <= 18:
+        raise ValueError(f"{path}: 'index_width' must be an integer in [1, 18], got {width!r}")
     return meta
 
 

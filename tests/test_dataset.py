@@ -586,6 +586,10 @@ def _rewrite_json(path, **changes):
      r"000001/annotation\.json: 'target' 5 is not a hand label"),
     (lambda d: (d / "annotation.json").write_text("{oops"), ValueError,
      r"000001/annotation\.json: not valid JSON"),
+    (lambda d: _rewrite_json(d / "annotation.json", labels="12"), ValueError,
+     r"000001/annotation\.json: 'labels' must be a list of labels, got '12'"),
+    (lambda d: _rewrite_json(d / "annotation.json", vr={"1": 1.0, "2": "0.8"}), ValueError,
+     r"000001/annotation\.json: 'vr' of label 2 must be a number in \[0, 1\], got '0\.8'"),
 ])
 def test_damaged_files_are_named(small_root, damage, error, pattern):
     damage(small_root / "samples" / "000001")
@@ -604,6 +608,9 @@ def test_dataset_level_errors(small_root, tmp_path):
         gen(small_root, num=3)  # resuming checks the samples it skips
     with pytest.raises(FileNotFoundError, match=r"nothing/meta\.json missing"):
         D.InterSHDataset(tmp_path / "nothing")
+    _rewrite_json(small_root / "meta.json", index_width="6")
+    with pytest.raises(ValueError, match=r"meta\.json: 'index_width' must be an integer"):
+        D.InterSHDataset(small_root)
 
 
 def _reject_even_seeds(seed):
