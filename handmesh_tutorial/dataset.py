@@ -59,6 +59,9 @@ SAMPLES_DIR = "samples"
 TMP_PREFIX = ".tmp-"
 LOCK_FILE = ".generate.lock"
 MIN_INDEX_WIDTH = 6
+#: Largest ``num_samples`` a ``meta.json`` may declare (the paper's set is 40,000; a corrupt
+#: or hostile file must not make the reader build a list of 1e11 indices).
+MAX_SAMPLES = 100_000_000
 MAX_LABEL = 65535
 
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip entry date: np.savez would store the wall clock
@@ -677,6 +680,16 @@ def read_meta(root: str | os.PathLike) -> dict:
     width = meta.get("index_width", MIN_INDEX_WIDTH)
     if isinstance(width, bool) or not isinstance(width, int) or not 1 <= width <= 18:
         raise ValueError(f"{path}: 'index_width' must be an integer in [1, 18], got {width!r}")
+    num = meta.get("num_samples")
+    if isinstance(num, bool) or not isinstance(num, int) or not 1 <= num <= MAX_SAMPLES:
+        raise ValueError(f"{path}: 'num_samples' must be an integer in [1, {MAX_SAMPLES:,}], "
+                         f"got {num!r}")
+    ranges = meta.get("ranges")
+    if not isinstance(ranges, list) or not all(
+            isinstance(r, list) and len(r) == 2 and all(type(x) is int for x in r)
+            and 0 <= r[0] <= r[1] <= num for r in ranges):
+        raise ValueError(f"{path}: 'ranges' must be [[start, stop], ...] integer pairs within "
+                         f"[0, num_samples={num}], got {str(ranges)[:80]}")
     return meta
 
 
@@ -735,8 +748,11 @@ class InterSHDataset:
         return len(self.indices)
 
     def __repr__(self) -> str:
+        planned = sum(b - a for a, b in self.meta["ranges"])  # no list of every index
+        present = sum(int(((self.indices >= a) & (self.indices < b)).sum())
+                      for a, b in self.meta["ranges"])
         return (f"InterSHDataset({str(self.root)!r}: {len(self)} samples, kinds "
-                f"{self.meta['kinds']}, {len(self.missing)} missing)")
+                f"{self.meta['kinds']}, {planned - present} missing)")
 
     @property
     def missing(self) -> list[int]:

@@ -117,6 +117,30 @@ def _stack(data, path: Path, shape: tuple, what: str) -> np.ndarray:
     raise ValueError(f"{path}: cannot read as an array of {what} with per-sample shape {shape}")
 
 
+#: Largest magnitude accepted in an annotation file (metres, pixels, MANO parameters): far above
+#: any real value, far below overflow in later arithmetic.
+MAX_ANNOTATION_VALUE = 1e6
+
+
+def _check_values(arr: np.ndarray, path: Path, key: str) -> None:
+    """Refuse NaN/inf, absurd magnitudes and singular intrinsics, naming the file and sample."""
+    flat = arr.reshape(len(arr), -1) if arr.ndim > 1 else arr.reshape(-1, 1)
+    bad = ~np.isfinite(flat).all(1)
+    if bad.any():
+        raise ValueError(f"{path}: sample {int(np.argmax(bad))} holds NaN or infinity ({key})")
+    big = (np.abs(flat) > MAX_ANNOTATION_VALUE).any(1)
+    if big.any():
+        i = int(np.argmax(big))
+        raise ValueError(f"{path}: sample {i} holds {np.abs(flat[i]).max():.3g}, beyond "
+                         f"+-{MAX_ANNOTATION_VALUE:g} ({key})")
+    if key == "K":
+        focal = np.minimum(arr[:, 0, 0], arr[:, 1, 1])
+        singular = (np.abs(np.linalg.det(arr)) < 1e-9) | (focal <= 0)
+        if singular.any():
+            raise ValueError(f"{path}: sample {int(np.argmax(singular))} has a singular "
+                             "intrinsic matrix or a focal length <= 0")
+
+
 def _shape_of(item) -> tuple | None:
     """Shape of a nested numeric list, ``None`` when ragged or not numeric."""
     try:
@@ -199,6 +223,7 @@ class FreiHAND:
             self._cache[key] = None
             return None
         arr = _stack(_read_json(path), path, _SHAPES[key], key)
+        _check_values(arr, path, key)
         if key != "K":
             n = self.num_unique
             if arr.shape[0] != n:

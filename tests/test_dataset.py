@@ -218,7 +218,10 @@ def test_reader_api(tmp_path):
     assert plain.annotation(2)["seed"] == D.sample_seed(SEED, 2)
     with pytest.raises(IndexError, match="out of range"):
         plain[5]
-    assert "5 samples" in repr(plain)
+    assert "5 samples" in repr(plain) and "0 missing" in repr(plain)
+    shutil.rmtree(tmp_path / "r" / "samples" / "000003")
+    fewer = D.InterSHDataset(tmp_path / "r")
+    assert "4 samples" in repr(fewer) and "1 missing" in repr(fewer) and fewer.missing == [3]
 
 
 def test_kind_and_image_size_are_checked(tmp_path):
@@ -608,9 +611,15 @@ def test_dataset_level_errors(small_root, tmp_path):
         gen(small_root, num=3)  # resuming checks the samples it skips
     with pytest.raises(FileNotFoundError, match=r"nothing/meta\.json missing"):
         D.InterSHDataset(tmp_path / "nothing")
-    _rewrite_json(small_root / "meta.json", index_width="6")
-    with pytest.raises(ValueError, match=r"meta\.json: 'index_width' must be an integer"):
-        D.InterSHDataset(small_root)
+    good = (small_root / "meta.json").read_text()
+    for change, pattern in (({"index_width": "6"}, "'index_width' must be an integer"),
+                            ({"num_samples": 10**11}, "'num_samples' must be an integer"),
+                            ({"ranges": [[0, 10**11]]}, "'ranges' must be"),
+                            ({"ranges": "0-3"}, "'ranges' must be")):
+        (small_root / "meta.json").write_text(good)
+        _rewrite_json(small_root / "meta.json", **change)
+        with pytest.raises(ValueError, match=r"meta\.json: " + pattern):
+            D.InterSHDataset(small_root)
 
 
 def _reject_even_seeds(seed):

@@ -149,6 +149,21 @@ def test_wrong_shape_names_file_sample_and_expected_shape(data):
         fh.FreiHAND(root, "training")[0]
 
 
+@pytest.mark.parametrize("key, index, value, pattern", [
+    ("xyz", (1, 4, 2), float("nan"), r"training_xyz\.json: sample 1 holds NaN or infinity"),
+    ("verts", (2, 7, 0), float("inf"), r"training_verts\.json: sample 2 holds NaN or infinity"),
+    ("xyz", (0, 0, 0), 1e308, r"training_xyz\.json: sample 0 holds 1e\+308, beyond"),
+    ("K", (2, 1, 1), 0.0, r"training_K\.json: sample 2 has a singular intrinsic matrix"),
+])
+def test_non_finite_absurd_or_singular_values_are_named(data, key, index, value, pattern):
+    root, arrays = data
+    arr = np.array(arrays["training"][key], dtype=np.float64)
+    arr[index] = value
+    (root / f"training_{key}.json").write_text(json.dumps(arr.tolist()))  # NaN/Infinity tokens
+    with pytest.raises(ValueError, match=pattern):
+        fh.FreiHAND(root, "training")[0]
+
+
 def test_length_mismatch_between_files(root):
     write_json(root / "training_scale.json", [0.03] * (N + 1))
     with pytest.raises(ValueError, match="training_scale.json has 4 samples.*training_K.json"):
