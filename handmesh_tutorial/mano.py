@@ -50,6 +50,7 @@ Units: the official files are in metres; nothing is rescaled.
 from __future__ import annotations
 
 import io
+import math
 import pickle
 import re
 from collections.abc import Mapping
@@ -158,6 +159,7 @@ class _SparseStandIn(_StandIn):
         """A current-scipy sparse matrix equal to the pickled one."""
         s = self._state
         shape = tuple(int(n) for n in s.get("_shape", s.get("shape")))
+        _check_size(shape, f"sparse matrix {self.qualname}")
         data = np.asarray(s["data"])
         if self.fmt == "coo":
             row = np.asarray(s.get("row", s.get("coords", (None, None))[0]))
@@ -191,17 +193,44 @@ def _plain(obj):
     return obj
 
 
+#: Largest array (elements) or sparse matrix (rows x columns) a MANO pickle may ask for: MANO's
+#: largest array, ``posedirs``, has 315,090 elements; a crafted shape must not allocate gigabytes.
+MAX_PICKLE_ELEMENTS = 20_000_000
+#: Largest MANO file read, bytes (the official files are about 4 MB).
+MAX_PICKLE_BYTES = 256 * 2**20
+
+
+def _check_size(shape, what: str) -> None:
+    dims = (shape,) if isinstance(shape, int | np.integer) else tuple(shape)
+    if not all(isinstance(n, int | np.integer) and n >= 0 for n in dims):
+        raise UnsafePickleError(f"refusing {what} with shape {dims!r}")
+    if math.prod(int(n) for n in dims) > MAX_PICKLE_ELEMENTS:
+        raise UnsafePickleError(f"refusing {what} of shape {dims} (more than "
+                                f"{MAX_PICKLE_ELEMENTS:,} elements)")
+
+
 def _numpy_functions() -> dict[tuple[str, str], object]:
     """numpy's own pickle helpers, found through numpy's reduce protocol (no private imports)."""
     reconstruct = np.zeros(1).__reduce__()[0]          # multiarray._reconstruct
     scalar = np.float64(1.0).__reduce__()[0]           # multiarray.scalar
     frombuffer = np.zeros(1).__reduce_ex__(5)[0]       # numeric._frombuffer (protocol 5)
     out: dict[tuple[str, str], object] = {}
+
+    # "numpy.ndarray" resolves to bounded_ndarray, which pickles of arrays pass to _reconstruct
+    # as the subtype: map it back
+    def bounded_reconstruct(subtype, shape, dtype):
+        _check_size(shape, "numpy _reconstruct")
+        return reconstruct(np.ndarray if subtype is bounded_ndarray else subtype, shape, dtype)
+
+    def bounded_ndarray(shape, *args, **kwargs):
+        _check_size(shape, "numpy.ndarray")
+        return np.ndarray(shape, *args, **kwargs)
+
     for core in ("numpy.core", "numpy._core"):
-        out[(f"{core}.multiarray", "_reconstruct")] = reconstruct
+        out[(f"{core}.multiarray", "_reconstruct")] = bounded_reconstruct
         out[(f"{core}.multiarray", "scalar")] = scalar
         out[(f"{core}.numeric", "_frombuffer")] = frombuffer
-    out[("numpy", "ndarray")] = np.ndarray
+    out[("numpy", "ndarray")] = bounded_ndarray
     out[("numpy", "dtype")] = np.dtype
     return out
 
@@ -308,6 +337,10 @@ def read_mano_pickle(path: str | Path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"MANO file not found: {path}")
+    size = path.stat().st_size
+    if size > MAX_PICKLE_BYTES:
+        raise ValueError(f"{path}: {size:,} bytes; a MANO file is a few MB (limit "
+                         f"{MAX_PICKLE_BYTES:,})")
     with open(path, "rb") as fh:
         data = RestrictedUnpickler(io.BytesIO(fh.read()), source=str(path)).load()
     if not isinstance(data, dict):

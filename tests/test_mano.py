@@ -215,6 +215,23 @@ def test_refuses_raw_globals(tmp_path, payload, name):
         M.read_mano_pickle(path)
 
 
+@pytest.mark.parametrize("payload, what", [
+    (b"cnumpy.core.multiarray\n_reconstruct\n(cnumpy\nndarray\n(I8000000000\ntS'b'\ntR.",
+     "numpy _reconstruct"),
+    (b"cnumpy\nndarray\n((I100000\nI100000\ntS'f8'\ntR.", "numpy.ndarray"),
+])
+def test_refuses_a_huge_array_before_allocating_it(tmp_path, payload, what):
+    path = tmp_path / "huge.pkl"
+    path.write_bytes(payload)
+    with pytest.raises(M.UnsafePickleError, match=f"refusing {what} of shape .*elements"):
+        M.read_mano_pickle(path)
+    # the same opcodes with a sane shape inside a dict still load
+    small = payload.replace(b"I8000000000", b"I8").replace(b"I100000\nI100000", b"I2\nI3")
+    path.write_bytes(b"(dp0\nS'a'\n" + small[:-1] + b"s.")
+    got = M.read_mano_pickle(path)["a"]
+    assert isinstance(got, np.ndarray) and got.size in (8, 6)
+
+
 def test_reconstructor_only_builds_stand_ins(tmp_path):
     # copyreg._reconstructor is whitelisted for Python-2 pickles, but only for stand-in classes.
     path = tmp_path / "raw.pkl"
