@@ -305,10 +305,10 @@ def error_kind(err: BaseException) -> str:
         return "exists"
     if isinstance(err, FileNotFoundError | NotADirectoryError | IsADirectoryError):
         return "not-found"
-    if isinstance(err, ValueError | KeyError | TypeError | IndexError | pickle.UnpicklingError
-                  | zipfile.BadZipFile | EOFError | FloatingPointError):
+    if isinstance(err, ValueError | KeyError | pickle.UnpicklingError | zipfile.BadZipFile
+                  | EOFError | FloatingPointError):
         return "bad-input"
-    return "unexpected"
+    return "unexpected"  # TypeError, IndexError, ...: most likely a bug of ours
 
 
 def error_message(err: BaseException) -> str:

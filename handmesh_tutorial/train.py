@@ -89,7 +89,7 @@ _ARCH_KEYS = ("encoder", "decoder", "attention", "channels", "latent_channels", 
 #: :class:`TrainConfig` fields a resumed run may change (how long, where, how fast, what is
 #: logged); every other field must equal the checkpoint's, so a run never silently mixes data,
 #: seeds, batch sizes or learning rates.
-RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_workers",
+RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_workers", "cache_data",
                   "val_every", "checkpoint_every", "val_batch_size", "progress", "durable")
 _PATH_KEYS = ("data", "val_data", "template")
 
