@@ -45,6 +45,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from .losses import normal_loss
 from .surface import flipped_face_fraction, roughness_deg
 
 __all__ = ["CodeEncoder", "FitResult", "fit_decoder", "posed_hands"]
@@ -162,7 +163,8 @@ def _flushed_subnormals():
 def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: int = 300,
                 seed: int = 0, *, faces=None, lr: float = 1e-3, code_lr: float | None = None,
                 code_dim: int = 64, batch_size: int | None = None, template=None,
-                loss: str = "l1", progress: bool = False) -> FitResult:
+                loss: str = "l1", normal_weight: float = 0.0,
+                progress: bool = False) -> FitResult:
     """Auto-decoder fit of the model's mesh part to ``N`` given meshes.
 
     Each mesh gets a learnable code ``(D,)`` (initialised ``N(0, 1)``) fed to
@@ -187,6 +189,9 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
         batch_size: samples per step (default all ``N``).
         template: template for a config (default the open right hand).
         loss: ``"l1"`` (the paper's mean absolute error) or ``"l2"`` (mean squared error).
+        normal_weight: weight of :func:`~handmesh_tutorial.losses.normal_loss` added to the
+            vertex loss (0 = off, the paper): penalises edges that leave the true surface's
+            tangent plane, i.e. crumpled surfaces.
         progress: print the loss every 10% of the steps.
 
     Returns:
@@ -204,6 +209,9 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
     faces = net.faces if faces is None else faces
     if faces is None:
         raise ValueError("pass faces= (the model has none recorded)")
+    if not normal_weight >= 0:
+        raise ValueError(f"normal_weight must be >= 0, got {normal_weight}")
+    face_index = torch.as_tensor(np.asarray(faces), dtype=torch.long)
     n = len(target)
     gen = torch.Generator().manual_seed(seed)
     codes = nn.Parameter(torch.randn(n, net.latent_to_mesh.in_features, generator=gen))
@@ -230,6 +238,8 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
             pred = net.decode(codes[idx])["vertices"]
             diff = pred - target[idx]
             value = diff.abs().mean() if loss == "l1" else diff.square().mean()
+            if normal_weight:
+                value = value + normal_weight * normal_loss(pred, target[idx], face_index)
             opt.zero_grad(set_to_none=True)
             value.backward()
             opt.step()
