@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import glob
 import io
 import os
 import tempfile
@@ -9,7 +10,18 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_write_bytes", "atomic_savez"]
+__all__ = ["atomic_write_bytes", "atomic_savez", "leftover_temporaries"]
+
+
+_TMP_SUFFIX = ".tmp"
+
+
+def leftover_temporaries(path: str | os.PathLike) -> list[Path]:
+    """The temp files :func:`atomic_write_bytes` of ``path`` leaves when killed mid-write
+    (``.<name>.<random>.tmp`` beside ``path``)."""
+    path = Path(path)
+    pattern = f".{glob.escape(path.name)}.*{_TMP_SUFFIX}"
+    return sorted(p for p in path.parent.glob(pattern) if p.is_file())
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = True) -> Path:
@@ -26,7 +38,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = Tru
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=_TMP_SUFFIX)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)

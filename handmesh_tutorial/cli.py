@@ -312,20 +312,10 @@ def error_kind(err: BaseException) -> str:
 
 
 def error_message(err: BaseException) -> str:
-    """One line for a user: the library's message, without torch's advice to unpickle.
-
-    ``torch.load(..., weights_only=True)`` refuses a checkpoint that holds more than tensors
-    and plain containers, and its message suggests ``weights_only=False``, which would run
-    whatever code the file carries; that advice is replaced by a warning.
-    """
+    """One line for a user: the library's message (at most its first three lines joined)."""
     text = str(err) if str(err) else type(err).__name__
     if isinstance(err, KeyError) and err.args:
         text = f"missing key {err.args[0]!r}"
-    if "weights_only" in text and "never load" not in text:
-        first = text.strip().splitlines()[0]
-        text = (f"{first.rstrip('.')}. The file holds objects that a safe load refuses; it "
-                "was not written by handmesh or was tampered with. Never load it with "
-                "weights_only=False: that runs any code the file carries.")
     lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
     return " ".join(lines) if len(lines) <= 3 else " ".join(lines[:3]) + " ..."
 

@@ -456,9 +456,15 @@ def _fsync_dir(path: Path) -> None:
             os.close(fd)
 
 
+def _temporary(path: Path) -> Path:
+    """Where a writer puts ``path`` before renaming it: ``.tmp-<name>-<pid>-<8 hex>`` beside it
+    (the form :func:`_is_own_temporary` recognises)."""
+    return path.with_name(f"{TMP_PREFIX}{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+
+
 def _write_atomic(path: Path, data: bytes, durable: bool = True) -> None:
     """Write a file via a temporary file in the same folder and ``os.replace``."""
-    tmp = path.with_name(f"{TMP_PREFIX}{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    tmp = _temporary(path)
     try:
         _write_file(tmp, data, durable)
         os.replace(tmp, path)
@@ -472,7 +478,7 @@ def _write_atomic(path: Path, data: bytes, durable: bool = True) -> None:
 def _write_folder(directory: Path, files: Mapping[str, bytes], durable: bool) -> None:
     """Write files into a hidden sibling folder, then rename it to ``directory`` in one step."""
     parent = directory.parent
-    tmp = parent / f"{TMP_PREFIX}{directory.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    tmp = _temporary(directory)
     tmp.mkdir()
     try:
         for name, data in files.items():
@@ -940,8 +946,8 @@ _SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+|alone_rgb_\d+)\.png$"
 def _is_own_temporary(p: Path) -> bool:
     """Whether ``p`` is a temporary that a writer of this module made (and may be removed).
 
-    The name must be ``.tmp-<name>-<pid>-<8 hex>`` (:func:`_write_atomic`,
-    :func:`_write_folder`, :func:`merge_shards`); a folder may hold only sample files, a file
+    The name must be :func:`_temporary`'s ``.tmp-<name>-<pid>-<8 hex>``; a folder may hold
+    only sample files, a file
     must stand for ``meta.json`` or a sample file. Anything else, e.g. a user's
     ``.tmp-my-notes/``, is left alone.
     """
@@ -1507,7 +1513,7 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
             if dst.exists():
                 skipped += 1
                 continue
-            tmp = dst.with_name(f"{TMP_PREFIX}{name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+            tmp = _temporary(dst)
             try:
                 shutil.copytree(r / SAMPLES_DIR / name, tmp,
                                 copy_function=os.link if link else shutil.copyfile)

@@ -1691,17 +1691,13 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
     from .dataset import generate_dataset
 
     # every argument is checked before anything is written (a bad one never leaves a
-    # meta.json behind that blocks the corrected rerun)
+    # meta.json behind that blocks the corrected rerun); generate_dataset checks the rest
     if kind not in KINDS + ("mixed",):
         raise ValueError(f"kind must be one of {KINDS + ('mixed',)}, got {kind!r}")
     if isinstance(image_size, bool) or not isinstance(image_size, int | np.integer) \
             or not MIN_IMAGE_SIZE <= image_size <= MAX_IMAGE_SIZE:
         raise ValueError(f"image_size must be an integer in [{MIN_IMAGE_SIZE}, "
                          f"{MAX_IMAGE_SIZE}] pixels, got {image_size!r}")
-    if isinstance(num, bool) or not isinstance(num, int | np.integer) or num < 1:
-        raise ValueError(f"num must be a positive integer, got {num!r}")
-    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
     InteractionConfig(limits=limits)  # validates
     fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits)
     kinds = list(KINDS) if kind == "mixed" else kind

@@ -63,6 +63,7 @@ from torch import nn
 from . import augment as A
 from . import metrics as M
 from ._io import atomic_write_bytes as _atomic_write_bytes
+from ._io import leftover_temporaries
 from .dataset import KINDS
 from .keypoints import keypoint_loss, normalised_keypoints
 from .losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
@@ -1004,16 +1005,11 @@ def remove_stale_temp_files(out_dir) -> list[Path]:
     Returns:
         The removed paths.
     """
-    own = (*RUN_CHECKPOINTS, "metrics.csv", "steps.csv", "config.json")
     out = Path(out_dir)
-    gone = []
-    if not out.is_dir():
-        return gone
-    for name in own:
-        for tmp in out.glob(f".{name}.*.tmp"):
-            if tmp.is_file():
-                tmp.unlink()
-                gone.append(tmp)
+    gone = [tmp for name in (*RUN_CHECKPOINTS, "metrics.csv", "steps.csv", "config.json")
+            for tmp in leftover_temporaries(out / name)]
+    for tmp in gone:
+        tmp.unlink()
     return gone
 
 
