@@ -36,8 +36,10 @@ Every item is a dict of tensors (see :class:`HandCropDataset`), so the default `
 
 from __future__ import annotations
 
+import copy
 import math
 import os
+import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 
@@ -49,7 +51,8 @@ __all__ = [
     "IMAGE_MEAN", "IMAGE_STD", "ROOT_INDEX", "AugmentConfig", "HandCropDataset",
     "InterSHTorchDataset", "FreiHANDTorchDataset", "normalize_image", "denormalize_image",
     "flip_intrinsics", "rotation_z", "crop_transform", "warp_image", "color_jitter",
-    "mirror_matrix", "unmirror", "to_camera", "project",
+    "mirror_matrix", "unmirror", "to_camera", "project", "BadSampleError", "BAD_SAMPLE_ERRORS",
+    "find_bad_items", "without_items",
 ]
 
 #: Image normalisation of the paper: ``(x / 255 - IMAGE_MEAN) / IMAGE_STD``.
@@ -462,7 +465,12 @@ class HandCropDataset(torch.utils.data.Dataset):
         if not -n <= i < n:
             raise IndexError(f"item {i} out of range for {n} items")
         index = self.indices[i] if self._indices is not None else int(i) % n
-        image, K, verts, joints, side, vr = self._raw(index)
+        try:
+            image, K, verts, joints, side, vr = self._raw(index)
+        except BAD_SAMPLE_ERRORS as e:
+            raise BadSampleError(f"sample {index}: {e} (leave such samples out with "
+                                 "skip_bad=True / --skip-bad; list them with handmesh verify)",
+                                 index=index, reason=str(e)) from e
         rng = np.random.default_rng([self.seed, self.epoch, index]) if self.train else None
         return self.make_item(image, K, verts, joints, side, vr, rng, index)
 
@@ -557,6 +565,70 @@ class HandCropDataset(torch.utils.data.Dataset):
     def vr_values(self) -> np.ndarray:
         """Target VR of every item, ``(N,)`` float64 (NaN when unknown)."""
         return np.array([self._raw(i)[5] for i in self.indices], dtype=np.float64)
+
+
+#: What the readers raise for a sample whose files are missing, unreadable or inconsistent.
+BAD_SAMPLE_ERRORS = (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile)
+
+
+class BadSampleError(ValueError):
+    """A sample of a dataset cannot be read; the message names the sample and its file.
+
+    Attributes:
+        index: the sample's position in the underlying reader (``None`` when unknown).
+        reason: what is wrong with it (the reader's message, naming the file).
+    """
+
+    def __init__(self, message: str, index: int | None = None, reason: str | None = None):
+        super().__init__(message)
+        self.index = index
+        self.reason = message if reason is None else reason
+
+
+def find_bad_items(dataset, progress: bool = False, desc: str = "checking samples") -> list:
+    """Items of ``dataset`` that cannot be loaded, with the reason.
+
+    Loads every item once (all of ``dataset[i]``: files, checks, crop), so that a run over
+    the remaining items cannot stop on a bad sample. Costs one pass over the data.
+
+    Args:
+        dataset: any map-style dataset (a ``HandCropDataset``, a ``torch.utils.data.Subset``...).
+        progress: tqdm bar.
+        desc: the bar's label.
+
+    Returns:
+        ``[{"position": i, "index": reader index or i, "error": message}, ...]`` in item order;
+        ``position`` is the item's position in ``dataset``, ``index`` the sample's position in
+        the underlying reader (what ``handmesh verify`` and the sample folders number).
+    """
+    from tqdm.auto import tqdm
+
+    bad = []
+    for i in tqdm(range(len(dataset)), desc=desc, disable=not progress, leave=False):
+        try:
+            dataset[i]
+        except BAD_SAMPLE_ERRORS as e:
+            index = getattr(e, "index", None)
+            bad.append({"position": i, "index": i if index is None else int(index),
+                        "error": getattr(e, "reason", str(e))})
+    return bad
+
+
+def without_items(dataset, positions):
+    """``dataset`` without the items at ``positions`` (e.g. those of :func:`find_bad_items`).
+
+    A ``HandCropDataset`` stays one (a shallow copy with fewer ``indices``: its augmentation
+    seeds, ``vr_values`` and ``target_shape`` keep working); any other dataset becomes a
+    ``torch.utils.data.Subset``. The input is not changed.
+    """
+    drop = {int(p) for p in positions}
+    keep = [i for i in range(len(dataset)) if i not in drop]
+    if isinstance(dataset, HandCropDataset):
+        out = copy.copy(dataset)
+        idx = dataset.indices
+        out._indices = [idx[i] for i in keep]
+        return out
+    return torch.utils.data.Subset(dataset, keep)
 
 
 class InterSHTorchDataset(HandCropDataset):

@@ -113,7 +113,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     overrides = {k: getattr(args, k) for k in _TRAIN_OPTIONS if getattr(args, k) is not None}
     overrides.update(out_dir=args.out, attention=not args.no_attention,
                      augment=not args.no_augment, progress=not args.no_progress,
-                     durable=not args.no_fsync)
+                     durable=not args.no_fsync, skip_bad=args.skip_bad)
     cfg = train.TrainConfig.from_budget(budget(args.budget), **overrides)
     res = train.train(cfg, resume=args.resume, overwrite=args.overwrite)
     if res.rank != 0:
@@ -128,7 +128,18 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if res.best_checkpoint is not None:
         print(f"best checkpoint (val PA-MPVPE): {res.best_checkpoint}")
     print(f"metrics: {res.metrics_csv}")
+    _print_skipped("train", res.skipped)
     return 0
+
+
+def _print_skipped(command: str, skipped: list) -> None:
+    """The bad samples ``--skip-bad`` left out, one line each (stdout: part of the result)."""
+    if not skipped:
+        return
+    print(f"handmesh {command}: skipped {len(skipped)} bad sample(s) (--skip-bad):")
+    for s in skipped:
+        where = f"{s['split']} " if "split" in s else ""
+        print(f"  {where}sample {s['index']}: {s['error']}")
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -138,7 +149,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                         image_size=args.image_size, batch_size=args.batch_size,
                         device=args.device, out_dir=args.out, num_samples=args.num,
                         template=args.template, progress=not args.no_progress,
-                        threads=args.threads, camera_frame=not args.network_frame)
+                        threads=args.threads, camera_frame=not args.network_frame,
+                        skip_bad=args.skip_bad)
     from .demo import BASELINE_ROW, headline
 
     sc = ev["scores"]
@@ -149,6 +161,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     print(ev["comparison"])
     for name, path in ev["files"].items():
         print(f"{name}: {path}")
+    _print_skipped("evaluate", ev["skipped"])
     return 0
 
 
@@ -248,6 +261,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--overwrite", action="store_true",
                     help="start afresh in an OUT that already holds a run (its checkpoints are "
                     "replaced); without --resume or --overwrite such an OUT is refused")
+    tr.add_argument("--skip-bad", action="store_true",
+                    help="load every sample once first, leave out those that cannot be read and "
+                    "list them at the end (default: the first bad sample stops the run, named)")
     tr.add_argument("--no-augment", action="store_true", help="no data augmentation")
     tr.add_argument("--no-progress", action="store_true", help="no progress bars")
     tr.add_argument("--no-fsync", action="store_true",
@@ -270,6 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--template", default=None, help="template .npz used for training")
     ev.add_argument("--network-frame", action="store_true",
                     help="store predictions in the network frame, not the camera frame")
+    ev.add_argument("--skip-bad", action="store_true",
+                    help="load every sample once first, leave out those that cannot be read and "
+                    "list them at the end (default: the first bad sample stops, named)")
     ev.add_argument("--no-progress", action="store_true", help="no progress bar")
     ev.set_defaults(func=_cmd_evaluate)
     return parser
@@ -316,6 +335,10 @@ def error_message(err: BaseException) -> str:
     text = str(err) if str(err) else type(err).__name__
     if isinstance(err, KeyError) and err.args:
         text = f"missing key {err.args[0]!r}"
+    if text.startswith("Caught ") and "Original Traceback" in text:
+        # re-raised from a DataLoader worker: the original error is the traceback's last line
+        last = text.strip().splitlines()[-1].strip()
+        text = last.split(": ", 1)[1] if ": " in last else last
     lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
     return " ".join(lines) if len(lines) <= 3 else " ".join(lines[:3]) + " ..."
 

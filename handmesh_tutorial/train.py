@@ -91,7 +91,8 @@ _ARCH_KEYS = ("encoder", "decoder", "attention", "channels", "latent_channels", 
 #: logged); every other field must equal the checkpoint's, so a run never silently mixes data,
 #: seeds, batch sizes or learning rates.
 RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_workers", "cache_data",
-                  "val_every", "checkpoint_every", "val_batch_size", "progress", "durable")
+                  "val_every", "checkpoint_every", "val_batch_size", "progress", "durable",
+                  "skip_bad")
 _PATH_KEYS = ("data", "val_data", "template")
 
 
@@ -149,6 +150,10 @@ class TrainConfig:
         edge_weight: weight of the edge-length loss; 0 = off.
         normal_weight: weight of the normal loss; 0 = off. (The four terms:
             :func:`training_loss`, :mod:`handmesh_tutorial.losses`.)
+        skip_bad: before training, load every training and validation item once and leave out
+            those that cannot be read (listed in ``TrainResult.skipped`` and ``skipped.json``);
+            ``False``: the first bad sample stops the run with its file named. May change on
+            resume (the batches after the resume point then differ; ``skipped.json`` says why).
     """
 
     data: str | None = None
@@ -187,6 +192,7 @@ class TrainConfig:
     aligned_weight: float = 0.0
     edge_weight: float = 0.0
     normal_weight: float = 0.0
+    skip_bad: bool = False
 
     def __post_init__(self):
         for name in ("data", "val_data", "template"):
@@ -286,6 +292,8 @@ class TrainResult:
         model: the trained network (unwrapped from DDP), on the training device.
         rank: this process's rank.
         world_size: the number of processes.
+        skipped: with ``TrainConfig.skip_bad``, the items left out:
+            ``[{"split": "train" | "val", "index": reader index, "error": message}, ...]``.
     """
 
     out_dir: Path
@@ -301,6 +309,7 @@ class TrainResult:
     model: nn.Module
     rank: int = 0
     world_size: int = 1
+    skipped: list = field(default_factory=list)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1081,6 +1090,11 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         train_ds, val_ds = make_datasets(config)
     else:
         train_ds, val_ds = dataset, val_dataset
+    skipped = []
+    if config.skip_bad:
+        train_ds, val_ds, skipped = _skip_bad_items(train_ds, val_ds, config.progress and is_main)
+        if is_main:
+            _write_json(out / "skipped.json", {"skipped": skipped})
     n_vert = int(net.joint_regressor.shape[1])
     got = tuple(train_ds[0]["vertices"].shape)
     if got != (n_vert, 3):
@@ -1169,7 +1183,27 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         metrics_csv=out / "metrics.csv" if is_main and history else None,
         history=history, step_losses=step_losses, final=dict(history[-1]) if history else {},
         epochs=done, steps=step, seconds=time.perf_counter() - t_start, model=net, rank=rank,
-        world_size=world)
+        world_size=world, skipped=skipped)
+
+
+def _skip_bad_items(train_ds, val_ds, progress: bool):
+    """``(train_ds, val_ds, skipped)`` without the items that cannot be loaded."""
+    skipped = []
+    found = {}
+    for split, ds in (("train", train_ds), ("val", val_ds)):
+        if ds is None:
+            continue
+        bad = A.find_bad_items(ds, progress, desc=f"checking {split} samples")
+        skipped += [{"split": split, "index": b["index"], "error": b["error"]} for b in bad]
+        found[split] = A.without_items(ds, [b["position"] for b in bad]) if bad else ds
+        if bad:
+            warnings.warn(f"skipping {len(bad)} of {len(ds)} {split} samples that cannot be "
+                          f"read (first: {bad[0]['error']})", stacklevel=4)
+    if len(found["train"]) == 0:
+        raise ValueError(f"every training sample is bad ({len(skipped)} skipped; first: "
+                         f"{skipped[0]['error']})")
+    val = found.get("val")
+    return found["train"], None if val is not None and len(val) == 0 else val, skipped
 
 
 def _write_logs(out: Path, history: list[dict], step_losses: list[float], durable: bool) -> None:
@@ -1347,7 +1381,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
              device: str = "auto", out_dir: str | os.PathLike | None = None,
              camera_frame: bool = True, num_samples: int | None = None, template=None,
              progress: bool = True, threads: int | None = None, baseline: bool = True,
-             mean_hand=None) -> dict:
+             mean_hand=None, skip_bad: bool = False) -> dict:
     """Evaluate a trained network: FreiHAND-style scores, per-sample errors, VR table, figures.
 
     Every item is the deterministic crop of its target hand (no augmentation); errors are
@@ -1382,6 +1416,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         mean_hand: ``(V, 3)`` network-frame vertices of a second constant baseline scored
             the same way, normally :func:`mean_hand` of the training data (the data's average
             articulation): the bar a model must clear to read *each* hand's pose from its image.
+        skip_bad: load every item once first and leave out those that cannot be read (listed
+            in ``skipped``); ``False``: the first bad sample stops the evaluation, named.
 
     Returns:
         dict with ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`: mm, AUC,
@@ -1401,7 +1437,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``comparison`` (markdown, model / rest hand / mean hand, those scored, per VR bin, kind
         and overall; ``""`` without either baseline), ``predictions`` (``vertices``
         (N, V, 3), ``joints`` (N, 21, 3) numpy, metres), ``num_samples`` and ``files`` (paths
-        written).
+        written), ``skipped`` (``[{"index": reader index, "error": message}, ...]``, the items
+        ``skip_bad`` left out; also in ``eval.json``).
     """
     if threads is not None:
         torch.set_num_threads(int(threads))
@@ -1433,6 +1470,14 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
     elif num_samples is not None:
         dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
+    skipped = []
+    if skip_bad:
+        bad = A.find_bad_items(dataset, progress, desc="checking samples")
+        skipped = [{"index": b["index"], "error": b["error"]} for b in bad]
+        dataset = A.without_items(dataset, [b["position"] for b in bad])
+        if bad and len(dataset) == 0:
+            raise ValueError(f"every evaluation sample is bad ({len(bad)} skipped; first: "
+                             f"{bad[0]['error']})")
     if len(dataset) == 0:
         raise ValueError("the evaluation set is empty")
 
@@ -1480,6 +1525,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         "predictions": {"vertices": pv.numpy(), "joints": pj.numpy(),
                         "frame": "camera" if camera_frame else "network"},
         "files": {},
+        "skipped": skipped,
     }
     if out_dir is not None:
         result["files"] = _write_eval(Path(out_dir), result, source, errors)
@@ -1507,7 +1553,8 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
                    "vr_table": res["mean_hand_baseline"]["vr_table"],
                    "kind_table": res["mean_hand_baseline"]["kind_table"]},
                "comparison": res["comparison"],
-               "predictions_frame": res["predictions"]["frame"]}
+               "predictions_frame": res["predictions"]["frame"],
+               "skipped": res.get("skipped", [])}
     files["json"] = out / "eval.json"
     _write_json(files["json"], summary)
     buf = io.BytesIO()
