@@ -851,7 +851,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
     Returns:
         A [`VerifyReport`][handmesh_tutorial.dataset.VerifyReport].
     """
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     root = Path(root)
     ds = InterSHDataset(root)
@@ -860,7 +860,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
     entries = sorted(p for p in samples.iterdir() if p.name.isdigit()) if samples.is_dir() \
         else []
     position = {int(i): k for k, i in enumerate(ds.indices.tolist())}
-    for p in tqdm(entries, disable=not progress, desc="verify", unit="sample"):
+    for p in progress_bar(entries, disable=not progress, desc="verify", unit="sample"):
         if not p.is_dir() or p.is_symlink():
             bad.append((p.name, "not a sample folder (a file or link)"))
             continue
@@ -1419,10 +1419,11 @@ def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
 def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | None,
          progress: bool, total: int, initial: int, mp_context: str, desc: str,
          initialised: bool = False) -> list[dict]:
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     results: list[dict] = []
-    bar = tqdm(total=total, initial=initial, disable=not progress, desc=desc, unit="sample")
+    bar = progress_bar(total=total, initial=initial, disable=not progress, desc=desc,
+                       unit="sample")
     try:
         if workers == 1 or len(todo) <= 1:
             if worker_init is not None and todo and not initialised:
@@ -1492,7 +1493,7 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
         ValueError: incompatible metas (differing keys named), overlapping shards, a shard with
             missing samples, or an ``out_root`` made from other shards.
     """
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     if not shard_roots:
         raise ValueError("merge_shards needs at least one shard root")
@@ -1523,7 +1524,7 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
     with _lock(out):
         _open_root(out, meta)
         jobs = [(r, i) for r, m in zip(roots, metas, strict=True) for i in _planned(m)]
-        for r, i in tqdm(jobs, disable=not progress, desc="merge", unit="sample"):
+        for r, i in progress_bar(jobs, disable=not progress, desc="merge", unit="sample"):
             name = f"{i:0{width}d}"
             dst = out / SAMPLES_DIR / name
             if dst.exists():

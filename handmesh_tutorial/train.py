@@ -791,7 +791,7 @@ def predict(model: nn.Module, images, batch_size: int = 32,
 
 def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.device,
                  num_workers: int = 0, progress: bool = False, desc: str = "eval") -> dict:
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     loader = torch.utils.data.DataLoader(dataset, batch_size=batch_size, shuffle=False,
                                          num_workers=num_workers)
@@ -801,7 +801,7 @@ def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.devic
     model.eval()
     try:
         with torch.no_grad():
-            for batch in tqdm(loader, desc=desc, disable=not progress, leave=False):
+            for batch in progress_bar(loader, desc=desc, disable=not progress, leave=False):
                 out = model(batch["image"].to(device))
                 acc["pred_vertices"].append(out["vertices"].float().cpu())
                 acc["pred_joints"].append(out["joints"].float().cpu())
@@ -951,7 +951,7 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         ValueError: inconsistent config, template/data vertex counts that differ, or a
             checkpoint of another architecture.
     """
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar as tqdm
 
     t_start = time.perf_counter()
     if config.threads is not None:
@@ -1122,7 +1122,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         model.train()
         lr = opt.param_groups[0]["lr"]
         losses = []
-        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}",
+        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}", per="epoch",
                    disable=not (config.progress and is_main), leave=False)
         for batch in bar:
             opt.zero_grad(set_to_none=True)

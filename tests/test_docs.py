@@ -3,7 +3,8 @@
 mkdocstrings reads Markdown, not reStructuredText: a Sphinx role such as ``:func:`x``` prints
 literally on the site. Cross-references use autorefs' syntax, ``[`x`][handmesh_tutorial.mod.x]``,
 and `mkdocs build --strict` fails if a target does not exist. Attribute documentation must be a
-docstring under the assignment: griffe ignores Sphinx's ``#:`` comments, so they never reach the site.
+docstring under the assignment: griffe ignores Sphinx's ``#:`` comments, so they never reach the
+site.
 """
 
 from __future__ import annotations
@@ -52,12 +53,14 @@ def test_the_pattern_catches_sphinx_roles():
 @pytest.mark.parametrize("path", MODULES, ids=[p.name for p in MODULES])
 def test_no_sphinx_roles_in_docstrings(path):
     leftovers = [
-        f"{path.name}:{line + text[: m.start()].count(chr(10))}: {text[m.start(): m.start() + 60]!r}"
+        f"{path.name}:{line + text[: m.start()].count(chr(10))}: "
+        f"{text[m.start(): m.start() + 60]!r}"
         for line, text in docstrings(path)
         for m in SPHINX_ROLE.finditer(text)
     ]
     assert not leftovers, (
-        "Sphinx roles do not render in mkdocstrings; write [`name`][handmesh_tutorial.module.name]:\n"
+        "Sphinx roles do not render in mkdocstrings; write "
+        "[`name`][handmesh_tutorial.module.name]:\n"
         + "\n".join(leftovers)
     )
 
