@@ -9,6 +9,10 @@ Notebook pages rendered by mkdocs-jupyter carry nbconvert's MathJax 2 block (an 
 ``<script src="">`` and a ``text/x-mathjax-config`` script); we strip it so that every page,
 concept, API or notebook, is typeset by the same MathJax 3 with the configuration in
 ``docs/javascripts/mathjax-config.js`` (``$...$`` inline enabled).
+
+Notebook pages also get: ipywidgets outputs as static, labelled HTML (the widget manager would come
+from a CDN and cannot run without a kernel anyway; a tqdm bar becomes its last line of text), and
+Markdown pipe tables printed as text turned into HTML tables.
 """
 
 from __future__ import annotations
@@ -197,10 +201,57 @@ def _static_widgets(output: str, src: str) -> str:
     return output
 
 
+# a text output (stream or text/plain) as nbconvert writes it
+_TEXT_OUTPUT = re.compile(r'(<div class="jp-RenderedText[^"]*"[^>]*>\s*)<pre>(.*?)</pre>', re.S)
+_TABLE_RULE = re.compile(r"^\|(\s*:?-{3,}:?\s*\|)+\s*$")
+
+
+def _pipe_tables(output: str) -> str:
+    """Turn Markdown pipe tables printed as text (``print(table)``) into HTML tables.
+
+    The notebook keeps its text output (readable in Jupyter's monospace); the site shows a table.
+    Lines around a table stay text; ANSI-coloured outputs (``<span>`` inside) are left alone.
+    """
+    import markdown  # a dependency of mkdocs
+
+    def convert(m: re.Match) -> str:
+        body = m.group(2)
+        if "|" not in body or "<span" in body:
+            return m.group(0)
+        lines = html.unescape(body).split("\n")
+        if not any(_TABLE_RULE.match(ln.strip()) for ln in lines):
+            return m.group(0)
+        parts, text, i = [], [], 0
+        while i < len(lines):
+            if (lines[i].lstrip().startswith("|") and i + 1 < len(lines)
+                    and _TABLE_RULE.match(lines[i + 1].strip())):
+                j = i + 2
+                while j < len(lines) and lines[j].lstrip().startswith("|"):
+                    j += 1
+                if text:
+                    parts.append("<pre>" + html.escape("\n".join(text)) + "</pre>")
+                    text = []
+                table = markdown.markdown("\n".join(ln.strip() for ln in lines[i:j]),
+                                          extensions=["tables"])
+                parts.append(f'<div class="hmt-table">{table}</div>')
+                i = j
+            else:
+                text.append(lines[i])
+                i += 1
+        while text and not text[-1].strip():
+            text.pop()
+        if text:
+            parts.append("<pre>" + html.escape("\n".join(text)) + "</pre>")
+        return m.group(1) + "".join(parts)
+
+    return _TEXT_OUTPUT.sub(convert, output)
+
+
 def on_post_page(output, page, config, **kwargs):
     if page.file.src_uri.endswith(".ipynb"):
         output, n = _NB_MATHJAX2.subn("", output, count=1)
         if n != 1:
             log.warning("%s: no nbconvert MathJax block found to replace", page.file.src_uri)
         output = _static_widgets(output, page.file.src_uri)
+        output = _pipe_tables(output)
     return output
