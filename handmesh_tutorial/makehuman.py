@@ -478,8 +478,8 @@ def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 
     """Pose anny's own model and save the result: the reference of the rig test.
 
     Poses: ``fist``, ``point``, ``pinch``, ``spread``
-        ([`example_pose`][handmesh_tutorial.hand.example_pose])
-    and ``num_random`` random ones ([`random_pose`][handmesh_tutorial.hand.random_pose], ``seed``).
+    ([`example_pose`][handmesh_tutorial.hand.example_pose]) and ``num_random`` random ones
+    ([`random_pose`][handmesh_tutorial.hand.random_pose], ``seed``).
     The committed fixture ``tests/fixtures/anny_posed_hand.npz`` was made by
     ``python -m handmesh_tutorial.makehuman --fixture tests/fixtures/anny_posed_hand.npz``.
 
