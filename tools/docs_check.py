@@ -73,10 +73,11 @@ PAGE_PROBE = r"""
   });
   let text = "";
   for (let n = walker.nextNode(); n; n = walker.nextNode()) text += n.nodeValue + "\u0001";
-  const near = (i) => text.slice(Math.max(0, i - 40), i + 60).replace(/\u0001/g, "");
+  const near = (i) => text.slice(Math.max(0, i - 30), i + 70).replace(/\u0001/g, " ");
   const rules = [
     ["raw TeX", /\\\(|\\\)|\\\[|\\\]|\$\$|\\begin\{|\$[^$\u0001]{0,80}\\[A-Za-z]+[^$\u0001]{0,80}\$/g],
-    ["Sphinx role", /:(mod|class|func|meth|attr|data|obj|exc|ref):`/g],
+    // the role's backticks become a <code> element (skipped here, hence the \u0001 separator)
+    ["Sphinx role", /:(mod|class|func|meth|attr|data|obj|exc|ref):(?=[`\u0001]|$)/gm],
     ["literal admonition", /^\s*!!!\s+\w+/gm],
     ["raw mermaid", /\b(flowchart|graph) (LR|TD|TB|RL)\b/g],
   ];
@@ -89,6 +90,10 @@ PAGE_PROBE = r"""
   for (const e of document.querySelectorAll("pre.mermaid, code.language-mermaid, div.mermaid"))
     if (!(e.shadowRoot && e.shadowRoot.querySelector("svg")) && !e.querySelector("svg"))
       problems.push("raw mermaid block: " + e.textContent.slice(0, 60));
+  // a mermaid fence whose renderer did not run is left as a code block (class removed)
+  const MERMAID = /^\s*(flowchart|graph|sequenceDiagram|classDiagram|stateDiagram|erDiagram|gantt|pie)\b/;
+  for (const e of root.querySelectorAll("pre"))
+    if (MERMAID.test(e.textContent)) problems.push("raw mermaid source: " + e.textContent.slice(0, 60));
   const images = [...document.querySelectorAll("img")];
   for (const img of images)
     if (!img.complete || img.naturalWidth === 0)

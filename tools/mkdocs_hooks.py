@@ -233,6 +233,8 @@ def _pipe_tables(output: str) -> str:
                     text = []
                 table = markdown.markdown("\n".join(ln.strip() for ln in lines[i:j]),
                                           extensions=["tables"])
+                # a class of its own: Material's table:not([class]) style is for prose tables
+                table = table.replace("<table>", '<table class="hmt-data">', 1)
                 parts.append(f'<div class="hmt-table">{table}</div>')
                 i = j
             else:
