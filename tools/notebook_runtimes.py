@@ -94,6 +94,15 @@ REUSED = {
 }
 
 
+#: The same, in a few words, for the Learning path table.
+TRAINED_SHORT = {
+    "00_quickstart": "trains a small one",
+    "08_training": "trains it",
+    "09_evaluation": "08's checkpoint",
+    "10_ablation": "trains 3 (one is 08's)",
+}
+
+
 def title(nb) -> str:
     first = nb.cells[0].source.lstrip()
     return first.splitlines()[0].lstrip("# ").strip()
@@ -201,20 +210,19 @@ def machine_load() -> dict:
 
 def write_path_page(rows: list[dict]) -> None:
     table = [
-        "| # | notebook | you will learn | read first | `default` | `smoke` | trained model |",
-        "|---|---|---|---|---|---|---|",
+        "| notebook: what you will learn | read first | `default` | `smoke` | trained model |",
+        "|---|---|---|---|---|",
     ]
     for r in rows:
-        num = r["stem"][:2]
         pre = ", ".join(p[:2] for p in PREREQS[r["stem"]]) or "–"
         table.append(
-            f"| {num} | [{r['title']}]({r['stem']}.ipynb) | {LEARN[r['stem']]} | {pre} | "
+            f"| **[{r['title']}]({r['stem']}.ipynb)**<br>{LEARN[r['stem']]} | {pre} | "
             f"{fmt(r.get('default'))}{'*' if r['stem'] in REUSED else ''} | {fmt(r.get('smoke'))} | "
-            f"{TRAINED.get(r['stem'], 'no')} |"
+            f"{TRAINED_SHORT.get(r['stem'], 'no')} |"
         )
     total_d = sum(r.get("default") or 0 for r in rows)
     total_s = sum(r.get("smoke") or 0 for r in rows)
-    table.append(f"| | **all, in order** | | | **{fmt(total_d)}** | **{fmt(total_s)}** | |")
+    table.append(f"| **all, in order** | | **{fmt(total_d)}** | **{fmt(total_s)}** | |")
     table.append("")
     table.append("\\* The committed `default` run reused data sets or checkpoints an earlier run had "
                  "left in `notebooks/runs/` (" + "; ".join(f"{k[:2]}: {v}" for k, v in REUSED.items())
