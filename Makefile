@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: setup demo test lint unit notebooks docs docs-serve execute-notebooks benchmarks clean
+.PHONY: setup demo test lint unit notebooks docs docs-serve docs-check execute-notebooks benchmarks clean
 
 setup: $(STAMP)
 
@@ -25,7 +25,7 @@ demo: setup
 	$(VENV)/bin/handmesh demo
 
 lint: setup
-	$(VENV)/bin/ruff check handmesh_tutorial tests benchmarks notebooks
+	$(VENV)/bin/ruff check handmesh_tutorial tests benchmarks notebooks tools
 
 unit: setup
 	HANDMESH_BUDGET=smoke $(PY) -m pytest tests
@@ -34,15 +34,32 @@ unit: setup
 notebooks: setup
 	HANDMESH_BUDGET=smoke $(PY) -m pytest --nbval-lax --nbval-current-env -p no:cacheprovider notebooks
 
+# The first build fetches MathJax (pinned npm package, tools/mkdocs_hooks.py) into .cache/.
 docs: setup
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+
+# Build the site and read every page in headless Chromium (tools/docs_check.py): raw TeX, raw
+# mermaid, Sphinx roles, console errors, broken images, requests to other hosts. Screenshots and
+# report.json go to build/docs-check/. Not part of `make test`: it needs Debian's chromium.
+docs-check: docs
+	@command -v chromium >/dev/null || command -v chromium-browser >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "docs-check: installing chromium with apt-get"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; \
+	  else \
+	    echo "docs-check needs headless Chromium: sudo apt-get install -y chromium"; exit 1; \
+	  fi; }
+	$(PY) tools/docs_check.py --site site --out build/docs-check
 
 test: lint unit notebooks docs
 
 # Re-execute every notebook under the default budget, outputs kept (what we commit).
+# Then measure each notebook under smoke (in memory; the committed outputs stay default) and
+# rewrite the "Before you start" cells and notebooks/learning_path.md with both runtimes.
 execute-notebooks: setup
 	for nb in notebooks/*.ipynb; do HANDMESH_BUDGET=default $(VENV)/bin/jupyter nbconvert --to notebook \
 	  --execute --inplace --ExecutePreprocessor.timeout=7200 "$$nb" || exit 1; done
+	$(PY) tools/notebook_runtimes.py --measure-smoke
 
 benchmarks: setup
 	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
@@ -51,4 +68,4 @@ docs-serve: setup
 	$(VENV)/bin/mkdocs serve
 
 clean:
-	rm -rf site runs .pytest_cache .ruff_cache
+	rm -rf site runs build/docs-check .pytest_cache .ruff_cache

@@ -17,7 +17,7 @@ _TMP_SUFFIX = ".tmp"
 
 
 def leftover_temporaries(path: str | os.PathLike) -> list[Path]:
-    """The temp files :func:`atomic_write_bytes` of ``path`` leaves when killed mid-write
+    """The temp files `atomic_write_bytes` of ``path`` leaves when killed mid-write
     (``.<name>.<random>.tmp`` beside ``path``)."""
     path = Path(path)
     pattern = f".{glob.escape(path.name)}.*{_TMP_SUFFIX}"

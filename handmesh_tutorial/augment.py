@@ -4,8 +4,9 @@ Paper, Sec. "Training": images are normalised with mean 0.5 and standard deviati
 (``x / 255 - 0.5``), augmented "with random image crops and transformations", and the ground-truth
 vertices are translated so that the middle MCP joint (FreiHAND keypoint 9) is at the origin.
 
-One network serves both hands: the model always predicts a *right* hand. A left target is
-mirrored on the way in and back on the way out (:func:`unmirror`, :func:`to_camera`):
+One network serves both hands: the model always predicts a *right* hand. A left target is mirrored
+on the way in and back on the way out ([`unmirror`][handmesh_tutorial.augment.unmirror],
+[`to_camera`][handmesh_tutorial.augment.to_camera]):
 
 * the image is flipped horizontally, ``u' = W - 1 - u`` (pixel centres at integer coordinates,
   as everywhere in this library);
@@ -13,7 +14,8 @@ mirrored on the way in and back on the way out (:func:`unmirror`, :func:`to_came
   a mirror is a right hand; the hand model's left mesh is the vertex-by-vertex mirror of the right
   one, so the vertex order is kept);
 * the intrinsics become ``K' = F K M`` with ``F`` the pixel flip: ``fx, fy, cy`` unchanged,
-  ``cx' = W - 1 - cx`` and the skew negated (:func:`flip_intrinsics`).
+  ``cx' = W - 1 - cx`` and the skew negated
+  ([`flip_intrinsics`][handmesh_tutorial.augment.flip_intrinsics]).
 
 Geometric augmentation keeps the 3D ground truth exactly consistent with the image:
 
@@ -30,7 +32,8 @@ small hue rotation) follows. All randomness of item ``i`` in epoch ``e`` comes f
 ``numpy.random.default_rng([seed, e, i])``: same seed, epoch and index -> same bytes, whatever the
 worker process or the order of loading.
 
-Every item is a dict of tensors (see :class:`HandCropDataset`), so the default ``collate_fn`` of
+Every item is a dict of tensors (see
+[`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset]), so the default ``collate_fn`` of
 ``torch.utils.data.DataLoader`` batches it.
 """
 
@@ -55,12 +58,12 @@ __all__ = [
     "find_bad_items", "without_items",
 ]
 
-#: Image normalisation of the paper: ``(x / 255 - IMAGE_MEAN) / IMAGE_STD``.
 IMAGE_MEAN = 0.5
-#: See :data:`IMAGE_MEAN`.
+"""Image normalisation of the paper: ``(x / 255 - IMAGE_MEAN) / IMAGE_STD``."""
 IMAGE_STD = 1.0
-#: Keypoint at the origin of the targets (middle-finger MCP, FreiHAND order).
+"""See [`IMAGE_MEAN`][handmesh_tutorial.augment.IMAGE_MEAN]."""
 ROOT_INDEX = 9
+"""Keypoint at the origin of the targets (middle-finger MCP, FreiHAND order)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -84,7 +87,7 @@ def normalize_image(image) -> torch.Tensor:
 
 
 def denormalize_image(image: torch.Tensor) -> np.ndarray:
-    """Undo :func:`normalize_image` for display.
+    """Undo [`normalize_image`][handmesh_tutorial.augment.normalize_image] for display.
 
     Args:
         image: ``(3, H, W)`` or ``(B, 3, H, W)`` normalised float tensor.
@@ -302,8 +305,8 @@ def unmirror(points, mirrored):
 def to_camera(points, batch: Mapping) -> torch.Tensor:
     """Network-frame points (root-centred, rotated, right-hand) back to the original camera frame.
 
-    Inverts what :class:`HandCropDataset` did to the ground truth:
-    ``p_cam = M^m R^T (p + root)``, with the batch's ``root`` (3,), rotation ``R`` (3, 3) and
+    Inverts what [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] did to the ground
+    truth: ``p_cam = M^m R^T (p + root)``, with the batch's ``root`` (3,), rotation ``R`` (3, 3) and
     ``mirrored`` flag (``M = diag(-1, 1, 1)``).
 
     Args:
@@ -368,7 +371,8 @@ class AugmentConfig:
 class HandCropDataset(torch.utils.data.Dataset):
     """Base class: one target hand per item, cropped, mirrored to the right, augmented.
 
-    Subclasses implement :meth:`load` (raw sample -> image, K, vertices, joints, side, VR).
+    Subclasses implement [`load`][handmesh_tutorial.augment.HandCropDataset.load] (raw sample ->
+    image, K, vertices, joints, side, VR).
 
     Items are dicts of tensors:
 
@@ -383,15 +387,16 @@ class HandCropDataset(torch.utils.data.Dataset):
     * ``mirrored`` bool scalar, the sample was a left hand flipped to the right;
     * ``index`` int64 scalar, position in the underlying reader.
 
-    :func:`to_camera` maps network-frame points back to the source camera frame.
+    [`to_camera`][handmesh_tutorial.augment.to_camera] maps network-frame points back to the source
+    camera frame.
 
     Args:
         image_size: crop side ``S``, pixels.
         train: random augmentation on (``False``: the deterministic crop of the target's box).
         seed: base seed of the augmentation (item ``i`` of epoch ``e`` uses
             ``default_rng([seed, e, i])``).
-        augment: ranges (:class:`AugmentConfig`); ``None`` = defaults; ``False`` = none even when
-            training.
+        augment: ranges ([`AugmentConfig`][handmesh_tutorial.augment.AugmentConfig]); ``None`` =
+            defaults; ``False`` = none even when training.
         crop: ``"bbox"`` = square box around the projected target mesh, ``box_scale`` times its
             larger side; ``"full"`` = the whole image (FreiHAND images are hand-centred crops).
         box_scale: margin of the ``"bbox"`` crop.
@@ -559,7 +564,8 @@ class HandCropDataset(torch.utils.data.Dataset):
     def target_shape(self, i: int) -> np.ndarray:
         """Item ``i``'s target mesh up to a rotation and translation: ``(V, 3)`` float64 metres,
         mirrored to a right hand like the item (what shape statistics such as
-        :func:`~handmesh_tutorial.train.mean_hand` need; subclasses read it without the image)."""
+        [`mean_hand`][handmesh_tutorial.train.mean_hand] need; subclasses read it without the
+        image)."""
         return self[i]["vertices"].double().numpy()
 
     def vr_values(self) -> np.ndarray:
@@ -567,8 +573,8 @@ class HandCropDataset(torch.utils.data.Dataset):
         return np.array([self._raw(i)[5] for i in self.indices], dtype=np.float64)
 
 
-#: What the readers raise for a sample whose files are missing, unreadable or inconsistent.
 BAD_SAMPLE_ERRORS = (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile)
+"""What the readers raise for a sample whose files are missing, unreadable or inconsistent."""
 
 
 class BadSampleError(ValueError):
@@ -601,10 +607,10 @@ def find_bad_items(dataset, progress: bool = False, desc: str = "checking sample
         ``position`` is the item's position in ``dataset``, ``index`` the sample's position in
         the underlying reader (what ``handmesh verify`` and the sample folders number).
     """
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     bad = []
-    for i in tqdm(range(len(dataset)), desc=desc, disable=not progress, leave=False):
+    for i in progress_bar(range(len(dataset)), desc=desc, disable=not progress, leave=False):
         try:
             dataset[i]
         except BAD_SAMPLE_ERRORS as e:
@@ -615,7 +621,10 @@ def find_bad_items(dataset, progress: bool = False, desc: str = "checking sample
 
 
 def without_items(dataset, positions):
-    """``dataset`` without the items at ``positions`` (e.g. those of :func:`find_bad_items`).
+    """``dataset`` without the items at ``positions``.
+
+    ``positions`` are usually those of
+    [`find_bad_items`][handmesh_tutorial.augment.find_bad_items].
 
     A ``HandCropDataset`` stays one (a shallow copy with fewer ``indices``: its augmentation
     seeds, ``vr_values`` and ``target_shape`` keep working); any other dataset becomes a
@@ -632,17 +641,19 @@ def without_items(dataset, positions):
 
 
 class InterSHTorchDataset(HandCropDataset):
-    """INTER-SH scenes as training crops of their target hand (see :class:`HandCropDataset`).
+    """INTER-SH scenes as training crops of their target hand (see
+    [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset]).
 
     Args:
         root_or_dataset: an INTER-SH root folder, an
-            :class:`~handmesh_tutorial.dataset.InterSHDataset`, or any sequence of INTER-SH
-            sample dicts (e.g. a list of :func:`~handmesh_tutorial.dataset.synthetic_sample`
-            outputs, for in-memory experiments).
+            [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset], or any sequence of
+            INTER-SH sample dicts (e.g. a list of
+            [`synthetic_sample`][handmesh_tutorial.dataset.synthetic_sample] outputs, for in-memory
+            experiments).
         image_size: crop side, pixels.
         train: augmentation on.
         seed: augmentation seed.
-        augment: see :class:`HandCropDataset`.
+        augment: see [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset].
         **kwargs: ``crop``, ``box_scale``, ``mirror_left``, ``indices``, ``cache``.
 
     Raises:
@@ -672,7 +683,9 @@ class InterSHTorchDataset(HandCropDataset):
                 float("nan") if vr is None else float(vr))
 
     def target_shape(self, i: int) -> np.ndarray:
-        """See :meth:`HandCropDataset.target_shape`; reads only the annotation of an on-disk
+        """See
+        [`HandCropDataset.target_shape`][handmesh_tutorial.augment.HandCropDataset.target_shape];
+        reads only the annotation of an on-disk
         root (no image)."""
         if not hasattr(self.source, "sample_dir"):
             return super().target_shape(i)
@@ -704,12 +717,12 @@ class FreiHANDTorchDataset(HandCropDataset):
     no visibility ratio (``vr`` is NaN) and no left hands (``mirrored`` is always False).
 
     Args:
-        root_or_reader: FreiHAND root folder or a :class:`~handmesh_tutorial.freihand.FreiHAND`.
+        root_or_reader: FreiHAND root folder or a [`FreiHAND`][handmesh_tutorial.freihand.FreiHAND].
         split: ``"training"`` or ``"evaluation"`` (when a root is given).
         image_size: crop side, pixels.
         train: augmentation on.
         seed: augmentation seed.
-        augment: see :class:`HandCropDataset`.
+        augment: see [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset].
         versions: training sample versions (see ``FreiHAND``).
         **kwargs: ``crop`` (default ``"full"``), ``box_scale``, ``indices``, ``cache``.
 

@@ -5,7 +5,7 @@ Paper section "Multi-path Mesh Decoder": the decoder's stages consist of *multi-
 i.e. a multi-resolution group convolution (every resolution runs its own residual spiral blocks)
 followed by a multi-resolution convolution (the fusion of HRNet, Wang et al. 2020), whose
 cross-resolution connections use the precomputed up- and downsampling matrices of
-:func:`handmesh_tutorial.sampling.mesh_hierarchy`.
+[`handmesh_tutorial.sampling.mesh_hierarchy`][handmesh_tutorial.sampling.mesh_hierarchy].
 
 Conventions: per-vertex features are tensors of shape ``(B, V, C)`` (batch, vertices, channels).
 Hierarchy level ``0`` is the finest mesh, level ``L-1`` the coarsest (the order of
@@ -173,9 +173,9 @@ class ResSpiralBlock(nn.Module):
     """Residual spiral block: a ResNet basic block on a mesh.
 
     ``y = ELU(LN(conv2(ELU(LN(conv1(x))))) + shortcut(x))`` with ``conv1``, ``conv2``
-    :class:`~handmesh_tutorial.spiral.SpiralConv` layers, LayerNorm over the channels instead of
-    BatchNorm, ELU as in the paper. The shortcut is the identity, or ``Linear + LayerNorm``
-    (a projection) when the channel count changes.
+    [`SpiralConv`][handmesh_tutorial.spiral.SpiralConv] layers, LayerNorm over the channels instead
+    of BatchNorm, ELU as in the paper. The shortcut is the identity, or ``Linear + LayerNorm`` (a
+    projection) when the channel count changes.
 
     Args:
         in_channels: ``C_in``.
@@ -344,8 +344,9 @@ class CoarseMeshTransformer(nn.Module):
     """Transformer on the coarse-mesh tokens (one token per coarsest vertex).
 
     Adds a learnable positional embedding per coarse vertex (the tokens have no other notion of
-    where they are) and runs ``num_layers`` pre-norm :class:`TransformerBlock` s, so every coarse
-    vertex can attend to every other (long-range interactions before the local spiral decoder).
+    where they are) and runs ``num_layers`` pre-norm
+    [`TransformerBlock`][handmesh_tutorial.blocks.TransformerBlock] s, so every coarse vertex can
+    attend to every other (long-range interactions before the local spiral decoder).
 
     Args:
         num_vertices: coarse-mesh vertices ``V_c`` (tokens).

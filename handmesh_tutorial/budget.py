@@ -6,7 +6,8 @@
 * ``default``: minutes on a 2-core laptop; what the committed notebooks were executed with.
 * ``full``: approaches the paper's scale (hours to days; a GPU helps).
 
-Nothing else in the library reads the variable: code asks :func:`budget` for sizes.
+Nothing else in the library reads the variable: code asks
+[`budget`][handmesh_tutorial.budget.budget] for sizes.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def budget(name: str | None = None) -> Budget:
             variable, and ``default`` when it is unset or empty.
 
     Returns:
-        The :class:`Budget` of that tier.
+        The [`Budget`][handmesh_tutorial.budget.Budget] of that tier.
 
     Raises:
         ValueError: the tier name is not one of ``smoke``, ``default``, ``full``.

@@ -5,7 +5,8 @@ the concept, so everything the command does can also be called from Python or a 
 
 Errors: a library error prints one line on stderr (``handmesh COMMAND: error: ...``, naming the
 file, key or shape and what to do) and exits with a code that says what kind of problem it was
-(:data:`EXIT_CODES`); ``handmesh --debug COMMAND ...`` shows the full traceback instead.
+([`EXIT_CODES`][handmesh_tutorial.cli.EXIT_CODES]); ``handmesh --debug COMMAND ...`` shows the full
+traceback instead.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ import sys
 import traceback
 import zipfile
 
-#: Exit codes of ``handmesh`` (argparse's own usage errors exit with 2).
 EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4,
               "exists": 5, "interrupted": 130}
+"""Exit codes of ``handmesh`` (argparse's own usage errors exit with 2)."""
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -319,7 +320,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def error_kind(err: BaseException) -> str:
-    """The :data:`EXIT_CODES` key of an exception raised by a sub-command."""
+    """The [`EXIT_CODES`][handmesh_tutorial.cli.EXIT_CODES] key of an exception raised by a
+    sub-command."""
     if isinstance(err, FileExistsError):
         return "exists"
     if isinstance(err, FileNotFoundError | NotADirectoryError | IsADirectoryError):

@@ -3,11 +3,18 @@
 The INTER-SH generator (paper, supplementary "Generating Mesh Interactions") approximates hands and
 objects by cylinders and annuli and moves them until two primitives intersect. This module holds:
 
-* :class:`Cylinders`: a body (hand, object, chain) as a batch of cylinders, metres.
-* :func:`cylinders_intersect`: exact, batched test for finite solid cylinders.
-* :func:`capsules_intersect`: the simple conservative alternative (a cylinder lies in its capsule).
-* scene queries :func:`bodies_collide`, :func:`colliding_pairs`, :func:`self_collisions`.
-* the hand as cylinders: :func:`hand_cylinders`, :func:`fit_cylinders`, :func:`coverage`.
+* [`Cylinders`][handmesh_tutorial.collision.Cylinders]: a body (hand, object, chain) as a batch of
+cylinders, metres.
+* [`cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect]: exact, batched test for
+finite solid cylinders.
+* [`capsules_intersect`][handmesh_tutorial.collision.capsules_intersect]: the simple conservative
+alternative (a cylinder lies in its capsule).
+* scene queries [`bodies_collide`][handmesh_tutorial.collision.bodies_collide],
+[`colliding_pairs`][handmesh_tutorial.collision.colliding_pairs],
+[`self_collisions`][handmesh_tutorial.collision.self_collisions].
+* the hand as cylinders: [`hand_cylinders`][handmesh_tutorial.collision.hand_cylinders],
+[`fit_cylinders`][handmesh_tutorial.collision.fit_cylinders],
+[`coverage`][handmesh_tutorial.collision.coverage].
 """
 
 from __future__ import annotations
@@ -38,8 +45,9 @@ class Cylinders:
         radius: (N,) float64, radius, metres.
         names: N names, e.g. ``"index_1"`` or ``"palm_middle"``.
         parts: (N,) int, the part (finger, link, ...) of each cylinder; informative only.
-        adjacent: (M, 2) int, pairs ``(i, j)`` with ``i < j`` of cylinders of this body that
-            touch by design (they share a joint); :func:`self_collisions` skips them.
+        adjacent: (M, 2) int, pairs ``(i, j)`` with ``i < j`` of cylinders of this body that touch
+            by design (they share a joint);
+            [`self_collisions`][handmesh_tutorial.collision.self_collisions] skips them.
     """
 
     p0: np.ndarray
@@ -93,7 +101,8 @@ class Cylinders:
             t: (3,) translation, metres.
 
         Returns:
-            A new :class:`Cylinders` (names, parts and adjacency kept).
+            A new [`Cylinders`][handmesh_tutorial.collision.Cylinders] (names, parts and adjacency
+            kept).
         """
         R = np.asarray(R, dtype=np.float64)
         t = np.asarray(t, dtype=np.float64).reshape(-1)
@@ -119,10 +128,10 @@ class Cylinders:
         """Join several bodies into one; adjacency indices are offset, parts kept as given.
 
         Args:
-            bodies: a sequence of :class:`Cylinders`.
+            bodies: a sequence of [`Cylinders`][handmesh_tutorial.collision.Cylinders].
 
         Returns:
-            One :class:`Cylinders` with all cylinders in order.
+            One [`Cylinders`][handmesh_tutorial.collision.Cylinders] with all cylinders in order.
         """
         bodies = list(bodies)
         if not bodies:
@@ -141,9 +150,10 @@ class Cylinders:
 # Tolerances. Everything is in metres and tuned for hand-scale primitives (lengths below ~0.3 m).
 # --------------------------------------------------------------------------------------------------
 
-#: Default contact tolerance of the tests, metres: cylinders are grown by ``atol / 2`` (radius and
-#: each end) before an exact test, so touching counts as intersecting and rounding cannot flip it.
 ATOL = 1e-9
+"""Default contact tolerance of the tests, metres: cylinders are grown by ``atol / 2`` (radius and
+each end) before an exact test, so touching counts as intersecting and rounding cannot flip it.
+"""
 # Below this sine of the angle between two disk normals the disks are treated as parallel; the tilt
 # this ignores moves a 1 cm disk by 1e-12 m.
 _PARALLEL_SIN = 1e-10
@@ -562,8 +572,8 @@ def capsules_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.ndar
 
     A capsule contains the cylinder with the same axis and radius, so ``capsules_intersect`` is a
     conservative (it never misses a cylinder contact) and cheaper stand-in for
-    :func:`cylinders_intersect`. The two differ near the end caps, where a capsule sticks out by
-    up to its radius.
+    [`cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect]. The two differ near
+    the end caps, where a capsule sticks out by up to its radius.
 
     Args:
         a0: (..., 3) axis end points of the first capsules, metres.
@@ -578,7 +588,7 @@ def capsules_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.ndar
         bool array of the broadcast batch shape.
 
     Raises:
-        ValueError: as :func:`cylinders_intersect`.
+        ValueError: as [`cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect].
     """
     a0, a1, ra, b0, b1, rb, shape = _prepare(a0, a1, ra, b0, b1, rb, atol)
     a0, a1, b0, b1 = _rows(a0), _rows(a1), _rows(b0), _rows(b1)
@@ -683,17 +693,19 @@ def distance_bounds(a0, a1, ra, b0, b1, rb, *, iters: int = 2000, tol: float = 1
                     refine_at: float | None = None, return_points: bool = False):
     """Lower and upper bounds on the distance between two solid cylinders: an independent oracle.
 
-    Nothing here shares code with :func:`cylinders_intersect`. The upper bound is ``|x - y|`` for
-    points ``x`` in A and ``y`` in B from alternating projections (von Neumann; they converge to a
-    closest pair, or to a common point when the solids meet). The lower bound is the width of a
-    separating slab: for a unit ``n``, every point of B is at least
-    ``-h_B(-n) - h_A(n)`` further along n than every point of A (support functions,
-    :func:`cylinder_support`), tried for the current ``y - x`` and for the axes and their cross
-    product. Two convex solids meet iff their distance is 0, so ``upper <= eps`` certifies contact
-    within eps and ``lower > eps`` certifies a gap larger than eps. Iterations stop per pair once
-    ``upper - lower <= tol``. Near tangent contact the projections converge slowly and the bounds
-    may stay apart; pairs for which the bounds do not yet decide whether the distance is at most
-    ``refine_at`` (``lower <= refine_at < upper``) are then refined one by one with SciPy's
+    Nothing here shares code with
+    [`cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect]. The upper bound is
+    ``|x - y|`` for points ``x`` in A and ``y`` in B from alternating projections (von Neumann; they
+    converge to a closest pair, or to a common point when the solids meet). The lower bound is the
+    width of a separating slab: for a unit ``n``, every point of B is at least ``-h_B(-n) - h_A(n)``
+    further along n than every point of A (support functions,
+    [`cylinder_support`][handmesh_tutorial.collision.cylinder_support]), tried for the current
+    ``y - x`` and for the axes and their cross product. Two convex solids meet iff their distance is
+    0, so ``upper <= eps`` certifies contact within eps and ``lower > eps`` certifies a gap larger
+    than eps. Iterations stop per pair once ``upper - lower <= tol``. Near tangent contact the
+    projections converge slowly and the bounds may stay apart; pairs for which the bounds do not yet
+    decide whether the distance is at most ``refine_at`` (``lower <= refine_at < upper``) are then
+    refined one by one with SciPy's
     SLSQP: the deepest point inside both solids (maximise the margin ``delta`` with ``x`` at least
     ``delta`` inside A and B) and the widest separating slab (maximise over unit ``n``). Both
     results are re-checked with the closed forms above, so the bounds stay valid whatever the
@@ -855,7 +867,7 @@ def ring_cylinders(center, normal, major_radius: float, minor_radius: float, n: 
         part: value of ``parts`` for every cylinder.
 
     Returns:
-        :class:`Cylinders` with ``n`` cylinders.
+        [`Cylinders`][handmesh_tutorial.collision.Cylinders] with ``n`` cylinders.
     """
     c = _check_points(center, "center").reshape(3)
     nrm = _check_points(normal, "normal").reshape(3)
@@ -891,7 +903,8 @@ def box_cylinders(center, rotation, half_extents, cells: int = 2, *, name: str =
         name: prefix of the names. part: value of ``parts``.
 
     Returns:
-        :class:`Cylinders`; cylinders in neighbouring cells are marked adjacent.
+        [`Cylinders`][handmesh_tutorial.collision.Cylinders]; cylinders in neighbouring cells are
+        marked adjacent.
     """
     c = _check_points(center, "center").reshape(3)
     R = np.asarray(rotation, dtype=np.float64)
@@ -976,7 +989,7 @@ def colliding_pairs(A: Cylinders, B: Cylinders, *, atol: float = ATOL):
     cylinder test on the survivors.
 
     Args:
-        A: the first body, a :class:`Cylinders`.
+        A: the first body, a [`Cylinders`][handmesh_tutorial.collision.Cylinders].
         B: the second body.
         atol: contact tolerance, metres.
 
@@ -996,7 +1009,7 @@ def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL) -> bool:
     primitive pairs at once: capsule prefilter, exact test, stopping at the first stage with a hit.
 
     Args:
-        A: the first body, a :class:`Cylinders` (e.g. a hand).
+        A: the first body, a [`Cylinders`][handmesh_tutorial.collision.Cylinders] (e.g. a hand).
         B: the second body (e.g. another hand, or an object).
         atol: contact tolerance, metres.
 
@@ -1015,10 +1028,11 @@ def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL) -> bool:
     return bool(_all_pairs_test(A, B, atol, early=True)[2].any())
 
 
-#: Fraction of each radius :func:`self_collisions` lets soft tissue compress (measured on the
-#: MakeHuman hand: 0.3 keeps a plain fist, a pinch and a flat hand free of self-collisions while
-#: a finger crossed through its neighbour still collides).
 SELF_CONTACT_COMPRESSION: float = 0.3
+"""Fraction of each radius [`self_collisions`][handmesh_tutorial.collision.self_collisions] lets
+soft tissue compress (measured on the MakeHuman hand: 0.3 keeps a plain fist, a pinch and a flat
+hand free of self-collisions while a finger crossed through its neighbour still collides).
+"""
 
 
 def self_collisions(body: Cylinders, *, atol: float = ATOL,
@@ -1026,18 +1040,18 @@ def self_collisions(body: Cylinders, *, atol: float = ATOL,
     """Intersecting pairs of NON-ADJACENT cylinders of one body (e.g. fingers crossing).
 
     Pairs listed in ``body.adjacent`` touch by design and are skipped. For hands built by
-    :func:`hand_cylinders` these are: consecutive phalanges of a finger; every phalanx with every
-    palm cylinder (the proximal segment sits on the palm; the others curl onto it in a fist, a
-    contact the flexion limits bound); all palm cylinders with each other; and the proximal
-    phalanges of neighbouring fingers (index-middle, middle-ring, ring-pinky), which sit side by
-    side on the knuckle line, joined by the finger webs.
+    [`hand_cylinders`][handmesh_tutorial.collision.hand_cylinders] these are: consecutive phalanges
+    of a finger; every phalanx with every palm cylinder (the proximal segment sits on the palm; the
+    others curl onto it in a fist, a contact the flexion limits bound); all palm cylinders with each
+    other; and the proximal phalanges of neighbouring fingers (index-middle, middle-ring,
+    ring-pinky), which sit side by side on the knuckle line, joined by the finger webs.
 
     Skin is soft: two parts of one hand pressed together (fingers side by side, thumb on a
     finger) overlap as cylinders before anything passes through anything. The test therefore
     shrinks every radius by the fraction ``compression`` first (0 = the exact cylinders).
 
     Args:
-        body: a :class:`Cylinders`.
+        body: a [`Cylinders`][handmesh_tutorial.collision.Cylinders].
         atol: contact tolerance, metres.
         compression: fraction of each radius that may be compressed, in [0, 1).
 
@@ -1081,13 +1095,13 @@ def fit_cylinders(vertices, segments, assignment, *, percentile: float = 95.0, e
         assignment: (V,) int, the link of each vertex, or -1 for a vertex no cylinder must cover.
         percentile: in (0, 100]; 100 covers every assigned vertex whose projection is inside.
         extend: optional (N, 2) bool, whether end 0 / end 1 of each link may be moved outwards.
-        names: passed to :class:`Cylinders`.
-        parts: passed to :class:`Cylinders`.
-        adjacent: passed to :class:`Cylinders`.
+        names: passed to [`Cylinders`][handmesh_tutorial.collision.Cylinders].
+        parts: passed to [`Cylinders`][handmesh_tutorial.collision.Cylinders].
+        adjacent: passed to [`Cylinders`][handmesh_tutorial.collision.Cylinders].
         min_radius: radius of a link without assigned vertices, metres.
 
     Returns:
-        :class:`Cylinders` with N cylinders.
+        [`Cylinders`][handmesh_tutorial.collision.Cylinders] with N cylinders.
     """
     v = _pts(vertices, "vertices")
     seg = np.asarray(segments, dtype=np.float64)
@@ -1127,11 +1141,13 @@ def fit_cylinders(vertices, segments, assignment, *, percentile: float = 95.0, e
     return Cylinders(p0, p1, radius, names or (), parts, adjacent)
 
 
-#: Names of the 20 cylinders of :func:`hand_cylinders`: 15 phalanges (3 per finger, thumb to
-#: pinky, base to tip; ``thumb_1`` is the thumb metacarpal) and 5 palm cylinders.
 HAND_CYLINDER_NAMES: tuple[str, ...] = tuple(
     f"{f}_{k}" for f in ("thumb", "index", "middle", "ring", "pinky") for k in (1, 2, 3)
 ) + ("palm_thumb", "palm_index", "palm_middle", "palm_ring", "palm_pinky")
+"""Names of the 20 cylinders of [`hand_cylinders`][handmesh_tutorial.collision.hand_cylinders]: 15
+phalanges (3 per finger, thumb to pinky, base to tip; ``thumb_1`` is the thumb metacarpal) and 5
+palm cylinders.
+"""
 
 
 def _hand_adjacency() -> np.ndarray:
@@ -1157,7 +1173,8 @@ def hand_segments(joints21, palm_spread: float = 0.7) -> np.ndarray:
         palm_spread: sideways spread of the palm cylinders at the wrist, in [0, 1].
 
     Returns:
-        (20, 2, 3) end points, in the order of :data:`HAND_CYLINDER_NAMES`.
+        (20, 2, 3) end points, in the order of
+        [`HAND_CYLINDER_NAMES`][handmesh_tutorial.collision.HAND_CYLINDER_NAMES].
     """
     j = np.asarray(joints21, dtype=np.float64)
     if j.shape != (21, 3):
@@ -1181,22 +1198,27 @@ def hand_cylinders(output_or_vertices, joints21=None, model=None, index: int = 0
     """The hand as 20 cylinders (15 phalanges + 5 palm) fitted to its posed mesh.
 
     Vertices are assigned to cylinders by the model's skinning weights (argmax joint -> the bone
-    leaving that joint; wrist-weighted vertices -> the nearest palm cylinder); without a model,
-    each vertex goes to the nearest axis segment. Radii come from :func:`fit_cylinders` with
-    ``percentile``; the palm cylinders extend back over the wrist. ``parts`` is the finger
-    (0 thumb .. 4 pinky, 5 palm); ``adjacent`` follows the rule in :func:`self_collisions`.
+    leaving that joint; wrist-weighted vertices -> the nearest palm cylinder); without a model, each
+    vertex goes to the nearest axis segment. Radii come from
+    [`fit_cylinders`][handmesh_tutorial.collision.fit_cylinders] with ``percentile``; the palm
+    cylinders extend back over the wrist. ``parts`` is the finger (0 thumb .. 4 pinky, 5 palm);
+    ``adjacent`` follows the rule in
+    [`self_collisions`][handmesh_tutorial.collision.self_collisions].
 
     Args:
         output_or_vertices: a hand model output (with ``.vertices`` (B, V, 3) and ``.joints``
             (B, 21, 3)), or vertices (B, V, 3) / (V, 3); torch or numpy, metres.
         joints21: (B, 21, 3) / (21, 3) FreiHAND keypoints; taken from the output when None.
-        model: the :class:`~handmesh_tutorial.hand.HandModel` (for ``skinning_weights``), or None.
+        model: the [`HandModel`][handmesh_tutorial.hand.HandModel] (for ``skinning_weights``), or
+            None.
         index: which batch element to use.
-        percentile: radius percentile, see :func:`fit_cylinders`.
-        palm_spread: see :func:`hand_segments`.
+        percentile: radius percentile, see
+            [`fit_cylinders`][handmesh_tutorial.collision.fit_cylinders].
+        palm_spread: see [`hand_segments`][handmesh_tutorial.collision.hand_segments].
 
     Returns:
-        :class:`Cylinders` with names :data:`HAND_CYLINDER_NAMES`, metres.
+        [`Cylinders`][handmesh_tutorial.collision.Cylinders] with names
+        [`HAND_CYLINDER_NAMES`][handmesh_tutorial.collision.HAND_CYLINDER_NAMES], metres.
     """
     verts = _to_numpy(getattr(output_or_vertices, "vertices", output_or_vertices), "vertices")
     if joints21 is None:
@@ -1246,7 +1268,7 @@ def coverage(vertices, body: Cylinders, *, tol: float = 1e-6) -> dict:
 
     Args:
         vertices: (V, 3) mesh vertices, metres.
-        body: the :class:`Cylinders` meant to cover them.
+        body: the [`Cylinders`][handmesh_tutorial.collision.Cylinders] meant to cover them.
         tol: a vertex counts as outside when it is further than this from every cylinder, metres.
 
     Returns:

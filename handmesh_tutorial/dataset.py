@@ -14,13 +14,14 @@ holds ``meta.json`` and one folder per sample::
         annotation.npz             K, vertices_<l>, faces_<l>, joints_<l>, pose_<l> (no pickles)
         annotation.json            kind, target, sides, names, vr, seed, stats (small, readable)
 
-Every file is deterministic (same sample -> same bytes: no time stamps in PNG, JSON or zip
-headers), every sample folder appears atomically (written in a temporary folder, then renamed),
-and :func:`generate_dataset` resumes an interrupted run to the same bytes as an uninterrupted one.
-See ``docs/concepts/dataset_format.md`` for the format in full.
+Every file is deterministic (same sample -> same bytes: no time stamps in PNG, JSON or zip headers),
+every sample folder appears atomically (written in a temporary folder, then renamed), and
+[`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] resumes an interrupted run to the
+same bytes as an uninterrupted one. See ``docs/concepts/dataset_format.md`` for the format in full.
 
 The driver knows nothing about hands or rendering: it calls ``make_sample(sample_seed) -> dict``.
-:func:`synthetic_sample` is a tiny stand-in (two spheres ray-cast with numpy) for tests and demos.
+[`synthetic_sample`][handmesh_tutorial.dataset.synthetic_sample] is a tiny stand-in (two spheres
+ray-cast with numpy) for tests and demos.
 """
 
 from __future__ import annotations
@@ -46,22 +47,25 @@ from typing import Any
 import numpy as np
 
 FORMAT_NAME = "INTER-SH"
-#: Version written by this library. 2: FreiHAND-like framing, photo backgrounds, anatomical
-#: limits by default, and the VR probe of balanced sets in ``meta.json`` (``vr_probe``). The
-#: sample files are laid out as in version 1.
 FORMAT_VERSION = 2
-#: Versions this library reads (version 1 roots read the same; resuming one with this version
-#: is refused, as any change of parameters is).
+"""Version written by this library. 2: FreiHAND-like framing, photo backgrounds, anatomical
+limits by default, and the VR probe of balanced sets in ``meta.json`` (``vr_probe``). The sample
+files are laid out as in version 1.
+"""
 READABLE_FORMAT_VERSIONS = (1, 2)
+"""Versions this library reads (version 1 roots read the same; resuming one with this version
+is refused, as any change of parameters is).
+"""
 KINDS = ("hand-hand", "hand-object", "hand-chain")
 META_FILE = "meta.json"
 SAMPLES_DIR = "samples"
 TMP_PREFIX = ".tmp-"
 LOCK_FILE = ".generate.lock"
 MIN_INDEX_WIDTH = 6
-#: Largest ``num_samples`` a ``meta.json`` may declare (the paper's set is 40,000; a corrupt
-#: or hostile file must not make the reader build a list of 1e11 indices).
 MAX_SAMPLES = 100_000_000
+"""Largest ``num_samples`` a ``meta.json`` may declare (the paper's set is 40,000; a corrupt
+or hostile file must not make the reader build a list of 1e11 indices).
+"""
 MAX_LABEL = 65535
 
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip entry date: np.savez would store the wall clock
@@ -71,10 +75,11 @@ _KNOWN_KEYS = frozenset({
     "image", "scene_mask", "alone_masks", "alone_images", "meshes", "joints", "K", "vr", "kind",
     "target", "sides", "names", "pose", "stats", "index", "seed", "attempt",
 })
-#: A bin is filled by VR balancing when at least this many probe candidates hit it: one lucky
-#: hit would keep a bin reachable once in a hundred candidates, whose samples would then mostly
-#: end up off their bin after ``max_attempts`` candidates each.
 PROBE_MIN_HITS = 2
+"""A bin is filled by VR balancing when at least this many probe candidates hit it: one lucky
+hit would keep a bin reachable once in a hundred candidates, whose samples would then mostly end up
+off their bin after ``max_attempts`` candidates each.
+"""
 _SEED_RULE = ("numpy.random.SeedSequence(entropy=seed, spawn_key=(index, attempt))"
               ".generate_state(1, uint64)[0] >> 11")
 
@@ -85,10 +90,11 @@ _SEED_RULE = ("numpy.random.SeedSequence(entropy=seed, spawn_key=(index, attempt
 class SampleRejected(Exception):
     """Raised by a ``make_sample`` callable for a seed that yields no valid sample.
 
-    :func:`generate_dataset` treats it as a rejected candidate (like ``accept`` returning
-    ``False``): it tries the next attempt's seed instead of stopping. Any other exception stops
-    generation. :class:`handmesh_tutorial.interact.InteractionError` (a scene the generator cannot
-    build within its bounded retries) is one.
+    [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] treats it as a rejected
+    candidate (like ``accept`` returning ``False``): it tries the next attempt's seed instead of
+    stopping. Any other exception stops generation.
+    [`handmesh_tutorial.interact.InteractionError`][handmesh_tutorial.interact.InteractionError] (a
+    scene the generator cannot build within its bounded retries) is one.
     """
 
 
@@ -115,8 +121,9 @@ def sample_seed(seed: int, index: int, attempt: int = 0) -> int:
 
 def probe_seed(seed: int, k: int) -> int:
     """The seed of the ``k``-th candidate of the VR probe of a balanced set (see
-    :func:`generate_dataset`): ``SeedSequence(seed, spawn_key=(k, 0, 1))``, independent of every
-    sample seed (whose spawn keys have two entries).
+    [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]):
+    ``SeedSequence(seed, spawn_key=(k, 0, 1))``, independent of every sample seed (whose spawn keys
+    have two entries).
     """
     sample_seed(seed, k)  # validates
     ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(int(k), 0, 1))
@@ -388,10 +395,10 @@ def encode_sample(sample: Mapping) -> dict[str, bytes]:
     """Validate a sample and encode it as the files of its folder (name -> bytes).
 
     Args:
-        sample: a sample dict (see :class:`InterSHDataset`); ``index``, ``seed``, ``attempt``,
-            ``names``, ``pose``, ``alone_images``, ``stats`` are optional. Extra keys are kept:
-            numpy arrays go to ``annotation.npz`` as ``extra_<key>``, other values (JSON-able) to
-            ``annotation.json`` under ``extra``.
+        sample: a sample dict (see [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset]);
+            ``index``, ``seed``, ``attempt``, ``names``, ``pose``, ``alone_images``, ``stats`` are
+            optional. Extra keys are kept: numpy arrays go to ``annotation.npz`` as ``extra_<key>``,
+            other values (JSON-able) to ``annotation.json`` under ``extra``.
 
     Returns:
         ``{"image.png": ..., "scene_mask.png": ..., "alone_<l>.png": ..., "annotation.npz": ...,
@@ -458,7 +465,7 @@ def _fsync_dir(path: Path) -> None:
 
 def _temporary(path: Path) -> Path:
     """Where a writer puts ``path`` before renaming it: ``.tmp-<name>-<pid>-<8 hex>`` beside it
-    (the form :func:`_is_own_temporary` recognises)."""
+    (the form `_is_own_temporary` recognises)."""
     return path.with_name(f"{TMP_PREFIX}{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
 
 
@@ -507,7 +514,8 @@ def write_sample(directory: str | os.PathLike, sample: Mapping, *, overwrite: bo
 
     Args:
         directory: the sample folder to create, e.g. ``root/samples/000123``.
-        sample: the sample dict (see :func:`encode_sample` and :class:`InterSHDataset`).
+        sample: the sample dict (see [`encode_sample`][handmesh_tutorial.dataset.encode_sample] and
+            [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset]).
         overwrite: replace an existing folder (the swap is then not atomic).
         durable: fsync files and folders, so a power cut cannot leave a renamed but empty file.
 
@@ -605,10 +613,11 @@ def read_sample(directory: str | os.PathLike) -> dict:
     """Read and validate one sample folder.
 
     Args:
-        directory: a folder written by :func:`write_sample`.
+        directory: a folder written by [`write_sample`][handmesh_tutorial.dataset.write_sample].
 
     Returns:
-        The sample dict (see :class:`InterSHDataset`), numpy arrays with the documented dtypes.
+        The sample dict (see [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset]), numpy
+        arrays with the documented dtypes.
 
     Raises:
         FileNotFoundError: a file is missing (the message names it).
@@ -802,7 +811,7 @@ class InterSHDataset:
 
 @dataclass
 class VerifyReport:
-    """Outcome of :func:`verify_dataset`.
+    """Outcome of [`verify_dataset`][handmesh_tutorial.dataset.verify_dataset].
 
     Attributes:
         root: the dataset folder.
@@ -828,9 +837,11 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                    progress: bool = True) -> VerifyReport:
     """Re-read every sample of an INTER-SH root and list the ones that are unreadable or foreign.
 
-    Each sample folder must read back (:func:`read_sample`: every file, key, shape, dtype) and
-    agree with ``meta.json`` (kind, image size) and with its own name (index; the seed of the
-    sample-seed rule, :func:`sample_seed`). A file where a sample folder belongs is bad too.
+    Each sample folder must read back ([`read_sample`][handmesh_tutorial.dataset.read_sample]: every
+    file, key, shape, dtype) and agree with ``meta.json`` (kind, image size) and with its own name
+    (index; the seed of the sample-seed rule,
+    [`sample_seed`][handmesh_tutorial.dataset.sample_seed]). A file where a sample folder belongs is
+    bad too.
 
     Args:
         root: the dataset folder (with ``meta.json``).
@@ -838,9 +849,9 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
         progress: tqdm progress bar.
 
     Returns:
-        A :class:`VerifyReport`.
+        A [`VerifyReport`][handmesh_tutorial.dataset.VerifyReport].
     """
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     root = Path(root)
     ds = InterSHDataset(root)
@@ -849,7 +860,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
     entries = sorted(p for p in samples.iterdir() if p.name.isdigit()) if samples.is_dir() \
         else []
     position = {int(i): k for k, i in enumerate(ds.indices.tolist())}
-    for p in tqdm(entries, disable=not progress, desc="verify", unit="sample"):
+    for p in progress_bar(entries, disable=not progress, desc="verify", unit="sample"):
         if not p.is_dir() or p.is_symlink():
             bad.append((p.name, "not a sample folder (a file or link)"))
             continue
@@ -936,19 +947,18 @@ def _lock(root: Path) -> Iterator[None]:
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
-#: Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``.
 _TMP_NAME = re.compile(rf"^{re.escape(TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
-#: Files a sample folder can hold (``_encode``): what a half-written sample may contain.
+"""Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``."""
 _SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+|alone_rgb_\d+)\.png$"
                           r"|^annotation\.(npz|json)$")
+"""Files a sample folder can hold (``_encode``): what a half-written sample may contain."""
 
 
 def _is_own_temporary(p: Path) -> bool:
     """Whether ``p`` is a temporary that a writer of this module made (and may be removed).
 
-    The name must be :func:`_temporary`'s ``.tmp-<name>-<pid>-<8 hex>``; a folder may hold
-    only sample files, a file
-    must stand for ``meta.json`` or a sample file. Anything else, e.g. a user's
+    The name must be `_temporary`'s ``.tmp-<name>-<pid>-<8 hex>``; a folder may hold only sample
+    files, a file must stand for ``meta.json`` or a sample file. Anything else, e.g. a user's
     ``.tmp-my-notes/``, is left alone.
     """
     m = _TMP_NAME.match(p.name)
@@ -963,7 +973,7 @@ def _is_own_temporary(p: Path) -> bool:
 def _clean_stale(folder: Path) -> int:
     """Remove the temporaries a killed writer left in ``folder``; returns how many.
 
-    Only this module's own temporaries (:func:`_is_own_temporary`) are removed.
+    Only this module's own temporaries (`_is_own_temporary`) are removed.
     """
     n = 0
     if folder.is_dir():
@@ -1126,9 +1136,10 @@ def _make_and_write(task: _Task, index: int) -> dict:
 
 
 def _probe(task: _Task, num: int) -> dict:
-    """VR probe of a balanced set: ``num`` candidates (seeds :func:`probe_seed`), their
-    target-VR counts per bin, and the bins balancing fills (those with at least
-    :data:`PROBE_MIN_HITS` hits)."""
+    """VR probe of a balanced set: ``num`` candidates (seeds
+    [`probe_seed`][handmesh_tutorial.dataset.probe_seed]), their target-VR counts per bin, and the
+    bins balancing fills (those with at least
+    [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.PROBE_MIN_HITS] hits)."""
     hits = [0] * len(task.bins)
     rejected = outside = 0
     for k in range(num):
@@ -1152,7 +1163,8 @@ def _fmt_bin(b: Sequence[float]) -> str:
 
 @dataclass
 class GenerationSummary:
-    """What :func:`generate_dataset` did (``str(summary)`` is a short report).
+    """What [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] did (``str(summary)``
+    is a short report).
 
     Attributes:
         root: dataset folder.
@@ -1244,32 +1256,36 @@ def generate_dataset(
     Args:
         root: output folder (created).
         make_sample: ``make_sample(sample_seed) -> dict``, a sample as described in
-            :class:`InterSHDataset` (without ``index``/``seed``). Must be deterministic in its
-            seed and, for ``workers > 1``, importable by the worker processes (a function of a
-            module, or a ``functools.partial`` of one; not one defined in a notebook cell).
+            [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset] (without
+            ``index``/``seed``). Must be deterministic in its seed and, for ``workers > 1``,
+            importable by the worker processes (a function of a module, or a ``functools.partial``
+            of one; not one defined in a notebook cell).
         num: number of samples of the whole dataset (all shards).
         seed: base seed, non-negative.
         kind: the kind(s) of scene ``make_sample`` produces (see ``KINDS``).
-        shard: ``(shard_index, num_shards)``: make only :func:`shard_range` of it (one machine's
-            part; join parts with :func:`merge_shards`). ``None`` = all.
+        shard: ``(shard_index, num_shards)``: make only
+            [`shard_range`][handmesh_tutorial.dataset.shard_range] of it (one machine's part; join
+            parts with [`merge_shards`][handmesh_tutorial.dataset.merge_shards]). ``None`` = all.
         workers: processes; each makes and writes its own samples.
         progress: show a tqdm bar.
         params: free-form JSON-able creation parameters (renderer, light, object set...),
             stored in ``meta.json`` and compared on resume.
         image_size: expected image size (int side or (H, W)); checked per sample if given.
-        accept: optional filter ``accept(sample) -> bool``; a rejected candidate is replaced by
-            the next attempt's seed. A ``make_sample`` that raises :class:`SampleRejected`
-            rejects its seed the same way.
-        balance_vr: ``True`` (bins from :func:`vr_bins`) or a list of bins: the target VRs are
-            spread evenly over the bins that ``make_sample`` can reach. First a *probe* makes
-            ``vr_probe`` candidates (seeds :func:`probe_seed`, not samples) and counts their
-            target VRs per bin; bins it hits fewer than :data:`PROBE_MIN_HITS` times (e.g.
-            [0.40, 0.60) for hand-chain scenes, whose thin rings rarely hide half a hand) are
-            reported at once (a ``UserWarning``) and left out. Sample ``i`` then wants bin
-            ``filled[i % len(filled)]``; if none of its ``max_attempts`` candidates lands
-            there, the accepted candidate nearest to the bin is written (counted in
-            ``off_bin``): balancing never stops a run. The probe is
-            stored in ``meta.json`` (``vr_probe``) and reused on resume; it is deterministic in
+        accept: optional filter ``accept(sample) -> bool``; a rejected candidate is replaced by the
+            next attempt's seed. A ``make_sample`` that raises
+            [`SampleRejected`][handmesh_tutorial.dataset.SampleRejected] rejects its seed the same
+            way.
+        balance_vr: ``True`` (bins from [`vr_bins`][handmesh_tutorial.dataset.vr_bins]) or a list of
+            bins: the target VRs are spread evenly over the bins that ``make_sample`` can reach.
+            First a *probe* makes ``vr_probe`` candidates (seeds
+            [`probe_seed`][handmesh_tutorial.dataset.probe_seed], not samples) and counts their
+            target VRs per bin; bins it hits fewer than
+            [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.PROBE_MIN_HITS] times (e.g. [0.40, 0.60)
+            for hand-chain scenes, whose thin rings rarely hide half a hand) are reported at once (a
+            ``UserWarning``) and left out. Sample ``i`` then wants bin ``filled[i % len(filled)]``;
+            if none of its ``max_attempts`` candidates lands there, the accepted candidate nearest
+            to the bin is written (counted in ``off_bin``): balancing never stops a run. The probe
+            is stored in ``meta.json`` (``vr_probe``) and reused on resume; it is deterministic in
             ``seed``, so shards agree.
         max_attempts: candidates per sample; RuntimeError when none is accepted (every seed
             rejected by ``make_sample`` or ``accept``).
@@ -1281,7 +1297,7 @@ def generate_dataset(
             OpenGL and torch).
 
     Returns:
-        A :class:`GenerationSummary`.
+        A [`GenerationSummary`][handmesh_tutorial.dataset.GenerationSummary].
 
     Raises:
         ValueError: bad arguments, or ``root`` holds a dataset made with different parameters
@@ -1403,10 +1419,11 @@ def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
 def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | None,
          progress: bool, total: int, initial: int, mp_context: str, desc: str,
          initialised: bool = False) -> list[dict]:
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     results: list[dict] = []
-    bar = tqdm(total=total, initial=initial, disable=not progress, desc=desc, unit="sample")
+    bar = progress_bar(total=total, initial=initial, disable=not progress, desc=desc,
+                       unit="sample")
     try:
         if workers == 1 or len(todo) <= 1:
             if worker_init is not None and todo and not initialised:
@@ -1476,7 +1493,7 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
         ValueError: incompatible metas (differing keys named), overlapping shards, a shard with
             missing samples, or an ``out_root`` made from other shards.
     """
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     if not shard_roots:
         raise ValueError("merge_shards needs at least one shard root")
@@ -1507,7 +1524,7 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
     with _lock(out):
         _open_root(out, meta)
         jobs = [(r, i) for r, m in zip(roots, metas, strict=True) for i in _planned(m)]
-        for r, i in tqdm(jobs, disable=not progress, desc="merge", unit="sample"):
+        for r, i in progress_bar(jobs, disable=not progress, desc="merge", unit="sample"):
             name = f"{i:0{width}d}"
             dst = out / SAMPLES_DIR / name
             if dst.exists():
@@ -1575,8 +1592,8 @@ def synthetic_sample(seed: int, kind: str = "hand-hand", image_size: int = 64,
             the size of a MANO hand).
 
     Returns:
-        A sample dict accepted by :func:`write_sample` / ``make_sample`` of
-        :func:`generate_dataset`.
+        A sample dict accepted by [`write_sample`][handmesh_tutorial.dataset.write_sample] /
+        ``make_sample`` of [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset].
     """
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")

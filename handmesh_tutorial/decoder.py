@@ -2,35 +2,40 @@
 
 Paper section "Multi-path Mesh Decoder" and Table 3 (ablation single vs multi-path).
 
-Both decoders take a mesh hierarchy (:func:`handmesh_tutorial.sampling.mesh_hierarchy`: level 0
+Both decoders take a mesh hierarchy
+([`handmesh_tutorial.sampling.mesh_hierarchy`][handmesh_tutorial.sampling.mesh_hierarchy]: level 0
 finest, level ``L-1`` coarsest; ``down[l]`` ``(V_{l+1}, V_l)``, ``up[l]`` ``(V_l, V_{l+1})``) and
-one spiral index array per level (:func:`hierarchy_spirals`). They map features on the coarsest
-mesh ``(B, V_{L-1}, channels[-1])`` to vertex coordinates on the finest mesh ``(B, V_0, 3)``.
-``channels`` is given per level, finest first.
+one spiral index array per level
+([`hierarchy_spirals`][handmesh_tutorial.decoder.hierarchy_spirals]). They map features on the
+coarsest mesh ``(B, V_{L-1}, channels[-1])`` to vertex coordinates on the finest mesh
+``(B, V_0, 3)``. ``channels`` is given per level, finest first.
 
-* :class:`SinglePathDecoder` walks coarse to fine: blocks on the coarsest mesh, upsample, blocks,
-  ..., blocks on the finest mesh, spiral convolution to xyz.
-* :class:`MultiPathDecoder` has ``L`` stages (five for the usual 4-fold hierarchy). Stage 1 runs
-  on the coarsest mesh only; each later stage first adds the next finer resolution (a transition
-  that upsamples the previous finest branch, like HRNet's transition layers) and then applies a
-  multi-resolution group convolution and a multi-resolution fusion to all its parallel branches.
-  The output head reads the finest branch (optionally all branches upsampled and concatenated).
+* [`SinglePathDecoder`][handmesh_tutorial.decoder.SinglePathDecoder] walks coarse to fine: blocks on
+  the coarsest mesh, upsample, blocks, ..., blocks on the finest mesh, spiral convolution to xyz.
+* [`MultiPathDecoder`][handmesh_tutorial.decoder.MultiPathDecoder] has ``L`` stages (five for the
+  usual 4-fold hierarchy). Stage 1 runs on the coarsest mesh only; each later stage first adds the
+  next finer resolution (a transition that upsamples the previous finest branch, like HRNet's
+  transition layers) and then applies a multi-resolution group convolution and a multi-resolution
+  fusion to all its parallel branches. The output head reads the finest branch (optionally all
+  branches upsampled and concatenated).
 
 With the same ``num_blocks`` both have the same depth: ``2 * num_blocks`` spiral convolutions per
-level (single) or per stage (multi) on every input-to-output path, plus the head when it is a
-spiral convolution; see :attr:`SinglePathDecoder.depth`. The fusion and transition layers are
-per-vertex ``Linear`` maps, which HRNet counts as 1x1 convolutions, not as spatial depth.
+level (single) or per stage (multi) on every input-to-output path, plus the head when it is a spiral
+convolution; see [`SinglePathDecoder.depth`][handmesh_tutorial.decoder.SinglePathDecoder.depth]. The
+fusion and transition layers are per-vertex ``Linear`` maps, which HRNet counts as 1x1 convolutions,
+not as spatial depth.
 
-**Output head** (``head``, measured with :func:`handmesh_tutorial.fit.fit_decoder`, 32 posed
-hands): ``"linear"`` (default), a per-vertex ``Linear`` on the finest features; ``"spiral"``, a
-:class:`~handmesh_tutorial.spiral.SpiralConv` as in CMR/MobRecon (slower and slightly worse in
+**Output head** (``head``, measured with
+[`handmesh_tutorial.fit.fit_decoder`][handmesh_tutorial.fit.fit_decoder], 32 posed hands):
+``"linear"`` (default), a per-vertex ``Linear`` on the finest features; ``"spiral"``, a
+[`SpiralConv`][handmesh_tutorial.spiral.SpiralConv] as in CMR/MobRecon (slower and slightly worse in
 the fit: 1.48 vs 1.16 mm); ``"pyramid"``, a ``Linear`` on every level, upsampled and summed
-(:class:`PyramidHead`; worse in the fit). By default the head starts at zero (``zero_head``), so
-the decoder's first output is all zeros instead of a random field: with the Xavier-initialised
-spiral head the first output of the default decoder was ~0.6 m of noise (after the model's
-``output_scale``), and 300 fit steps left 10 mm of error and a crumpled surface; with a zero head
-2.1 mm. :class:`~handmesh_tutorial.model.MSMRNet` reads the output as a deformation of its
-template, so it starts exactly at the template.
+([`PyramidHead`][handmesh_tutorial.decoder.PyramidHead]; worse in the fit). By default the head
+starts at zero (``zero_head``), so the decoder's first output is all zeros instead of a random
+field: with the Xavier-initialised spiral head the first output of the default decoder was ~0.6 m of
+noise (after the model's ``output_scale``), and 300 fit steps left 10 mm of error and a crumpled
+surface; with a zero head 2.1 mm. [`MSMRNet`][handmesh_tutorial.model.MSMRNet] reads the output as a
+deformation of its template, so it starts exactly at the template.
 """
 
 from __future__ import annotations
@@ -58,7 +63,9 @@ def hierarchy_spirals(hierarchy, length: int = 9, dilation: int = 1) -> list:
     """Spiral indices for every level of a mesh hierarchy.
 
     Args:
-        hierarchy: result of :func:`handmesh_tutorial.sampling.mesh_hierarchy` (uses ``.faces``).
+        hierarchy: result of
+            [`handmesh_tutorial.sampling.mesh_hierarchy`][handmesh_tutorial.sampling.mesh_hierarchy]
+            (uses ``.faces``).
         length: spiral length ``L`` (9 as MobRecon, 27 as CMR).
         dilation: spiral dilation.
 
@@ -69,7 +76,7 @@ def hierarchy_spirals(hierarchy, length: int = 9, dilation: int = 1) -> list:
 
 
 def count_spiral_convs(module: nn.Module) -> int:
-    """Number of :class:`~handmesh_tutorial.spiral.SpiralConv` layers inside ``module``."""
+    """Number of [`SpiralConv`][handmesh_tutorial.spiral.SpiralConv] layers inside ``module``."""
     return sum(isinstance(m, SpiralConv) for m in module.modules())
 
 

@@ -3,18 +3,20 @@
 One call runs the whole paper pipeline at laptop scale, on CPU:
 
 1. **Data.** Two INTER-SH sets of mixed scenes (hand-hand, hand-object and hand-chain, one kind
-   drawn per sample; natural poses: the generator's default anatomical joint limits, not the
-   paper's ±60°; :func:`handmesh_tutorial.dataset.generate_dataset` with
-   :func:`handmesh_tutorial.interact.make_sample`): ``OUT/data/train`` (seed ``seed``, the
-   generator's natural VR distribution) and the held-out ``OUT/data/test`` (seed ``seed + 1``,
-   never seen in training, ``balance_vr=True``: the target hands spread evenly over the paper's
-   four VR bins, so every row of the VR table has the same weight).
+   drawn per sample; natural poses: the generator's default anatomical joint limits, not the paper's
+   ±60°; [`handmesh_tutorial.dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset]
+   with [`handmesh_tutorial.interact.make_sample`][handmesh_tutorial.interact.make_sample]):
+   ``OUT/data/train`` (seed ``seed``, the generator's natural VR distribution) and the held-out
+   ``OUT/data/test`` (seed ``seed + 1``, never seen in training, ``balance_vr=True``: the target
+   hands spread evenly over the paper's four VR bins, so every row of the VR table has the same
+   weight).
 2. **Training.** MSMR-Net (ResNet-10 encoder, multi-path decoder, coarse-mesh attention) with
-   :func:`handmesh_tutorial.train.train` into ``OUT/train`` (10% of the training set held out
-   for per-epoch validation; ``checkpoint_best.pt`` keeps the best validation PA-MPVPE).
+   [`handmesh_tutorial.train.train`][handmesh_tutorial.train.train] into ``OUT/train`` (10% of the
+   training set held out for per-epoch validation; ``checkpoint_best.pt`` keeps the best validation
+   PA-MPVPE).
 3. **Evaluation** of the best checkpoint on the test set with
-   :func:`handmesh_tutorial.train.evaluate` into ``OUT/eval`` (``eval.json``,
-   ``predictions.npz``, ``pck.png``, ``vr.png``).
+   [`handmesh_tutorial.train.evaluate`][handmesh_tutorial.train.evaluate] into ``OUT/eval``
+   (``eval.json``, ``predictions.npz``, ``pck.png``, ``vr.png``).
 4. **Report.** ``OUT/report.md`` with the FreiHAND-style scores, the table per VR bin (the
    paper's Table 2 layout), predicted meshes drawn over held-out images next to the ground truth
    (``overlays.png``), the loss curves (``loss.png``), PCK curves and error vs VR; ``OUT/demo.json``
@@ -22,12 +24,13 @@ One call runs the whole paper pipeline at laptop scale, on CPU:
 
 **Resumable.** Rerunning the same command skips finished work: the data generators skip samples
 already on disk, training continues from ``OUT/train/checkpoint_last.pt`` (exactly, see
-:mod:`handmesh_tutorial.train`), and a finished training is not repeated. Evaluation and report
-are cheap and always redone.
+[`handmesh_tutorial.train`][handmesh_tutorial.train]), and a finished training is not repeated.
+Evaluation and report are cheap and always redone.
 
-**Sizes** come from the run-size tier (:func:`handmesh_tutorial.budget.budget`) through
-:meth:`DemoConfig.from_budget`; the demo's own choices, made so that the ``default`` tier
-finishes in about ten minutes on a 2-core CPU:
+**Sizes** come from the run-size tier
+([`handmesh_tutorial.budget.budget`][handmesh_tutorial.budget.budget]) through
+[`DemoConfig.from_budget`][handmesh_tutorial.demo.DemoConfig.from_budget]; the demo's own choices,
+made so that the ``default`` tier finishes in about ten minutes on a 2-core CPU:
 
 * training scenes = 5 x ``budget.samples`` (``default``: 3,000; about 7 scenes/s with two
   workers at 128 px on a 2-core CPU) and VR-balanced test scenes = 1/2 of
@@ -39,22 +42,22 @@ finishes in about ten minutes on a 2-core CPU:
   (``default``: 10, about 1,700 steps), learning rate ``1e-3`` (as MobRecon/HandMesh; the
   paper's ``1e-4`` is for 200 epochs with a pretrained encoder), halved once, after three
   quarters of the run;
-* **ResNet-10** instead of the paper's ImageNet-pretrained ResNet-50 / HRNet, **no
-  augmentation** below the ``full`` tier, and the **CPU recipe** (:data:`RECIPES`): a 2D
-  keypoint head whose features are pooled at the joints, a global-rotation head, and keypoint
-  and aligned-joint losses beside the paper's L1. With the paper's recipe (``recipe="paper"``)
-  a from-scratch network stays for thousands of steps on a plateau of the L1 loss (about 28 mm)
-  where it predicts one average mesh for every image. The docs page "Training from scratch on a
-  CPU" has the measurements behind every choice.
+* **ResNet-10** instead of the paper's ImageNet-pretrained ResNet-50 / HRNet, **no augmentation**
+  below the ``full`` tier, and the **CPU recipe** ([`RECIPES`][handmesh_tutorial.demo.RECIPES]): a
+  2D keypoint head whose features are pooled at the joints, a global-rotation head, and keypoint and
+  aligned-joint losses beside the paper's L1. With the paper's recipe (``recipe="paper"``) a
+  from-scratch network stays for thousands of steps on a plateau of the L1 loss (about 28 mm) where
+  it predicts one average mesh for every image. The docs page "Training from scratch on a CPU" has
+  the measurements behind every choice.
 
 The ``full`` tier is the paper's scale instead: ``budget.samples`` training scenes (40,000),
 ``budget.epochs`` epochs (200), augmentation on.
 
-What to expect at the ``default`` size (measured on a 2-core CPU, seed 0, 18.7 min in all: 7.1
-min generating, 11.4 min training): on the 100 held-out scenes MPJPE 36.8 mm, PA-MPJPE 10.2 mm,
-PA-MPVPE 9.6 mm, roughness 9.9 degrees, 2.1% flipped faces. The rest hand (the template's open
-hand for every image) scores PA-MPJPE 13.1 mm, the mean training hand
-(:func:`~handmesh_tutorial.train.mean_hand`) 10.3 mm: the network has learnt the hand's
+What to expect at the ``default`` size (measured on a 2-core CPU, seed 0, 18.7 min in all: 7.1 min
+generating, 11.4 min training): on the 100 held-out scenes MPJPE 36.8 mm, PA-MPJPE 10.2 mm, PA-MPVPE
+9.6 mm, roughness 9.9 degrees, 2.1% flipped faces. The rest hand (the template's open hand for every
+image) scores PA-MPJPE 13.1 mm, the mean training hand
+([`mean_hand`][handmesh_tutorial.train.mean_hand]) 10.3 mm: the network has learnt the hand's
 orientation and the data's average articulation, not yet each hand's finger pose.
 
 Example::
@@ -81,31 +84,36 @@ __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "train_confi
            "plot_loss_curves", "write_report", "headline", "parse_headline", "HEADLINE",
            "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES"]
 
-#: Training recipes (:class:`~handmesh_tutorial.train.TrainConfig` fields on top of
-#: :func:`train_config`): the paper's (one L1 vertex loss, an encoder that ends in global
-#: average pooling) and the CPU recipe, which adds a 2D keypoint head whose features are pooled
-#: at the joints (:mod:`handmesh_tutorial.keypoints`), a global-rotation head
-#: (:mod:`handmesh_tutorial.rotation`) and the keypoint and aligned-joint losses
-#: (:mod:`handmesh_tutorial.losses`). Why: docs page "Training from scratch on a CPU".
 RECIPES = {
     "paper": {},
     "cpu": {"model_kwargs": {"keypoints": True, "global_rotation": True},
             "keypoint_weight": 0.5, "aligned_weight": 1.0},
 }
+"""Training recipes ([`TrainConfig`][handmesh_tutorial.train.TrainConfig] fields on top of
+[`train_config`][handmesh_tutorial.demo.train_config]): the paper's (one L1 vertex loss, an encoder
+that ends in global average pooling) and the CPU recipe, which adds a 2D keypoint head whose
+features are pooled at the joints ([`handmesh_tutorial.keypoints`][handmesh_tutorial.keypoints]), a
+global-rotation head ([`handmesh_tutorial.rotation`][handmesh_tutorial.rotation]) and the keypoint
+and aligned-joint losses ([`handmesh_tutorial.losses`][handmesh_tutorial.losses]). Why: docs page
+"Training from scratch on a CPU".
+"""
 
-#: Row names of the headline table: the trained network and the two constant baselines of
-#: :func:`handmesh_tutorial.train.evaluate`: the rest hand (the template's open hand) and the
-#: mean training hand (:func:`handmesh_tutorial.train.mean_hand`), each predicted for every image.
 MODEL_ROW, BASELINE_ROW, MEAN_ROW = ("MSMR-Net", "rest hand (no network)",
                                      "mean training hand (no network)")
+"""Row names of the headline table: the trained network and the two constant baselines of
+[`handmesh_tutorial.train.evaluate`][handmesh_tutorial.train.evaluate]: the rest hand (the
+template's open hand) and the mean training hand
+([`handmesh_tutorial.train.mean_hand`][handmesh_tutorial.train.mean_hand]), each predicted for every
+image.
+"""
 
-#: Scores in the report's headline table: (eval.json key, column title, format).
 HEADLINE = (("mpjpe", "MPJPE (mm)", "{:.2f}"), ("pa_mpjpe", "PA-MPJPE (mm)", "{:.2f}"),
             ("pa_mpvpe", "PA-MPVPE (mm)", "{:.2f}"),
             ("f_at_5mm", "F@5mm", "{:.3f}"), ("f_at_15mm", "F@15mm", "{:.3f}"),
             ("auc_joints", "AUC joints 0-50mm", "{:.3f}"),
             ("auc_joints_20mm", "AUC joints 0-20mm", "{:.3f}"),
             ("roughness_deg", "roughness (deg)", "{:.1f}"), ("flipped", "flipped faces", "{:.3f}"))
+"""Scores in the report's headline table: (eval.json key, column title, format)."""
 
 
 @dataclass
@@ -124,9 +132,9 @@ class DemoConfig:
         decoder: ``"multi"`` or ``"single"``.
         attention: coarse-mesh transformer on.
         augment: random crop / scale / rotation / colour jitter of training crops.
-        recipe: ``"cpu"`` (default; :data:`RECIPES`: 2D keypoint head with pose pooling, a
-            global-rotation head, keypoint and aligned-joint losses beside the paper's L1) or
-            ``"paper"`` (L1 vertex loss only, global-pooling encoder).
+        recipe: ``"cpu"`` (default; [`RECIPES`][handmesh_tutorial.demo.RECIPES]: 2D keypoint head
+            with pose pooling, a global-rotation head, keypoint and aligned-joint losses beside the
+            paper's L1) or ``"paper"`` (L1 vertex loss only, global-pooling encoder).
         balance_train: VR-balance the training scenes too (about 5x slower to generate).
         threads: torch threads.
         workers: data-generation processes.
@@ -157,7 +165,7 @@ class DemoConfig:
         """The demo's sizes for a run-size tier.
 
         Args:
-            budget: a :class:`~handmesh_tutorial.budget.Budget` (default ``hmt.budget()``).
+            budget: a [`Budget`][handmesh_tutorial.budget.Budget] (default ``hmt.budget()``).
             **overrides: any field.
 
         Returns:
@@ -182,7 +190,7 @@ class DemoConfig:
 
 @dataclass
 class DemoResult:
-    """What :func:`run_demo` returns.
+    """What [`run_demo`][handmesh_tutorial.demo.run_demo] returns.
 
     Attributes:
         out_dir: the output folder.
@@ -193,7 +201,7 @@ class DemoResult:
         files: name -> path of everything written.
         seconds: wall time per stage (``generate``, ``train``, ``evaluate``, ``report``,
             ``total``) of this call.
-        config: the :class:`DemoConfig` used.
+        config: the [`DemoConfig`][handmesh_tutorial.demo.DemoConfig] used.
         train_epochs: epochs completed by the training run.
         baseline_scores: scores of the rest-hand baseline on the same test scenes.
         comparison: markdown, model / rest hand / mean hand per VR bin, scene kind and overall.
@@ -256,13 +264,14 @@ def generate_data(root: str | os.PathLike, config: DemoConfig | None = None, see
     Args:
         root: folder of the two sets.
         config: sizes (``train_samples``, ``test_samples``, ``render_size``, ``workers``,
-            ``balance_train``); default :meth:`DemoConfig.from_budget`.
+            ``balance_train``); default
+            [`DemoConfig.from_budget`][handmesh_tutorial.demo.DemoConfig.from_budget].
         seed: seed of the training set; the test set uses ``seed + 1``.
         progress: tqdm bars.
 
     Returns:
         dict with ``train`` and ``test`` roots (``Path``) and their
-        :class:`~handmesh_tutorial.dataset.GenerationSummary` as ``train_summary`` and
+        [`GenerationSummary`][handmesh_tutorial.dataset.GenerationSummary] as ``train_summary`` and
         ``test_summary``.
     """
     cfg = config or DemoConfig.from_budget()
@@ -332,9 +341,9 @@ def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = 
             metres, ``val_pa_mpjpe``, ``val_pa_mpvpe`` in mm).
         step_losses: training loss of every step, metres.
         baselines: ``{name: scores}`` of constant baselines on the validation scenes
-            (:func:`~handmesh_tutorial.train.constant_hand_scores`: the rest hand, the mean
-            training hand): dashed / dotted lines at their PA-MPJPE and PA-MPVPE, the bars the
-            curves must go under.
+            ([`constant_hand_scores`][handmesh_tutorial.train.constant_hand_scores]: the rest hand,
+            the mean training hand): dashed / dotted lines at their PA-MPJPE and PA-MPVPE, the bars
+            the curves must go under.
 
     Returns:
         The matplotlib figure.
@@ -375,15 +384,16 @@ def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = 
 
 
 def headline(scores: dict, baseline: dict | None = None, mean: dict | None = None) -> str:
-    """The headline scores as a markdown table (formats of :data:`HEADLINE`).
+    """The headline scores as a markdown table (formats of
+    [`HEADLINE`][handmesh_tutorial.demo.HEADLINE]).
 
     Args:
-        scores: ``eval.json`` ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`),
-            the row :data:`MODEL_ROW`.
+        scores: ``eval.json`` ``scores``
+            ([`freihand_scores`][handmesh_tutorial.metrics.freihand_scores]), the row `MODEL_ROW`.
         baseline: optional scores of the rest-hand baseline on the same scenes (``eval.json``
-            ``baseline.scores``), the row :data:`BASELINE_ROW`.
+            ``baseline.scores``), the row `BASELINE_ROW`.
         mean: optional scores of the mean training hand (``eval.json``
-            ``mean_hand_baseline.scores``), the row :data:`MEAN_ROW`.
+            ``mean_hand_baseline.scores``), the row `MEAN_ROW`.
 
     Returns:
         A markdown table.
@@ -406,8 +416,8 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
     Args:
         path: the report file.
         scores: held-out scores (``eval.json`` ``scores``).
-        table: VR table (markdown) from :func:`~handmesh_tutorial.train.evaluate`.
-        config: the run's :class:`DemoConfig`.
+        table: VR table (markdown) from [`evaluate`][handmesh_tutorial.train.evaluate].
+        config: the run's [`DemoConfig`][handmesh_tutorial.demo.DemoConfig].
         seconds: wall time per stage.
         figures: caption -> figure path (relative links are made from the report's folder).
         counts: ``train``/``test`` scene counts and VR histograms.
@@ -500,11 +510,12 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
 
 def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.PathLike,
                  seed: int = 0, progress: bool = True, **overrides):
-    """The demo's :class:`~handmesh_tutorial.train.TrainConfig` (notebooks 08-10 train with it).
+    """The demo's [`TrainConfig`][handmesh_tutorial.train.TrainConfig] (notebooks 08-10 train with
+    it).
 
-    10% of ``data`` is held out for per-epoch validation; the learning rate is halved once,
-    after three quarters of the epochs; crops are cached in memory; CPU; the loss terms and
-    keypoint head of ``config.recipe`` (:data:`RECIPES`).
+    10% of ``data`` is held out for per-epoch validation; the learning rate is halved once, after
+    three quarters of the epochs; crops are cached in memory; CPU; the loss terms and keypoint head
+    of ``config.recipe`` ([`RECIPES`][handmesh_tutorial.demo.RECIPES]).
 
     Args:
         config: the demo's sizes and choices.
@@ -512,8 +523,8 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
         out_dir: the run's folder.
         seed: initialisation, data order, split and augmentation seed.
         progress: tqdm bars.
-        **overrides: any :class:`~handmesh_tutorial.train.TrainConfig` field (e.g. ``decoder``,
-            ``attention`` for the ablation).
+        **overrides: any [`TrainConfig`][handmesh_tutorial.train.TrainConfig] field (e.g.
+            ``decoder``, ``attention`` for the ablation).
 
     Returns:
         The config.
@@ -540,12 +551,14 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
         out: output folder.
         seed: seed of the training data (the test data uses ``seed + 1``), of the network
             initialisation, data order and augmentation.
-        config: sizes (default :meth:`DemoConfig.from_budget` of ``hmt.budget()``).
+        config: sizes (default
+            [`DemoConfig.from_budget`][handmesh_tutorial.demo.DemoConfig.from_budget] of
+            ``hmt.budget()``).
         progress: tqdm bars.
         log: called with one-line progress messages (``None``: silent).
 
     Returns:
-        A :class:`DemoResult`.
+        A [`DemoResult`][handmesh_tutorial.demo.DemoResult].
 
     Raises:
         ValueError: ``out`` holds a run of another configuration (the message says what
@@ -676,14 +689,15 @@ def _json_safe(obj):
 
 
 def parse_headline(report: str, row: str = MODEL_ROW) -> dict:
-    """Read the headline scores back from a report's text (the inverse of :func:`headline`).
+    """Read the headline scores back from a report's text (the inverse of
+    [`headline`][handmesh_tutorial.demo.headline]).
 
     Args:
         report: the text of ``report.md``.
-        row: :data:`MODEL_ROW`, :data:`BASELINE_ROW` or :data:`MEAN_ROW`.
+        row: `MODEL_ROW`, `BASELINE_ROW` or `MEAN_ROW`.
 
     Returns:
-        {score key: float} for the keys of :data:`HEADLINE`.
+        {score key: float} for the keys of [`HEADLINE`][handmesh_tutorial.demo.HEADLINE].
 
     Raises:
         ValueError: the report has no headline table, or the table has no such row.

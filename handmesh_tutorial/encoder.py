@@ -3,9 +3,9 @@
 Paper section "Multi-path Mesh Decoder" (the CNN encoder) and Table 1 (ResNet50, HRNet18/48
 backbones). torchvision is not a dependency (no CPU build here, and it would pull CUDA), so the
 networks are written out with **torchvision's module names** (ResNet) and the **official
-HRNet-Image-Classification / timm names** (HRNet). A user who has pretrained weights can load
-them with :func:`load_torchvision_state_dict` (key names mapped, shapes checked); nothing is
-downloaded.
+HRNet-Image-Classification / timm names** (HRNet). A user who has pretrained weights can load them
+with [`load_torchvision_state_dict`][handmesh_tutorial.encoder.load_torchvision_state_dict] (key
+names mapped, shapes checked); nothing is downloaded.
 
 Every encoder maps images ``(B, 3, H, W)`` to a global feature vector ``(B, D)`` (global average
 pooling of the last feature map); ``encoder.out_features`` is ``D``. Any ``H, W >= 32`` work.
@@ -133,7 +133,8 @@ class ResNet(nn.Module):
     """ResNet feature extractor (torchvision architecture and names, no ``fc``).
 
     Args:
-        block: :class:`BasicBlock` or :class:`Bottleneck`.
+        block: [`BasicBlock`][handmesh_tutorial.encoder.BasicBlock] or
+            [`Bottleneck`][handmesh_tutorial.encoder.Bottleneck].
         layers: blocks per stage, e.g. ``(2, 2, 2, 2)`` for ResNet-18.
 
     Attributes:
@@ -208,18 +209,18 @@ def _check_images(images: torch.Tensor) -> None:
 # HRNet (classification variant, official names)
 # ----------------------------------------------------------------------------------------------
 
-#: ``hrnet_w18_small_v2`` layout: per stage (num_modules, num_blocks per branch, channels).
 HRNET_W18_SMALL_V2 = {
     "stem_blocks": 2,
     "stages": ((1, (2, 2), (18, 36)), (3, (2, 2, 2), (18, 36, 72)),
                (2, (2, 2, 2, 2), (18, 36, 72, 144))),
 }
-#: Full ``hrnet_w18`` layout (4 blocks per branch; 1, 4, 3 modules).
+"""``hrnet_w18_small_v2`` layout: per stage (num_modules, num_blocks per branch, channels)."""
 HRNET_W18 = {
     "stem_blocks": 4,
     "stages": ((1, (4, 4), (18, 36)), (4, (4, 4, 4), (18, 36, 72)),
                (3, (4, 4, 4, 4), (18, 36, 72, 144))),
 }
+"""Full ``hrnet_w18`` layout (4 blocks per branch; 1, 4, 3 modules)."""
 _HEAD_CHANNELS = (32, 64, 128, 256)
 
 
@@ -282,7 +283,9 @@ class HRNet(nn.Module):
     channels and global average pooling.
 
     Args:
-        config: layout dict like :data:`HRNET_W18_SMALL_V2` (default) or :data:`HRNET_W18`.
+        config: layout dict like
+            [`HRNET_W18_SMALL_V2`][handmesh_tutorial.encoder.HRNET_W18_SMALL_V2] (default) or
+            [`HRNET_W18`][handmesh_tutorial.encoder.HRNET_W18].
 
     Attributes:
         out_features: ``D = 2048``.
@@ -372,17 +375,18 @@ def hrnet_w18_small() -> HRNet:
     return HRNet(HRNET_W18_SMALL_V2)
 
 
-#: Encoder names accepted by :func:`build_encoder` and ``build_model(encoder=...)``.
 ENCODERS = {"resnet10": resnet10, "resnet18": resnet18, "resnet34": resnet34, "resnet50": resnet50,
             "hrnet18": hrnet_w18_small, "hrnet_w18_small": hrnet_w18_small}
+"""Encoder names accepted by [`build_encoder`][handmesh_tutorial.encoder.build_encoder] and
+``build_model(encoder=...)``."""
 
 
 def build_encoder(name: str) -> nn.Module:
     """An encoder by name.
 
     Args:
-        name: one of :data:`ENCODERS` (``resnet10``, ``resnet18``, ``resnet34``, ``resnet50``,
-            ``hrnet18``).
+        name: one of [`ENCODERS`][handmesh_tutorial.encoder.ENCODERS] (``resnet10``, ``resnet18``,
+            ``resnet34``, ``resnet50``, ``hrnet18``).
 
     Returns:
         ``nn.Module`` mapping ``(B, 3, H, W)`` to ``(B, D)``, with attribute ``out_features``.
@@ -408,7 +412,8 @@ def load_torchvision_state_dict(encoder: nn.Module, state_dict: Mapping[str, tor
     get the file yourself and pass ``torch.load(path, weights_only=True)``.
 
     Args:
-        encoder: a :class:`ResNet` or :class:`HRNet` from this module.
+        encoder: a [`ResNet`][handmesh_tutorial.encoder.ResNet] or
+            [`HRNet`][handmesh_tutorial.encoder.HRNet] from this module.
         state_dict: mapping name -> tensor.
         strict: raise if an encoder parameter or buffer has no entry (otherwise keep its value).
 

@@ -1,20 +1,20 @@
 """Fit tests: can the mesh part of the model represent hands at all?
 
-Before asking a network to recover hands from images, check that its mesh part (the FC to the
-coarse mesh, the transformer and the spiral decoder, i.e. :meth:`MSMRNet.decode
-<handmesh_tutorial.model.MSMRNet.decode>`) can reproduce a set of known hands. The test is an
-*auto-decoder* (Park et al., DeepSDF 2019): every target mesh gets its own learnable latent code
-in place of the image feature, and codes and network are optimised together with the paper's L1
-vertex loss. No image and no encoder are involved, so a failure here is a failure of the
+Before asking a network to recover hands from images, check that its mesh part (the FC to the coarse
+mesh, the transformer and the spiral decoder, i.e.
+[`MSMRNet.decode`][handmesh_tutorial.model.MSMRNet.decode]) can reproduce a set of known hands. The
+test is an *auto-decoder* (Park et al., DeepSDF 2019): every target mesh gets its own learnable
+latent code in place of the image feature, and codes and network are optimised together with the
+paper's L1 vertex loss. No image and no encoder are involved, so a failure here is a failure of the
 decoder (its initialisation, normalisation, widths, output scale...), not of the data.
 
-:func:`fit_decoder` reports the mean vertex error and the surface metrics of
-:mod:`handmesh_tutorial.surface` (roughness, flipped faces), which catch crumpled outputs that a
-small vertex error can hide.
+[`fit_decoder`][handmesh_tutorial.fit.fit_decoder] reports the mean vertex error and the surface
+metrics of [`handmesh_tutorial.surface`][handmesh_tutorial.surface] (roughness, flipped faces),
+which catch crumpled outputs that a small vertex error can hide.
 
-Measured on 32 posed open hands (799 vertices, :func:`posed_hands`), 1,000 steps of 8 hands,
-one CPU thread (``benchmarks/decoder_fit.py``; about two CPU minutes for the multi-path decoder,
-1.5 for the single path, on a shared machine):
+Measured on 32 posed open hands (799 vertices, [`posed_hands`][handmesh_tutorial.fit.posed_hands]),
+1,000 steps of 8 hands, one CPU thread (``benchmarks/decoder_fit.py``; about two CPU minutes for the
+multi-path decoder, 1.5 for the single path, on a shared machine):
 
 | decoder | what it predicts | error | roughness | flipped |
 |---|---|---|---|---|
@@ -33,8 +33,9 @@ default multi-path 1.5 mm / 17.1 degrees / 2.1%, single path 1.8 mm / 17.6 degre
 rest hand against those targets 36.5 mm / 11.1 degrees. The roughness there is not yet at the
 procedural hand's level.
 
-The normal loss (``normal_weight``, :func:`~handmesh_tutorial.losses.normal_loss`) is the lever
-that lowers it. Same MakeHuman fit (32 hands, batches of 8, 800 steps, multi-path, one thread):
+The normal loss (``normal_weight``, [`normal_loss`][handmesh_tutorial.losses.normal_loss]) is the
+lever that lowers it. Same MakeHuman fit (32 hands, batches of 8, 800 steps, multi-path, one
+thread):
 
 | ``normal_weight`` | error | roughness | flipped |
 |---|---|---|---|
@@ -70,8 +71,8 @@ __all__ = ["CodeEncoder", "FitResult", "fit_decoder", "posed_hands"]
 class CodeEncoder(nn.Identity):
     """A stand-in encoder whose "image features" are the input itself: ``(B, D) -> (B, D)``.
 
-    Lets :func:`~handmesh_tutorial.model.build_model` assemble the mesh part without an image
-    encoder (``build_model(encoder=CodeEncoder(64), ...)``).
+    Lets [`build_model`][handmesh_tutorial.model.build_model] assemble the mesh part without an
+    image encoder (``build_model(encoder=CodeEncoder(64), ...)``).
 
     Args:
         out_features: ``D``, the width of the codes.
@@ -84,14 +85,16 @@ class CodeEncoder(nn.Identity):
 
 @dataclass
 class FitResult:
-    """Outcome of :func:`fit_decoder`.
+    """Outcome of [`fit_decoder`][handmesh_tutorial.fit.fit_decoder].
 
     Attributes:
         losses: ``(steps,)`` L1 vertex error of every step, metres (mean over vertices and
             coordinates, as the paper's loss, whatever loss was optimised).
         error_mm: final mean vertex error ``mean ||pred - target||``, millimetres.
-        roughness_deg: final mean :func:`~handmesh_tutorial.surface.roughness_deg`, degrees.
-        flipped: final mean :func:`~handmesh_tutorial.surface.flipped_face_fraction`.
+        roughness_deg: final mean [`roughness_deg`][handmesh_tutorial.surface.roughness_deg],
+            degrees.
+        flipped: final mean
+            [`flipped_face_fraction`][handmesh_tutorial.surface.flipped_face_fraction].
         init_error_mm: mean vertex error of the model at initialisation (before any step), mm.
         init_roughness_deg: roughness at initialisation, degrees.
         seconds: wall time of the optimisation.
@@ -130,7 +133,7 @@ def posed_hands(num: int, seed: int = 0, side: str = "right", hand=None,
         num: number of hands ``N``.
         seed: seed of the poses (and rotations).
         side: ``"right"`` or ``"left"``.
-        hand: a :class:`~handmesh_tutorial.hand.HandModel` (default ``HandModel(side)``).
+        hand: a [`HandModel`][handmesh_tutorial.hand.HandModel] (default ``HandModel(side)``).
         rotate: also apply a uniformly random global rotation to each hand.
 
     Returns:
@@ -184,18 +187,19 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
     """Auto-decoder fit of the model's mesh part to ``N`` given meshes.
 
     Each mesh gets a learnable code ``(D,)`` (initialised ``N(0, 1)``) fed to
-    :meth:`MSMRNet.decode <handmesh_tutorial.model.MSMRNet.decode>` in place of the image
-    features; codes and every parameter after the encoder are trained with Adam on the L1 vertex
-    loss, with a cosine learning-rate decay to 0 over ``steps``.
+    [`MSMRNet.decode`][handmesh_tutorial.model.MSMRNet.decode] in place of the image features; codes
+    and every parameter after the encoder are trained with Adam on the L1 vertex loss, with a cosine
+    learning-rate decay to 0 over ``steps``.
 
     Args:
-        model_or_config: an :class:`~handmesh_tutorial.model.MSMRNet` (its ``encoder`` is not
+        model_or_config: an [`MSMRNet`][handmesh_tutorial.model.MSMRNet] (its ``encoder`` is not
             used; ``D`` = ``latent_to_mesh.in_features``), or a mapping of
-            :func:`~handmesh_tutorial.model.build_model` arguments (``None`` = defaults); a
-            config without ``encoder`` gets a :class:`CodeEncoder` of width ``code_dim``.
-        vertices: ``(N, V, 3)`` target meshes (numpy or torch), metres, in the model's
-            template topology (root-relative as the training targets, e.g. from
-            :func:`posed_hands`).
+            [`build_model`][handmesh_tutorial.model.build_model] arguments (``None`` = defaults); a
+            config without ``encoder`` gets a [`CodeEncoder`][handmesh_tutorial.fit.CodeEncoder] of
+            width ``code_dim``.
+        vertices: ``(N, V, 3)`` target meshes (numpy or torch), metres, in the model's template
+            topology (root-relative as the training targets, e.g. from
+            [`posed_hands`][handmesh_tutorial.fit.posed_hands]).
         steps: optimisation steps (full batch unless ``batch_size``).
         seed: seeds the model initialisation, the codes and the batches.
         faces: ``(F, 3)`` faces for the surface metrics (default: the model's ``faces``).
@@ -205,14 +209,14 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
         batch_size: samples per step (default all ``N``).
         template: template for a config (default the open right hand).
         loss: ``"l1"`` (the paper's mean absolute error) or ``"l2"`` (mean squared error).
-        normal_weight: weight of :func:`~handmesh_tutorial.losses.normal_loss` added to the
-            vertex loss (0 = off, the paper): penalises edges that leave the true surface's
-            tangent plane, i.e. crumpled surfaces.
+        normal_weight: weight of [`normal_loss`][handmesh_tutorial.losses.normal_loss] added to the
+            vertex loss (0 = off, the paper): penalises edges that leave the true surface's tangent
+            plane, i.e. crumpled surfaces.
         progress: print the loss every 10% of the steps.
 
     Returns:
-        :class:`FitResult` with per-step losses, final error (mm), roughness (degrees),
-        flipped-face fraction and the fitted model and codes.
+        [`FitResult`][handmesh_tutorial.fit.FitResult] with per-step losses, final error (mm),
+        roughness (degrees), flipped-face fraction and the fitted model and codes.
     """
     if loss not in ("l1", "l2"):
         raise ValueError(f"loss must be 'l1' or 'l2', got {loss!r}")

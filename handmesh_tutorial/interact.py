@@ -1,50 +1,56 @@
 """The INTER-SH interaction generator: the paper's six-step algorithm (supplementary,
 "Generating Mesh Interactions"), for hand-hand, hand-object and hand-chain scenes.
 
-1. **Centre body.** A hand at a random valid pose (LCS angles inside the limits, no
-   self-collision) and random rotation, a static object (:func:`objects.make_object`) or an
-   articulated chain of rings (:func:`objects.make_chain`), at the scene centre.
+1. **Centre body.** A hand at a random valid pose (LCS angles inside the limits, no self-collision)
+   and random rotation, a static object
+   ([`objects.make_object`][handmesh_tutorial.objects.make_object]) or an articulated chain of rings
+   ([`objects.make_chain`][handmesh_tutorial.objects.make_chain]), at the scene centre.
 2. **Second hand.** A hand in the neutral (flat) pose whose palm faces the centre body, far
    enough along a random approach direction ``u`` that the two cannot collide.
 3. **Approach.** The second hand moves towards the centre in steps of ``approach_step``
    (2 mm) until its cylinders first collide; it backs off to the last valid position.
 4. **Joint moves.** Every joint of every dynamic body (both hands, the chain links) gets a random
-   direction in its LCS-angle space and turns along it in increments of ``joint_step_deg``
-   (2 degrees) until a collision with another body, a self-collision, or its limit stops it,
-   backing off to the last valid angle. The default limits are anatomical
-   (``limits="anatomical"``, :data:`handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG`: one-sided
-   flexion, little abduction and twist), which give natural poses; the paper's ±60 degrees about
-   every axis (fingers bent backwards and twisted) is ``limits="paper"``
+   direction in its LCS-angle space and turns along it in increments of ``joint_step_deg`` (2
+   degrees) until a collision with another body, a self-collision, or its limit stops it, backing
+   off to the last valid angle. The default limits are anatomical (``limits="anatomical"``,
+   [`handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG`][handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG]:
+   one-sided flexion, little abduction and twist), which give natural poses; the paper's ±60 degrees
+   about every axis (fingers bent backwards and twisted) is ``limits="paper"``
    (``handmesh generate --limits paper``).
 5. **Repeat.** Joints move in turn, at most ``sweep_deg`` per round, until no joint can make a
    valid move (stop reason ``"no valid move"``) or ``max_rounds`` rounds have run
    (``"max rounds"``).
-6. **Render** (:func:`make_sample`): a camera framed on the target hand like a FreiHAND crop
-   (:func:`frame_camera`: the hand wholly inside, 45-75 % of the image side), random lights of
-   random colour temperature (:func:`scene_lights`), a natural photograph or a procedural texture
-   behind (:func:`handmesh_tutorial.render.scene_background`); scene image, label mask, every
-   body alone, visibility ratios.
+6. **Render** ([`make_sample`][handmesh_tutorial.interact.make_sample]): a camera framed on the
+   target hand like a FreiHAND crop ([`frame_camera`][handmesh_tutorial.interact.frame_camera]: the
+   hand wholly inside, 45-75 % of the image side), random lights of random colour temperature
+   ([`scene_lights`][handmesh_tutorial.interact.scene_lights]), a natural photograph or a procedural
+   texture behind
+   ([`handmesh_tutorial.render.scene_background`][handmesh_tutorial.render.scene_background]); scene
+   image, label mask, every body alone, visibility ratios.
 
-Validity is decided on the collision cylinders (:mod:`handmesh_tutorial.collision`), as in the
-paper; each body is a rig of rigid cylinders attached to the nodes of its kinematic tree, and all
-candidate angles of one joint are tested in one vectorised call (bounding spheres, then capsules,
-then the exact Ketchel-Larochelle test on the survivors).
+Validity is decided on the collision cylinders
+([`handmesh_tutorial.collision`][handmesh_tutorial.collision]), as in the paper; each body is a rig
+of rigid cylinders attached to the nodes of its kinematic tree, and all candidate angles of one
+joint are tested in one vectorised call (bounding spheres, then capsules, then the exact
+Ketchel-Larochelle test on the survivors).
 
-**Deviations from the paper.** (a) *Settle (step 5b)*: cylinders approximate the meshes only to
-a few millimetres (radii are the 95th percentile of the vertex distances, see
-:func:`collision.hand_cylinders`; round palm cylinders stick out of the flat palm), so after
-step 5 the generator measures the *meshes* (:func:`mesh_contact`: vertex-to-surface distances
-with exact inside/outside signs) and translates the second body along ``u`` until the meshes
-touch (gap <= ``contact_tol``) without interpenetrating by more than ``penetration_tol``. Both
-numbers end up in the scene ``stats`` (mm). (b) *Re-approach* (``reapproach``): after every round
-of joint moves the second hand is pushed towards the centre again until its cylinders touch
-(step 3 repeated), so contacts lost by joint moves are restored.
+**Deviations from the paper.** (a) *Settle (step 5b)*: cylinders approximate the meshes only to a
+few millimetres (radii are the 95th percentile of the vertex distances, see
+[`collision.hand_cylinders`][handmesh_tutorial.collision.hand_cylinders]; round palm cylinders stick
+out of the flat palm), so after step 5 the generator measures the *meshes*
+([`mesh_contact`][handmesh_tutorial.interact.mesh_contact]: vertex-to-surface distances with exact
+inside/outside signs) and translates the second body along ``u`` until the meshes touch (gap <=
+``contact_tol``) without interpenetrating by more than ``penetration_tol``. Both numbers end up in
+the scene ``stats`` (mm). (b) *Re-approach* (``reapproach``): after every round of joint moves the
+second hand is pushed towards the centre again until its cylinders touch (step 3 repeated), so
+contacts lost by joint moves are restored.
 
-Further choices the paper leaves open, all in :class:`InteractionConfig`: a joint's random
-direction has per-axis weights ``axis_weights`` (abduction, flexion, twist) and flexes rather than
-extends with probability ``flexion_bias``; the centre hand's random pose uses ``init_pose_scale``
-of the range; a joint stops for good once it is blocked (by contact or limit), which is what makes
-"no valid move" reachable.
+Further choices the paper leaves open, all in
+[`InteractionConfig`][handmesh_tutorial.interact.InteractionConfig]: a joint's random direction has
+per-axis weights ``axis_weights`` (abduction, flexion, twist) and flexes rather than extends with
+probability ``flexion_bias``; the centre hand's random pose uses ``init_pose_scale`` of the range; a
+joint stops for good once it is blocked (by contact or limit), which is what makes "no valid move"
+reachable.
 
 Everything is seeded: the same seed gives the same scene, to the byte.
 """
@@ -87,18 +93,21 @@ __all__ = [
     "signed_distance",
 ]
 
-#: Scene kinds of the generator (``"mixed"`` in :func:`make_sample` draws one per sample).
 KINDS: tuple[str, ...] = ("hand-hand", "hand-object", "hand-chain")
+"""Scene kinds of the generator (``"mixed"`` in
+[`make_sample`][handmesh_tutorial.interact.make_sample] draws one per sample)."""
 
-#: Why the joint-move loop (steps 4-5) stopped.
 STOP_REASONS: tuple[str, ...] = ("no valid move", "max rounds")
+"""Why the joint-move loop (steps 4-5) stopped."""
 
 
 class InteractionError(RuntimeError, SampleRejected):
     """A scene could not be generated (bounded retries exhausted or an impossible config).
 
-    A :class:`~handmesh_tutorial.dataset.SampleRejected`: :func:`generate_interactions` and
-    :func:`~handmesh_tutorial.dataset.generate_dataset` replace the seed with the next attempt's.
+    A [`SampleRejected`][handmesh_tutorial.dataset.SampleRejected]:
+    [`generate_interactions`][handmesh_tutorial.interact.generate_interactions] and
+    [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] replace the seed with the next
+    attempt's.
 
     Attributes:
         kind: the scene kind.
@@ -121,8 +130,8 @@ class InteractionConfig:
 
     Attributes:
         limits: joint limits of the hands: ``"anatomical"`` (default,
-            :data:`handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG`: natural poses) or ``"paper"``
-            (±60° about every LCS axis, the paper's generator).
+            [`lcs.ANATOMICAL_LIMITS_DEG`][handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG]: natural
+            poses) or ``"paper"`` (±60° about every LCS axis, the paper's generator).
         approach_step: step of the approach (step 3), metres.
         joint_step_deg: angular increment of a joint move (step 4), degrees.
         sweep_deg: largest rotation of one joint per round, degrees (joints take turns).
@@ -132,7 +141,8 @@ class InteractionConfig:
             (abduction, flexion, twist).
         flexion_bias: probability that a hand joint's direction flexes (rather than extends).
         shape_scale: scales the adult shape ranges of
-            :data:`~handmesh_tutorial.hand.SHAPE_SAMPLE_RANGES` (0 = every hand average).
+            [`SHAPE_SAMPLE_RANGES`][handmesh_tutorial.hand.SHAPE_SAMPLE_RANGES] (0 = every hand
+            average).
         lateral_offset: spread of the aim point on the second hand (palm plane), metres.
         contact_tol: the settle step closes mesh gaps larger than this, metres.
         penetration_tol: the settle step backs off mesh penetrations deeper than this, metres.
@@ -142,7 +152,7 @@ class InteractionConfig:
         max_attempts: scene candidates (approach directions, initial poses) before giving up.
         chain_links: inclusive range of the number of chain links.
         object_kinds: static object kinds to draw from (``None``: all of
-            :data:`handmesh_tutorial.objects.OBJECT_KINDS`).
+            [`handmesh_tutorial.objects.OBJECT_KINDS`][handmesh_tutorial.objects.OBJECT_KINDS]).
     """
 
     limits: str = "anatomical"
@@ -230,8 +240,9 @@ def _pair_stages(a0, a1, ra, b0, b1, rb):
 
 
 def _pair_hits(a0, a1, ra, b0, b1, rb) -> np.ndarray:
-    """(N,) exact cylinder test of aligned pairs: :func:`_pair_stages`, then
-    :func:`collision.cylinders_intersect` (Ketchel-Larochelle) on the undecided pairs."""
+    """(N,) exact cylinder test of aligned pairs: `_pair_stages`, then
+    [`collision.cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect]
+    (Ketchel-Larochelle) on the undecided pairs."""
     hit, maybe = _pair_stages(a0, a1, ra, b0, b1, rb)
     if maybe.size:
         hit[maybe] = cylinders_intersect(a0[maybe], a1[maybe], ra[maybe], b0[maybe], b1[maybe],
@@ -244,7 +255,7 @@ class _Rig:
 
     Node 0 is the root, placed by ``(root_R, root_P)`` (its world rotation and position).
     Articulated node ``k >= 1`` turns by ``F R(a) F^T`` about its rest position relative to its
-    parent (the convention of :mod:`handmesh_tutorial.lcs`), so for node ``k``:
+    parent (the convention of [`handmesh_tutorial.lcs`][handmesh_tutorial.lcs]), so for node ``k``:
     ``G_k = G_parent L_k`` and ``P_k = P_parent + G_parent (rest_k - rest_parent)``; a rest point
     ``x`` attached to node ``k`` is at ``G_k (x - rest_k) + P_k``.
     """
@@ -431,8 +442,8 @@ def _hand_attach() -> np.ndarray:
 
 _MAX_SETTLE = 0.05
 
-#: Length of the forearm drawn behind each hand, metres (scenery: not a collision body).
 FOREARM_LENGTH: float = 0.25
+"""Length of the forearm drawn behind each hand, metres (scenery: not a collision body)."""
 
 
 @dataclass
@@ -451,12 +462,13 @@ class SceneBody:
         joints: (21, 3) FreiHAND keypoints of a hand (world, metres), else ``None``.
         pose: (15, 3) float32 axis-angle finger pose of a hand (MANO order), else ``None``.
         angles: (J, 3) LCS angles (radians) of a hand's joints or the chain's links, else None.
-        shape: (6,) hand shape parameters (:data:`~handmesh_tutorial.hand.SHAPE_PARAM_NAMES`), else
-            ``None``.
+        shape: (6,) hand shape parameters
+            ([`SHAPE_PARAM_NAMES`][handmesh_tutorial.hand.SHAPE_PARAM_NAMES]), else ``None``.
         dynamic: whether step 4 moved its joints.
-        forearm: a hand's forearm for rendering, ``(vertices (N,3) world, faces (M,3), colours
-            (N,3))`` (:func:`~handmesh_tutorial.hand.forearm_mesh`: scenery, not a body: it
-            occludes but has no label, no annotation and no collision), else ``None``.
+        forearm: a hand's forearm for rendering,
+            ``(vertices (N,3) world, faces (M,3), colours (N,3))``
+            ([`forearm_mesh`][handmesh_tutorial.hand.forearm_mesh]: scenery, not a body: it occludes
+            but has no label, no annotation and no collision), else ``None``.
     """
 
     label: int
@@ -485,12 +497,12 @@ class Scene:
         bodies: the bodies, in label order.
         target: label of the target hand (the left hand in hand-hand scenes).
         approach: (3,) unit direction from the centre body towards the second hand (step 2).
-        stats: ``contact_mm`` (mesh-to-mesh distance, 0 when touching), ``penetration_mm``
-            (deepest vertex of one mesh inside the other), ``rounds``, ``stop`` (one of
-            :data:`STOP_REASONS`), ``moves`` (accepted joint moves), ``blocked_contact`` /
-            ``blocked_limit`` (joints stopped by a collision / a limit), ``approach_mm``
-            (distance travelled in step 3), ``settle_mm`` (signed shift of the settle step,
-            positive towards the centre), ``attempts`` (candidates tried).
+        stats: ``contact_mm`` (mesh-to-mesh distance, 0 when touching), ``penetration_mm`` (deepest
+            vertex of one mesh inside the other), ``rounds``, ``stop`` (one of
+            [`STOP_REASONS`][handmesh_tutorial.interact.STOP_REASONS]), ``moves`` (accepted joint
+            moves), ``blocked_contact`` / ``blocked_limit`` (joints stopped by a collision / a
+            limit), ``approach_mm`` (distance travelled in step 3), ``settle_mm`` (signed shift of
+            the settle step, positive towards the centre), ``attempts`` (candidates tried).
         history: with ``record=True``, a list of snapshots ``{"step", "text", "bodies"}`` where
             ``bodies`` maps label -> ``{"cylinders", "vertices", "faces", "colors"}``.
     """
@@ -524,7 +536,8 @@ class Scene:
 
     def scenery_meshes(self, R=None, t=None) -> list[tuple]:
         """``(vertices, faces, sRGB colors, owner label)`` of the scenery (the hands' forearms),
-        optionally moved ``x -> R x + t``; see :meth:`handmesh_tutorial.render.Renderer.render`'s
+        optionally moved ``x -> R x + t``; see
+        [`handmesh_tutorial.render.Renderer.render`][handmesh_tutorial.render.Renderer.render]'s
         ``occluders``."""
         R = np.eye(3) if R is None else np.asarray(R, float)
         t = np.zeros(3) if t is None else np.asarray(t, float)
@@ -791,11 +804,11 @@ def mesh_contact(a_vertices, a_faces, b_vertices, b_faces, *, a_cylinders: Cylin
                  sdf_a=None, sdf_b=None) -> dict:
     """Contact and penetration between two closed meshes, measured on their vertices.
 
-    Each mesh's vertices are tested against the other mesh's surface (signed distance with an
-    exact sign, see :func:`signed_distance`). With cylinders given, only vertices within
-    ``near`` of the other body's cylinders are tested (a prefilter: the cylinders cover their
-    mesh to within a few millimetres, so farther vertices cannot set the contact); when no
-    vertex passes it, every vertex is tested.
+    Each mesh's vertices are tested against the other mesh's surface (signed distance with an exact
+    sign, see [`signed_distance`][handmesh_tutorial.interact.signed_distance]). With cylinders
+    given, only vertices within ``near`` of the other body's cylinders are tested (a prefilter: the
+    cylinders cover their mesh to within a few millimetres, so farther vertices cannot set the
+    contact); when no vertex passes it, every vertex is tested.
 
     Args:
         a_vertices: (V, 3) vertices of the first mesh (closed), metres.
@@ -1228,12 +1241,15 @@ def build_scene(kind: str, seed: int | np.random.Generator, config: InteractionC
     Args:
         kind: ``"hand-hand"``, ``"hand-object"`` or ``"hand-chain"``.
         seed: an integer seed or a ``numpy.random.Generator``; same seed -> same scene.
-        config: an :class:`InteractionConfig` (defaults when ``None``).
+        config: an [`InteractionConfig`][handmesh_tutorial.interact.InteractionConfig] (defaults
+            when ``None``).
         record: keep a snapshot of every step in ``Scene.history`` (for figures).
-        **overrides: fields of :class:`InteractionConfig` to change, e.g. ``limits="anatomical"``.
+        **overrides: fields of [`InteractionConfig`][handmesh_tutorial.interact.InteractionConfig]
+            to change, e.g. ``limits="anatomical"``.
 
     Returns:
-        A :class:`Scene` in the world frame (centre body near the origin).
+        A [`Scene`][handmesh_tutorial.interact.Scene] in the world frame (centre body near the
+        origin).
 
     Raises:
         ValueError: unknown kind or config field.
@@ -1259,7 +1275,7 @@ _RENDERERS: dict = {}
 
 
 def get_renderer(image_size: int = 224):
-    """The per-process :class:`~handmesh_tutorial.render.Renderer` of this image size (created
+    """The per-process [`Renderer`][handmesh_tutorial.render.Renderer] of this image size (created
     on first use and then reused: one OpenGL context per process)."""
     key = int(image_size)
     if key not in _RENDERERS:
@@ -1270,8 +1286,9 @@ def get_renderer(image_size: int = 224):
 
 
 def init_worker(image_size: int = 224, threads: int = 1) -> None:
-    """``worker_init`` for :func:`handmesh_tutorial.dataset.generate_dataset`: one renderer and
-    the hand models per process, torch limited to ``threads`` threads.
+    """``worker_init`` for
+    [`handmesh_tutorial.dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset]: one
+    renderer and the hand models per process, torch limited to ``threads`` threads.
 
     Use ``functools.partial(init_worker, image_size)``.
     """
@@ -1314,14 +1331,17 @@ def camera_pose(centre, rng, distance=(0.35, 0.7), toward=None,
     return R, -R @ cam
 
 
-#: Share of the image side covered by the target hand's bounding box (FreiHAND's 224-px crops:
-#: roughly 40-80 %), see :func:`frame_camera`.
 FRAME_SHARE: tuple[float, float] = (0.45, 0.75)
-#: Focal length as a multiple of the image side (403-806 px at 224 px, fields of view of
-#: 31-16 degrees: a crop of a hand from an ordinary camera), see :func:`frame_camera`.
+"""Share of the image side covered by the target hand's bounding box (FreiHAND's 224-px crops:
+roughly 40-80 %), see [`frame_camera`][handmesh_tutorial.interact.frame_camera].
+"""
 FRAME_FOCAL: tuple[float, float] = (1.8, 3.6)
-#: Free border, as a fraction of the image side, that the target hand never enters.
+"""Focal length as a multiple of the image side (403-806 px at 224 px, fields of view of
+31-16 degrees: a crop of a hand from an ordinary camera), see
+[`frame_camera`][handmesh_tutorial.interact.frame_camera].
+"""
 FRAME_MARGIN: float = 0.08
+"""Free border, as a fraction of the image side, that the target hand never enters."""
 
 
 def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
@@ -1445,7 +1465,7 @@ def scene_lights(rng, depth: float = 0.5):
         depth: typical scene depth, metres (places the point light).
 
     Returns:
-        A list of :class:`handmesh_tutorial.render.Light` (camera frame).
+        A list of [`handmesh_tutorial.render.Light`][handmesh_tutorial.render.Light] (camera frame).
     """
     from .render import Light, color_temperature
 
@@ -1493,25 +1513,28 @@ def _choose_kind(seed: int) -> str:
 def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224,
                 renderer=None, config: InteractionConfig | None = None, *,
                 limits: str | None = None) -> dict:
-    """One INTER-SH sample: :func:`build_scene` then :func:`render_scene`.
+    """One INTER-SH sample: [`build_scene`][handmesh_tutorial.interact.build_scene] then
+    [`render_scene`][handmesh_tutorial.interact.render_scene].
 
     The scene and the view draw from independent streams of ``sample_seed``
     (``numpy.random.SeedSequence(sample_seed).spawn(3)``: scene, view, kind), so the same seed
     always gives the same bytes.
 
     Args:
-        sample_seed: the sample's seed (from :func:`handmesh_tutorial.dataset.sample_seed`).
+        sample_seed: the sample's seed (from
+            [`handmesh_tutorial.dataset.sample_seed`][handmesh_tutorial.dataset.sample_seed]).
         kind: ``"hand-hand"``, ``"hand-object"``, ``"hand-chain"`` or ``"mixed"`` (one of the
             three drawn from the seed).
         image_size: square image side, pixels.
-        renderer: a :class:`~handmesh_tutorial.render.Renderer` of that size; ``None`` uses the
-            per-process one (:func:`get_renderer`).
-        config: generator parameters (:class:`InteractionConfig`).
+        renderer: a [`Renderer`][handmesh_tutorial.render.Renderer] of that size; ``None`` uses the
+            per-process one ([`get_renderer`][handmesh_tutorial.interact.get_renderer]).
+        config: generator parameters
+            ([`InteractionConfig`][handmesh_tutorial.interact.InteractionConfig]).
         limits: shortcut for ``config.limits``: ``"anatomical"`` (the default config's) or
             ``"paper"`` (±60° on every axis).
 
     Returns:
-        The sample dict of :func:`render_scene`.
+        The sample dict of [`render_scene`][handmesh_tutorial.interact.render_scene].
 
     Raises:
         ValueError: unknown kind or limits.
@@ -1539,24 +1562,26 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
                  photo_prob: float = 0.75) -> dict:
     """Step 6: place a camera, render a scene and measure visibility; the dataset sample dict.
 
-    **Camera** (:func:`frame_camera`): it looks at the target hand from a uniformly random
-    direction (or, with probability ``occluder_view``, from around the other body's side), with a
-    random roll, at the distance where the hand covers a random share (``share``, 45-75 %) of the
-    image side with a focal length of 1.8-3.6 times the side; the whole target hand stays at
-    least ``margin`` (8 %) of the side inside the border, like a FreiHAND 224-px crop. The other
-    body may leave the frame.
-    **Light** (:func:`scene_lights`): key, fill, sometimes rim and point lights of random colour
-    temperature and exposure, plus an ambient term tinted by the background.
-    **Background** (:func:`handmesh_tutorial.render.scene_background`): a natural photograph
-    (random crop, flip, defocus, colour jitter; ``photo_prob``) or a procedural texture.
-    The renderer draws the scene (image, label mask) and each body alone (the VR denominators);
+    **Camera** ([`frame_camera`][handmesh_tutorial.interact.frame_camera]): it looks at the target
+    hand from a uniformly random direction (or, with probability ``occluder_view``, from around the
+    other body's side), with a random roll, at the distance where the hand covers a random share
+    (``share``, 45-75 %) of the image side with a focal length of 1.8-3.6 times the side; the whole
+    target hand stays at least ``margin`` (8 %) of the side inside the border, like a FreiHAND
+    224-px crop. The other body may leave the frame.
+    **Light** ([`scene_lights`][handmesh_tutorial.interact.scene_lights]): key, fill, sometimes rim
+    and point lights of random colour temperature and exposure, plus an ambient term tinted by the
+    background. **Background**
+    ([`handmesh_tutorial.render.scene_background`][handmesh_tutorial.render.scene_background]): a
+    natural photograph (random crop, flip, defocus, colour jitter; ``photo_prob``) or a procedural
+    texture. The renderer draws the scene (image, label mask) and each body alone (the VR
+    denominators);
     the image gets a little sensor noise (0-2 grey levels).
 
     Args:
-        scene: a :class:`Scene`.
+        scene: a [`Scene`][handmesh_tutorial.interact.Scene].
         rng: ``numpy.random.Generator`` or seed of the view.
         image_size: square image side, pixels.
-        renderer: a :class:`~handmesh_tutorial.render.Renderer` of that size, or ``None`` for
+        renderer: a [`Renderer`][handmesh_tutorial.render.Renderer] of that size, or ``None`` for
             the per-process one.
         occluder_view: probability of a view from the side of the other body (camera direction
             around ``other centre - target centre``), which makes low VRs (occlusion) common.
@@ -1566,14 +1591,15 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
         photo_prob: probability of a photograph (else a procedural texture) as background.
 
     Returns:
-        A sample for :func:`handmesh_tutorial.dataset.write_sample`: ``image`` (S,S,3) uint8,
-        ``scene_mask`` (S,S) int32, ``alone_masks`` {label: (S,S) bool}, ``meshes`` {label:
-        (vertices (V,3) float32 camera frame metres, faces (F,3) int32)}, ``joints`` {hand label:
-        (21,3) float32 camera frame}, ``pose`` {hand label: (15,3)}, ``K`` (3,3), ``vr`` {label:
-        float}, ``kind``, ``target`` (label 1; the left hand in hand-hand scenes), ``sides``,
-        ``names``, ``stats`` (:attr:`Scene.stats` plus ``camera_distance_m`` (camera to scene
-        centre), ``target_distance_m`` (camera to the target hand's box centre), ``focal_px``
-        and ``target_share`` (the hand's box over the image side)).
+        A sample for
+        [`handmesh_tutorial.dataset.write_sample`][handmesh_tutorial.dataset.write_sample]:
+        ``image`` (S,S,3) uint8, ``scene_mask`` (S,S) int32, ``alone_masks`` {label: (S,S) bool},
+        ``meshes`` {label: (vertices (V,3) float32 camera frame metres, faces (F,3) int32)},
+        ``joints`` {hand label: (21,3) float32 camera frame}, ``pose`` {hand label: (15,3)}, ``K``
+        (3,3), ``vr`` {label: float}, ``kind``, ``target`` (label 1; the left hand in hand-hand
+        scenes), ``sides``, ``names``, ``stats`` (`Scene.stats` plus ``camera_distance_m`` (camera
+        to scene centre), ``target_distance_m`` (camera to the target hand's box centre),
+        ``focal_px`` and ``target_share`` (the hand's box over the image side)).
 
     Raises:
         InteractionError: a body is not in view.
@@ -1650,9 +1676,11 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     }
 
 
-#: Range of ``image_size`` that :func:`generate_interactions` accepts, pixels: below 32 a hand
-#: is a few pixels; above 4096 one image needs gigabytes of render buffers.
 MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, 4096
+"""Range of ``image_size`` that
+[`generate_interactions`][handmesh_tutorial.interact.generate_interactions] accepts, pixels: below
+32 a hand is a few pixels; above 4096 one image needs gigabytes of render buffers.
+"""
 
 
 def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: int = 224,
@@ -1662,10 +1690,11 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
                           vr_probe: int = 64):
     """Generate (or resume) an INTER-SH dataset of rendered interactions on disk.
 
-    A thin wrapper of :func:`handmesh_tutorial.dataset.generate_dataset` with
+    A thin wrapper of
+    [`handmesh_tutorial.dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset] with
     ``make_sample = functools.partial(make_sample, kind=..., image_size=..., limits=...)`` and one
-    renderer per worker process (:func:`init_worker`). Rerunning the same call skips the samples
-    already written (resume).
+    renderer per worker process ([`init_worker`][handmesh_tutorial.interact.init_worker]). Rerunning
+    the same call skips the samples already written (resume).
 
     Args:
         root: output folder.
@@ -1674,9 +1703,10 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
         seed: base seed.
         image_size: square image side, pixels.
         workers: processes.
-        balance_vr: spread the target VRs evenly over the paper's VR bins: bins that a probe
-            of candidates never reaches (e.g. [0.4, 0.6) for hand-chain scenes) are reported up
-            front and left out (see :func:`handmesh_tutorial.dataset.generate_dataset`).
+        balance_vr: spread the target VRs evenly over the paper's VR bins: bins that a probe of
+            candidates never reaches (e.g. [0.4, 0.6) for hand-chain scenes) are reported up front
+            and left out (see
+            [`handmesh_tutorial.dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset]).
         shard: ``(k, n)``: only the k-th of n equal index ranges.
         limits: ``"anatomical"`` joint limits (default: natural poses) or ``"paper"`` (±60°
             about every LCS axis, as in the paper).
@@ -1686,7 +1716,8 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
         vr_probe: candidates of the VR probe that finds the reachable bins (``balance_vr``).
 
     Returns:
-        The :class:`handmesh_tutorial.dataset.GenerationSummary`.
+        The
+        [`handmesh_tutorial.dataset.GenerationSummary`][handmesh_tutorial.dataset.GenerationSummary].
     """
     from .dataset import generate_dataset
 

@@ -11,7 +11,8 @@ the joints carry what the fingers look like there. Measured on 4,000 INTER-SH sc
 steps of 16 crops at 64 px (docs page "Training from scratch on a CPU"): global pooling stayed
 on the plateau (28 mm training L1), pose pooling left it after about 300 steps.
 
-:class:`KeypointEncoder` wraps a :class:`~handmesh_tutorial.encoder.ResNet`:
+[`KeypointEncoder`][handmesh_tutorial.keypoints.KeypointEncoder] wraps a
+[`ResNet`][handmesh_tutorial.encoder.ResNet]:
 
 1. a small feature pyramid (1x1 lateral convs, nearest up-sampling, sum) brings stages 2-4 to
    stride 8 (an 8x8 map for a 64-px crop) with ``width`` channels;
@@ -23,8 +24,8 @@ on the plateau (28 mm training L1), pose pooling left it after about 300 steps.
 
 Coordinates: ``uv`` in ``[-1, 1]`` with ``-1`` the left/top edge of the crop and ``+1`` the
 right/bottom edge (``grid_sample`` with ``align_corners=False``); a pixel position ``u`` (pixel
-centres at integers, as :func:`~handmesh_tutorial.augment.crop_transform`) is
-``(2 u + 1) / S - 1`` (:func:`normalised_keypoints`).
+centres at integers, as [`crop_transform`][handmesh_tutorial.augment.crop_transform]) is
+``(2 u + 1) / S - 1`` ([`normalised_keypoints`][handmesh_tutorial.keypoints.normalised_keypoints]).
 
 Taught in notebook 08 ("Training").
 """
@@ -86,7 +87,7 @@ class KeypointEncoder(nn.Module):
     """A ResNet with a 2D keypoint head whose features are pooled at the predicted joints.
 
     Args:
-        backbone: a :class:`~handmesh_tutorial.encoder.ResNet` (basic or bottleneck blocks).
+        backbone: a [`ResNet`][handmesh_tutorial.encoder.ResNet] (basic or bottleneck blocks).
         num_joints: ``J``, heat-maps / pooled positions.
         width: channels of the stride-8 pyramid map.
         out_features: ``D``, width of the returned feature vector.

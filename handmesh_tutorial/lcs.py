@@ -23,34 +23,36 @@ decomposition becomes ambiguous, so flexion ranges beyond 90° (PIP 110°) round
 **Into the hand model.** MANO's pose of joint ``k`` is its rotation relative to the parent,
 expressed in rest-pose axes. A rotation about the rest LCS axes is therefore
 ``R_k = F_k R(a) F_k^T``, and its axis-angle is simply ``F_k @ rotvec(R(a))``; that is what
-:meth:`Articulation.to_pose` returns, ready for ``HandModel(pose=...)`` (and for
-:class:`~handmesh_tutorial.mano.ManoModel`).
+[`Articulation.to_pose`][handmesh_tutorial.lcs.Articulation.to_pose] returns, ready for
+``HandModel(pose=...)`` (and for [`ManoModel`][handmesh_tutorial.mano.ManoModel]).
 
-**Which vertex (hand).** :func:`hand_lcs` picks ``v_i`` with a deterministic rule on the rest
-mesh: (1) a target direction ``d_i`` = the palmar normal of the hand for the four fingers, and for
-the thumb the palmar normal turned by ``thumb_flexion_angle`` (default 45°) towards the little
-finger (the thumb's pad faces obliquely across the palm); the palmar normal is
-``(index MCP - pinky MCP) × (middle MCP - wrist)`` for a right hand and its negative for a left
-hand. (2) Candidates are vertices whose strongest skinning weight belongs to the joint or its
-parent and which lie within ``slab`` (default 0.25) of the bone length from the joint's
-cross-section plane. (3) The chosen vertex maximises the cosine between ``d_i`` and its offset
-from the joint projected off ``z_i``. The ids are stored in ``Articulation.flexion_vertex_ids``.
+**Which vertex (hand).** [`hand_lcs`][handmesh_tutorial.lcs.hand_lcs] picks ``v_i`` with a
+deterministic rule on the rest mesh: (1) a target direction ``d_i`` = the palmar normal of the hand
+for the four fingers, and for the thumb the palmar normal turned by ``thumb_flexion_angle`` (default
+45°) towards the little finger (the thumb's pad faces obliquely across the palm); the palmar normal
+is ``(index MCP - pinky MCP) × (middle MCP - wrist)`` for a right hand and its negative for a left
+hand. (2) Candidates are vertices whose strongest skinning weight belongs to the joint or its parent
+and which lie within ``slab`` (default 0.25) of the bone length from the joint's cross-section
+plane. (3) The chosen vertex maximises the cosine between ``d_i`` and its offset from the joint
+projected off ``z_i``. The ids are stored in ``Articulation.flexion_vertex_ids``.
 
 **Limits** (degrees, per axis ``(x: abduction, y: flexion, z: twist)``), see
-:data:`ANATOMICAL_LIMITS_DEG` and :data:`PAPER_LIMIT_DEG`. The paper's generator uses ±60° on
-every axis (``limits="paper"``); ``limits="anatomical"`` uses one-sided flexion, small abduction
-and (except at the thumb's CMC) almost no twist, rounded from commonly cited ranges of motion
-(finger MCP 0–90° flexion and ±15° abduction, PIP 0–110°, DIP 0–90° as in Lin, Wu & Huang 2000,
-"Modeling the constraints of human hand motion"; MCP hyperextension and thumb ranges rounded from
-clinical range-of-motion tables such as the AAOS values). They are plausible defaults for
-sampling, not measurements.
+[`ANATOMICAL_LIMITS_DEG`][handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG] and
+[`PAPER_LIMIT_DEG`][handmesh_tutorial.lcs.PAPER_LIMIT_DEG]. The paper's generator uses ±60° on every
+axis (``limits="paper"``); ``limits="anatomical"`` uses one-sided flexion, small abduction and
+(except at the thumb's CMC) almost no twist, rounded from commonly cited ranges of motion (finger
+MCP 0–90° flexion and ±15° abduction, PIP 0–110°, DIP 0–90° as in Lin, Wu & Huang 2000, "Modeling
+the constraints of human hand motion"; MCP hyperextension and thumb ranges rounded from clinical
+range-of-motion tables such as the AAOS values). They are plausible defaults for sampling, not
+measurements.
 
 **Left hands.** If the left mesh is the mirror image of the right by a reflection ``M`` (the
-library's hand negates z, :func:`handmesh_tutorial.hand.mirror_points`), the rule gives
+library's hand negates z,
+[`handmesh_tutorial.hand.mirror_points`][handmesh_tutorial.hand.mirror_points]), the rule gives
 ``F_left = M F_right diag(1, -1, 1)``: ``z`` and ``x`` mirror, ``y`` flips to stay right-handed
 (``(Mz) × (Mx) = -M (z × x)``). Then equal flexion angles give mirrored poses, while ``a_x`` and
-``a_z`` change sign (:func:`mirror_angles`). All limits on ``x`` and ``z`` are symmetric, so the
-same table serves both sides.
+``a_z`` change sign ([`mirror_angles`][handmesh_tutorial.lcs.mirror_angles]). All limits on ``x``
+and ``z`` are symmetric, so the same table serves both sides.
 """
 
 from __future__ import annotations
@@ -80,11 +82,9 @@ __all__ = [
     "within_limits",
 ]
 
-#: The paper's limit: ±60° about every LCS axis (supplementary, step 4 of the generator).
 PAPER_LIMIT_DEG = 60.0
+"""The paper's limit: ±60° about every LCS axis (supplementary, step 4 of the generator)."""
 
-#: Anatomical limits in degrees, ``(lower, upper)`` per axis ``x`` (abduction), ``y`` (flexion,
-#: positive towards the palm), ``z`` (twist about the bone).
 ANATOMICAL_LIMITS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
     "mcp": ((-15.0, 15.0), (-20.0, 90.0), (-5.0, 5.0)),
     "pip": ((0.0, 0.0), (0.0, 110.0), (0.0, 0.0)),
@@ -93,20 +93,26 @@ ANATOMICAL_LIMITS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
     "thumb_mcp": ((-10.0, 10.0), (-10.0, 60.0), (-5.0, 5.0)),
     "thumb_ip": ((0.0, 0.0), (-15.0, 80.0), (0.0, 0.0)),
 }
+"""Anatomical limits in degrees, ``(lower, upper)`` per axis ``x`` (abduction), ``y`` (flexion,
+positive towards the palm), ``z`` (twist about the bone).
+"""
 
-#: DIP flexion = this fraction of the PIP flexion under anatomical limits: the distal joint of a
-#: finger is driven by the same tendons as the middle one and follows it (about 2/3, Rijpkema &
-#: Girard 1991; the constraint common in hand animation and tracking).
 DIP_PIP_RATIO: float = 2.0 / 3.0
+"""DIP flexion = this fraction of the PIP flexion under anatomical limits: the distal joint of a
+finger is driven by the same tendons as the middle one and follows it (about 2/3, Rijpkema & Girard
+1991; the constraint common in hand animation and tracking).
+"""
 
-#: Coupled joints of the hand under anatomical limits: ``{DIP node: PIP node}`` (MANO nodes
-#: 1..15; the thumb's IP stays independent).
 DIP_FOLLOWS_PIP: dict[int, int] = {3: 2, 6: 5, 9: 8, 12: 11}
+"""Coupled joints of the hand under anatomical limits: ``{DIP node: PIP node}`` (MANO nodes
+1..15; the thumb's IP stays independent).
+"""
 
-#: Kind of each of the 15 articulated MANO joints (MANO order 1..15: index, middle, pinky, ring,
-#: thumb; three joints each).
 HAND_JOINT_KINDS: tuple[str, ...] = (
     ("mcp", "pip", "dip") * 4 + ("thumb_cmc", "thumb_mcp", "thumb_ip"))
+"""Kind of each of the 15 articulated MANO joints (MANO order 1..15: index, middle, pinky, ring,
+thumb; three joints each).
+"""
 
 _EULER = "YXZ"  # intrinsic: flexion (y), then abduction (x), then twist (z)
 
@@ -262,7 +268,8 @@ def lcs_angles_to_pose(frames, angles) -> np.ndarray:
 
 
 def pose_to_lcs_angles(frames, pose) -> np.ndarray:
-    """Inverse of :func:`lcs_angles_to_pose` (exact while ``|a_x| < 90°``).
+    """Inverse of [`lcs_angles_to_pose`][handmesh_tutorial.lcs.lcs_angles_to_pose] (exact while
+    ``|a_x| < 90°``).
 
     Args:
         frames: (J,3,3) rest LCS.
@@ -432,7 +439,9 @@ class Articulation:
         return rng.uniform(lo, hi, size=shape)
 
     def random_pose(self, rng=None, n: int | None = None, scale: float = 1.0) -> np.ndarray:
-        """Random valid pose vectors: :meth:`random_angles` through :meth:`to_pose`.
+        """Random valid pose vectors:
+        [`random_angles`][handmesh_tutorial.lcs.Articulation.random_angles] through
+        [`to_pose`][handmesh_tutorial.lcs.Articulation.to_pose].
 
         Returns:
             (J,3) or (n,J,3) float32 axis-angle, ready for ``HandModel(pose=...)``.
@@ -444,7 +453,8 @@ def hand_joint_limits(limits: str = "anatomical") -> tuple[np.ndarray, np.ndarra
     """Per-axis limits of the 15 articulated hand joints (MANO order), radians.
 
     Args:
-        limits: ``"paper"`` (±60° everywhere) or ``"anatomical"`` (:data:`ANATOMICAL_LIMITS_DEG`).
+        limits: ``"paper"`` (±60° everywhere) or ``"anatomical"``
+            ([`ANATOMICAL_LIMITS_DEG`][handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG]).
 
     Returns:
         ``(lower, upper)``, each (15,3) radians, axis order ``x, y, z``.
@@ -501,10 +511,10 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
              slab: float = 0.25) -> Articulation:
     """The LCS of the 15 articulated joints of a hand model, in MANO joint order 1..15.
 
-    Works for :class:`~handmesh_tutorial.hand.HandModel` and
-    :class:`~handmesh_tutorial.mano.ManoModel` (anything with ``side``, ``template_vertices``,
-    ``skinning_weights``, ``parents`` and a zero-pose call returning ``joints`` (FreiHAND order)
-    and ``joints_mano``).
+    Works for [`HandModel`][handmesh_tutorial.hand.HandModel] and
+    [`ManoModel`][handmesh_tutorial.mano.ManoModel] (anything with ``side``, ``template_vertices``,
+    ``skinning_weights``, ``parents`` and a zero-pose call returning ``joints`` (FreiHAND order) and
+    ``joints_mano``).
 
     Args:
         model: the hand model (its rest pose, zero shape, is used).
@@ -514,7 +524,8 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
         slab: candidate slab of the vertex rule (fraction of the bone length).
 
     Returns:
-        An :class:`Articulation` whose ``to_pose`` output is the model's ``pose`` (15,3).
+        An [`Articulation`][handmesh_tutorial.lcs.Articulation] whose ``to_pose`` output is the
+        model's ``pose`` (15,3).
     """
     from . import hand as _hand
 
@@ -567,7 +578,8 @@ def random_pose(model_or_lcs, rng=None, n: int | None = None, limits=None,
     """Random pose vectors whose LCS angles respect the limits.
 
     Args:
-        model_or_lcs: an :class:`Articulation` or a hand model (then :func:`hand_lcs` is built).
+        model_or_lcs: an [`Articulation`][handmesh_tutorial.lcs.Articulation] or a hand model (then
+            [`hand_lcs`][handmesh_tutorial.lcs.hand_lcs] is built).
         rng: ``numpy.random.Generator`` or seed (same seed -> same bytes).
         n: number of poses; ``None`` returns one (15,3) pose.
         limits: ``None`` (keep the articulation's; ``"anatomical"`` for a model), ``"paper"``,

@@ -1,18 +1,20 @@
 """Training losses: the paper's L1 vertex loss and the optional terms of the CPU recipe.
 
 The paper trains MSMR-Net with one loss, the L1 distance of predicted to true vertices
-(:func:`vertex_loss`); :class:`~handmesh_tutorial.train.TrainConfig` keeps that as its
-default. Training from scratch on a CPU for minutes needs more guidance; the optional terms,
-each weighted by a ``TrainConfig`` field (0 = off), are those standard in the field:
+([`vertex_loss`][handmesh_tutorial.losses.vertex_loss]);
+[`TrainConfig`][handmesh_tutorial.train.TrainConfig] keeps that as its default. Training from
+scratch on a CPU for minutes needs more guidance; the optional terms, each weighted by a
+``TrainConfig`` field (0 = off), are those standard in the field:
 
-* :func:`~handmesh_tutorial.keypoints.keypoint_loss` (``keypoint_weight``): L1 of the 2D keypoint
-  head's normalised joint positions (MobRecon);
-* :func:`aligned_joint_loss` (``aligned_weight``): L1 of the joints after a differentiable
-  similarity (Procrustes) alignment to the truth. The vertex loss is dominated by the global
-  orientation (a 10 degree tilt moves a fingertip by 15 mm); the aligned term is the part of the
-  error the PA- metrics measure, the hand's articulation;
-* :func:`edge_length_loss` (``edge_weight``) and :func:`normal_loss` (``normal_weight``): the mesh
-  regularisers of CMR / MobRecon (Chen et al. 2021, 2022) against crumpled surfaces.
+* [`keypoint_loss`][handmesh_tutorial.keypoints.keypoint_loss] (``keypoint_weight``): L1 of the 2D
+  keypoint head's normalised joint positions (MobRecon);
+* [`aligned_joint_loss`][handmesh_tutorial.losses.aligned_joint_loss] (``aligned_weight``): L1 of
+  the joints after a differentiable similarity (Procrustes) alignment to the truth. The vertex loss
+  is dominated by the global orientation (a 10 degree tilt moves a fingertip by 15 mm); the aligned
+  term is the part of the error the PA- metrics measure, the hand's articulation;
+* [`edge_length_loss`][handmesh_tutorial.losses.edge_length_loss] (``edge_weight``) and
+  [`normal_loss`][handmesh_tutorial.losses.normal_loss] (``normal_weight``): the mesh regularisers
+  of CMR / MobRecon (Chen et al. 2021, 2022) against crumpled surfaces.
 
 All take metres and return scalar tensors. Taught in notebook 08 ("Training").
 """
@@ -74,7 +76,8 @@ def similarity_align(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 def aligned_joint_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """L1 of points after :func:`similarity_align` (the loss behind PA-MPJPE).
+    """L1 of points after [`similarity_align`][handmesh_tutorial.losses.similarity_align] (the loss
+    behind PA-MPJPE).
 
     Args:
         pred: ``(B, J, 3)`` predicted joints, metres.

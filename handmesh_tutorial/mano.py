@@ -1,24 +1,26 @@
 """Load a user's own ``MANO_RIGHT.pkl`` / ``MANO_LEFT.pkl`` without chumpy, safely.
 
 MANO is licence-gated, so the library ships its own hand (the MakeHuman hand,
-:mod:`handmesh_tutorial.hand`).
-A user who owns the official files can load them here and use them anywhere a
-:class:`~handmesh_tutorial.hand.HandModel` is accepted: :func:`load_mano` returns a
-:class:`ManoModel` with the same call signature and output (vertices, 21 FreiHAND-order joints,
-16 MANO joints, joint transforms) and the same attributes (``faces``, ``template_vertices``,
-``skinning_weights``, ``rest_joints``, ``parents``, ``fingertip_vertex_ids``, ``joint_regressor``).
+[`handmesh_tutorial.hand`][handmesh_tutorial.hand]). A user who owns the official files can load
+them here and use them anywhere a [`HandModel`][handmesh_tutorial.hand.HandModel] is accepted:
+[`load_mano`][handmesh_tutorial.mano.load_mano] returns a
+[`ManoModel`][handmesh_tutorial.mano.ManoModel] with the same call signature and output (vertices,
+21 FreiHAND-order joints, 16 MANO joints, joint transforms) and the same attributes (``faces``,
+``template_vertices``, ``skinning_weights``, ``rest_joints``, ``parents``, ``fingertip_vertex_ids``,
+``joint_regressor``).
 
 **Safe loading.** The official files are Python-2 pickles that contain numpy arrays, one
 ``scipy.sparse`` matrix (``J_regressor``) and chumpy ``Ch`` objects (public loaders such as
-manopth's call ``.r`` on ``shapedirs``; without chumpy, plain unpickling fails with
-"No module named 'chumpy'"). Plain
-``pickle.load`` would import chumpy (unmaintained, broken on current numpy) and would execute
-whatever callable a tampered file names. :class:`RestrictedUnpickler` admits only a whitelist of
-classes (numpy array/dtype reconstruction, scipy sparse csc/csr/coo matrices, a few chumpy
-classes) and maps chumpy and scipy classes to tiny stand-ins that only *record* their pickled
-state; :func:`read_mano_pickle` then turns the stand-ins into plain arrays. Anything else is
-refused with :class:`UnsafePickleError` naming ``module.class`` and the file, before anything is
-called.
+manopth's call ``.r`` on ``shapedirs``; without chumpy, plain unpickling fails with "No module named
+'chumpy'"). Plain ``pickle.load`` would import chumpy (unmaintained, broken on current numpy) and
+would execute whatever callable a tampered file names.
+[`RestrictedUnpickler`][handmesh_tutorial.mano.RestrictedUnpickler] admits only a whitelist of
+classes (numpy array/dtype reconstruction, scipy sparse csc/csr/coo matrices, a few chumpy classes)
+and maps chumpy and scipy classes to tiny stand-ins that only *record* their pickled state;
+[`read_mano_pickle`][handmesh_tutorial.mano.read_mano_pickle] then turns the stand-ins into plain
+arrays. Anything else is refused with
+[`UnsafePickleError`][handmesh_tutorial.mano.UnsafePickleError] naming ``module.class`` and the
+file, before anything is called.
 
 How chumpy objects pickle (read from chumpy's ``ch.py``): ``Ch.__getstate__`` returns a copy of the
 instance ``__dict__`` without its weak-reference caches; the array of a leaf ``Ch`` lives in the
@@ -29,12 +31,12 @@ instance ``__dict__`` without its weak-reference caches; the array of a leaf ``C
 **Conventions verified in public code** (see ``docs/api/mano.md`` for the citations):
 
 * *Left-hand shapedirs.* In the official ``MANO_LEFT.pkl`` the x component of ``shapedirs``
-  (``shapedirs[:, 0, :]``) is the same as the right hand's although the left template is mirrored
-  in x, so equal ``betas`` give a left hand that is not the mirror image of the right one. The
-  common fix flips its sign: ``shapedirs[:, 0, :] *= -1`` (reported in the smplx repository's
-  issue #48; applied in InterHand2.6M's ``tool/MANO_render/render.py``, recommended in
-  dex-ycb-toolkit issue #28, discussed in arctic issue #50). :func:`load_mano` applies it for
-  left hands by default (``fix_left_shapedirs``). The library cannot check a file against the
+  (``shapedirs[:, 0, :]``) is the same as the right hand's although the left template is mirrored in
+  x, so equal ``betas`` give a left hand that is not the mirror image of the right one. The common
+  fix flips its sign: ``shapedirs[:, 0, :] *= -1`` (reported in the smplx repository's issue #48;
+  applied in InterHand2.6M's ``tool/MANO_render/render.py``, recommended in dex-ycb-toolkit issue
+  #28, discussed in arctic issue #50). [`load_mano`][handmesh_tutorial.mano.load_mano] applies it
+  for left hands by default (``fix_left_shapedirs``). The library cannot check a file against the
   right one, so if your left file was already corrected, pass ``fix_left_shapedirs=False``.
 * *Fingertip vertices.* MANO has 16 joints; the 5 fingertips of the 21 keypoints are mesh
   vertices, and two conventions are in use (thumb, index, middle, ring, pinky):
@@ -72,17 +74,14 @@ __all__ = [
     "read_mano_pickle",
 ]
 
-#: Fingertip vertex ids (thumb, index, middle, ring, pinky) per convention and side.
 FINGERTIP_VERTEX_IDS: dict[str, dict[str, tuple[int, ...]]] = {
     # smplx/vertex_ids.py, key 'mano' (same ids for both sides; HaMeR-family code).
     "smplx": {"right": (744, 320, 443, 554, 671), "left": (744, 320, 443, 554, 671)},
     # manopth/manolayer.py (hassony2/manopth): the left middle tip is 445.
     "manopth": {"right": (745, 317, 444, 556, 673), "left": (745, 317, 445, 556, 673)},
 }
+"""Fingertip vertex ids (thumb, index, middle, ring, pinky) per convention and side."""
 
-#: Arrays :func:`load_mano` needs, with their expected shapes: ``"V"`` = the number of vertices
-#: of ``v_template`` (778 in the official files; other meshes in MANO format also load),
-#: ``None`` = any size.
 MANO_KEYS: dict[str, tuple] = {
     "v_template": ("V", 3),
     "shapedirs": ("V", 3, None),
@@ -92,6 +91,10 @@ MANO_KEYS: dict[str, tuple] = {
     "kintree_table": (2, 16),
     "f": (None, 3),
 }
+"""Arrays [`load_mano`][handmesh_tutorial.mano.load_mano] needs, with their expected shapes:
+``"V"`` = the number of vertices of ``v_template`` (778 in the official files; other meshes in MANO
+format also load), ``None`` = any size.
+"""
 
 
 class UnsafePickleError(pickle.UnpicklingError, ValueError):
@@ -128,7 +131,7 @@ class _StandIn:
 
 
 class _ChumpyStandIn(_StandIn):
-    """Stand-in for a chumpy object; :meth:`to_array` evaluates the few array-valued kinds."""
+    """Stand-in for a chumpy object; `to_array` evaluates the few array-valued kinds."""
 
     kind = "Ch"
 
@@ -151,7 +154,7 @@ class _ChumpyStandIn(_StandIn):
 
 
 class _SparseStandIn(_StandIn):
-    """Stand-in for a scipy sparse matrix; :meth:`to_sparse` rebuilds it from its arrays."""
+    """Stand-in for a scipy sparse matrix; `to_sparse` rebuilds it from its arrays."""
 
     fmt = "csc"
 
@@ -193,11 +196,12 @@ def _plain(obj):
     return obj
 
 
-#: Largest array (elements) or sparse matrix (rows x columns) a MANO pickle may ask for: MANO's
-#: largest array, ``posedirs``, has 315,090 elements; a crafted shape must not allocate gigabytes.
 MAX_PICKLE_ELEMENTS = 20_000_000
-#: Largest MANO file read, bytes (the official files are about 4 MB).
+"""Largest array (elements) or sparse matrix (rows x columns) a MANO pickle may ask for: MANO's
+largest array, ``posedirs``, has 315,090 elements; a crafted shape must not allocate gigabytes.
+"""
 MAX_PICKLE_BYTES = 256 * 2**20
+"""Largest MANO file read, bytes (the official files are about 4 MB)."""
 
 
 def _check_size(shape, what: str) -> None:
@@ -284,19 +288,20 @@ _WHITELIST = _build_whitelist()
 
 
 class RestrictedUnpickler(pickle.Unpickler):
-    """A :class:`pickle.Unpickler` that resolves only whitelisted globals.
+    """A `pickle.Unpickler` that resolves only whitelisted globals.
 
-    Admitted: numpy ``ndarray``/``dtype`` and numpy's array/scalar reconstruction helpers,
-    scipy sparse csc/csr/coo matrices (as :class:`_SparseStandIn`), chumpy ``Ch``, ``Select``,
-    ``Reshape`` and ``transpose`` (as :class:`_ChumpyStandIn`), ``set``/``frozenset``/``slice``/
-    ``object`` and a restricted ``copyreg._reconstructor``. Every other global raises
-    :class:`UnsafePickleError` when the unpickler *looks it up*, i.e. before it could be called.
+    Admitted: numpy ``ndarray``/``dtype`` and numpy's array/scalar reconstruction helpers, scipy
+    sparse csc/csr/coo matrices (as `_SparseStandIn`), chumpy ``Ch``, ``Select``, ``Reshape`` and
+    ``transpose`` (as `_ChumpyStandIn`), ``set``/``frozenset``/``slice``/ ``object`` and a
+    restricted ``copyreg._reconstructor``. Every other global raises
+    [`UnsafePickleError`][handmesh_tutorial.mano.UnsafePickleError] when the unpickler *looks it
+    up*, i.e. before it could be called.
 
     Args:
         file: a binary file object.
         source: a name for messages (usually the file path).
-        **kwargs: passed to :class:`pickle.Unpickler` (``encoding="latin1"`` reads Python-2
-            pickles such as the official MANO files).
+        **kwargs: passed to `pickle.Unpickler` (``encoding="latin1"`` reads Python-2 pickles such as
+            the official MANO files).
     """
 
     def __init__(self, file, *, source: str = "<pickle>", **kwargs):
@@ -369,7 +374,8 @@ def _infer_side(path: Path) -> str | None:
 
 
 class ManoModel(torch.nn.Module):
-    """MANO (Romero et al. 2017) as a torch module with the :class:`HandModel` interface.
+    """MANO (Romero et al. 2017) as a torch module with the
+    [`HandModel`][handmesh_tutorial.hand.HandModel] interface.
 
     Forward pass (all in metres, float32):
 
@@ -382,13 +388,13 @@ class ManoModel(torch.nn.Module):
     5. ``transl`` is added; ``joints_mano`` are the posed joint centres ``G_k[:3, 3]``; the 21
        keypoints are these 16 plus the 5 fingertip vertices, in FreiHAND order.
 
-    Usually built with :func:`load_mano`. Attributes mirror
-    :class:`~handmesh_tutorial.hand.HandModel`.
+    Usually built with [`load_mano`][handmesh_tutorial.mano.load_mano]. Attributes mirror
+    [`HandModel`][handmesh_tutorial.hand.HandModel].
 
     Args:
-        params: dict with the :data:`MANO_KEYS` arrays (as returned by :func:`read_mano_pickle`);
-            ``hands_components`` (45x45) and ``hands_mean`` (45,) are needed for PCA poses or
-            ``flat_hand_mean=False``.
+        params: dict with the [`MANO_KEYS`][handmesh_tutorial.mano.MANO_KEYS] arrays (as returned by
+            [`read_mano_pickle`][handmesh_tutorial.mano.read_mano_pickle]); ``hands_components``
+            (45x45) and ``hands_mean`` (45,) are needed for PCA poses or ``flat_hand_mean=False``.
         side: ``"right"`` or ``"left"``.
         use_pca: if True, ``pose`` holds ``num_pca_comps`` PCA coefficients (B, num_pca_comps) and
             the full pose is ``coeffs @ hands_components[:num_pca_comps]``.
@@ -397,8 +403,8 @@ class ManoModel(torch.nn.Module):
             mean pose ``hands_mean`` is added to the 45 pose values (as smplx and manopth do with
             ``flat_hand_mean=False``), so zero pose is the relaxed, slightly curled mean hand.
         fingertips: ``"smplx"`` (default) or ``"manopth"`` fingertip vertex convention (see
-            :data:`FINGERTIP_VERTEX_IDS`), or an explicit 5-tuple (thumb, index, middle, ring,
-            pinky).
+            [`FINGERTIP_VERTEX_IDS`][handmesh_tutorial.mano.FINGERTIP_VERTEX_IDS]), or an explicit
+            5-tuple (thumb, index, middle, ring, pinky).
         fix_left_shapedirs: flip ``shapedirs[:, 0, :]`` (left-hand fix, see the module text);
             ``None`` = do it for ``side="left"`` only.
         source: name used in error messages.
@@ -528,10 +534,9 @@ class ManoModel(torch.nn.Module):
 
         Mean distance of the vertices skinned mostly to joint k from its bone segment (joint k to
         its child joint, or to its fingertip for the last joint of a finger); for the wrist, the
-        palm's half-thickness (mean distance of the palm vertices from the plane through the
-        wrist and the knuckles). An estimate for collision proxies, like
-        :attr:`HandModel.bone_radii` (on the MakeHuman hand written in MANO format the two agree to
-        about 10 %).
+        palm's half-thickness (mean distance of the palm vertices from the plane through the wrist
+        and the knuckles). An estimate for collision proxies, like `HandModel.bone_radii` (on the
+        MakeHuman hand written in MANO format the two agree to about 10 %).
         """
         v = self.template_vertices.astype(np.float64)
         j = self.rest_joints.astype(np.float64)
@@ -561,7 +566,7 @@ class ManoModel(torch.nn.Module):
         return radii.astype(np.float32)
 
     def vertex_colors(self, tone=None, rng=None, variation: float = 0.04) -> np.ndarray:
-        """Per-vertex skin colour (a tone of :data:`~handmesh_tutorial.hand.SKIN_TONES`).
+        """Per-vertex skin colour (a tone of [`SKIN_TONES`][handmesh_tutorial.hand.SKIN_TONES]).
 
         MANO files carry no palm or nail labels, so the colour is one tone with a little
         per-vertex brightness noise.
@@ -659,9 +664,9 @@ class ManoModel(torch.nn.Module):
             transl: (B,3) translation in metres, added last.
 
         Returns:
-            The same output type as :class:`~handmesh_tutorial.hand.HandModel`: ``vertices``
-            (B,778,3), ``joints`` (B,21,3) FreiHAND order, ``joints_mano`` (B,16,3),
-            ``transforms`` (B,16,4,4) global rigid transforms of the joints, all metres, float32.
+            The same output type as [`HandModel`][handmesh_tutorial.hand.HandModel]: ``vertices``
+            (B,778,3), ``joints`` (B,21,3) FreiHAND order, ``joints_mano`` (B,16,3), ``transforms``
+            (B,16,4,4) global rigid transforms of the joints, all metres, float32.
 
         Raises:
             ValueError: an input has the wrong shape or the batch sizes disagree.
@@ -714,12 +719,14 @@ def load_mano(path: str | Path, side: str | None = None, *, use_pca: bool = Fals
               num_pca_comps: int = 45, flat_hand_mean: bool = True,
               fingertips: str | tuple = "smplx",
               fix_left_shapedirs: bool | None = None) -> ManoModel:
-    """Load an official MANO pickle (or a file in its format) as a :class:`ManoModel`.
+    """Load an official MANO pickle (or a file in its format) as a
+    [`ManoModel`][handmesh_tutorial.mano.ManoModel].
 
     Args:
         path: ``MANO_RIGHT.pkl`` / ``MANO_LEFT.pkl`` (your own licensed copy).
         side: ``"right"`` or ``"left"``; ``None`` infers it from the file name.
-        use_pca: pose given as PCA coefficients (see :class:`ManoModel`).
+        use_pca: pose given as PCA coefficients (see
+            [`ManoModel`][handmesh_tutorial.mano.ManoModel]).
         num_pca_comps: number of PCA components when ``use_pca``.
         flat_hand_mean: zero pose = flat template (True, default) or MANO's mean pose (False).
         fingertips: ``"smplx"`` (744, 320, 443, 554, 671) or ``"manopth"``
@@ -728,7 +735,7 @@ def load_mano(path: str | Path, side: str | None = None, *, use_pca: bool = Fals
             hands (the official left file needs it), off for right.
 
     Returns:
-        The model; call it like :class:`~handmesh_tutorial.hand.HandModel`.
+        The model; call it like [`HandModel`][handmesh_tutorial.hand.HandModel].
 
     Raises:
         FileNotFoundError: no such file.

@@ -3,7 +3,8 @@
 Everything here reproduces the official FreiHAND evaluation (``eval.py`` and
 ``utils/eval_util.py`` of the ``lmb-freiburg/freihand`` repository) to 1e-6, batched over samples:
 
-* **Procrustes with scale, per sample** (:func:`procrustes_align`): both point sets are centred,
+* **Procrustes with scale, per sample**
+  ([`procrustes_align`][handmesh_tutorial.metrics.procrustes_align]): both point sets are centred,
   divided by their Frobenius norm plus ``1e-8``, and the rotation comes from the orthogonal
   Procrustes solution ``R = U V^T`` of ``svd(A^T B)`` with scale ``sum(singular values)``
   (``scipy.linalg.orthogonal_procrustes``). That ``R`` may be a *reflection* (det -1); this is the
@@ -19,7 +20,8 @@ Everything here reproduces the official FreiHAND evaluation (``eval.py`` and
   over samples.
 
 Inputs are metres, numpy arrays or torch tensors; everything is computed in float64 numpy (the
-F-score's candidate search runs in float32 torch with a proven error margin; see :func:`f_score`).
+F-score's candidate search runs in float32 torch with a proven error margin; see
+[`f_score`][handmesh_tutorial.metrics.f_score]).
 """
 
 from __future__ import annotations
@@ -32,16 +34,17 @@ import numpy as np
 # [0.95,1.00] (half-open, the last closed). Re-exported here for tables.
 from .visibility import VR_BINS
 
-#: PCK thresholds of the official FreiHAND AUC: 0 to 50 mm, 100 values (metres).
 FREIHAND_THRESHOLDS = np.linspace(0.0, 0.05, 100)
-#: PCK thresholds of the paper's INTER-SH table (Table 2): 0 to 20 mm, 20 values (metres).
+"""PCK thresholds of the official FreiHAND AUC: 0 to 50 mm, 100 values (metres)."""
 PAPER_THRESHOLDS = np.linspace(0.0, 0.02, 20)
-#: F-score distances of the official evaluation (metres): F@5mm and F@15mm.
+"""PCK thresholds of the paper's INTER-SH table (Table 2): 0 to 20 mm, 20 values (metres)."""
 FSCORE_THRESHOLDS = (0.005, 0.015)
-#: Printable labels of :data:`VR_BINS` (half-open, the last closed).
+"""F-score distances of the official evaluation (metres): F@5mm and F@15mm."""
 VR_BIN_LABELS = ("[0.40, 0.60)", "[0.60, 0.80)", "[0.80, 0.95)", "[0.95, 1.00]")
-#: Root keypoint (middle-finger MCP, FreiHAND order) for root-relative errors.
+"""Printable labels of [`VR_BINS`][handmesh_tutorial.visibility.VR_BINS] (half-open, the last
+closed)."""
 ROOT_INDEX = 9
+"""Root keypoint (middle-finger MCP, FreiHAND order) for root-relative errors."""
 
 _EPS_NORM = 1e-8  # added to both Frobenius norms, as in the official align_w_scale
 _U32 = 2.0 ** -24  # unit roundoff of float32
@@ -199,7 +202,7 @@ def auc(pck, thresholds=FREIHAND_THRESHOLDS) -> float:
     the normaliser is 0.05.
 
     Args:
-        pck: (T,) PCK values from :func:`pck_curve`.
+        pck: (T,) PCK values from [`pck_curve`][handmesh_tutorial.metrics.pck_curve].
         thresholds: (T,) the thresholds (metres) the curve was computed at.
 
     Returns:
@@ -217,8 +220,8 @@ def nearest_distances(src, dst) -> np.ndarray:
     """Exact distance from every ``src`` point to its nearest ``dst`` point, per sample.
 
     A straightforward per-sample ``scipy.spatial.cKDTree`` query (the same quantity the official
-    code gets from Open3D). :func:`f_score` does not need the distances themselves and uses a
-    faster batched search.
+    code gets from Open3D). [`f_score`][handmesh_tutorial.metrics.f_score] does not need the
+    distances themselves and uses a faster batched search.
 
     Args:
         src: (N,P,3) query points, metres.
@@ -244,11 +247,11 @@ def _sq_norm(x: np.ndarray) -> np.ndarray:
 def _min_sq_dist_f32(gt: np.ndarray, pred: np.ndarray, block: int = 256):
     """Approximate squared nearest-neighbour distances in both directions, float32.
 
-    Returns (gt_to_pred, pred_to_gt, gt_norm, pred_norm): (N,G), (N,P) squared distances and
-    the lengths (N,G), (N,P) of the centred points, from which :func:`_fraction_within` bounds
-    the rounding error. One (G,5)x(5,P) product per sample gives the whole squared-distance
-    matrix ``|x|^2 + |y|^2 - 2 x.y``; one sample at a time keeps it in cache, which is what makes
-    this faster than two KD-tree builds and queries.
+    Returns (gt_to_pred, pred_to_gt, gt_norm, pred_norm): (N,G), (N,P) squared distances and the
+    lengths (N,G), (N,P) of the centred points, from which `_fraction_within` bounds the rounding
+    error. One (G,5)x(5,P) product per sample gives the whole squared-distance matrix
+    ``|x|^2 + |y|^2 - 2 x.y``; one sample at a time keeps it in cache, which is what makes this
+    faster than two KD-tree builds and queries.
     """
     import torch
 
@@ -372,7 +375,8 @@ def f_score(pred, gt, thresholds=FSCORE_THRESHOLDS) -> dict:
 def per_sample_scores(*, pred_joints, gt_joints, pred_verts=None, gt_verts=None,
                       allow_reflection: bool = True, fscore_thresholds=FSCORE_THRESHOLDS,
                       root_index: int = ROOT_INDEX) -> dict:
-    """Per-sample errors behind :func:`freihand_scores` (for tables stratified by VR, plots...).
+    """Per-sample errors behind [`freihand_scores`][handmesh_tutorial.metrics.freihand_scores] (for
+    tables stratified by VR, plots...).
 
     Args:
         pred_joints: (N,21,3) predicted keypoints, metres (FreiHAND order).
@@ -447,14 +451,16 @@ def freihand_scores(*, pred_joints, gt_joints, pred_verts, gt_verts,
 
 
 def scores_from_errors(ps: dict) -> dict:
-    """The scores of :func:`freihand_scores` from already computed per-sample errors.
+    """The scores of [`freihand_scores`][handmesh_tutorial.metrics.freihand_scores] from already
+    computed per-sample errors.
 
     Args:
-        ps: :func:`per_sample_scores` output with vertices (the F-scores at the default
-            thresholds, 5 and 15 mm).
+        ps: [`per_sample_scores`][handmesh_tutorial.metrics.per_sample_scores] output with vertices
+            (the F-scores at the default thresholds, 5 and 15 mm).
 
     Returns:
-        The dict of :func:`freihand_scores` without the unaligned F-scores.
+        The dict of [`freihand_scores`][handmesh_tutorial.metrics.freihand_scores] without the
+        unaligned F-scores.
     """
     je, jpa, ve, vpa = ps["joint_err"], ps["joint_err_pa"], ps["vert_err"], ps["vert_err_pa"]
     ft, pt = FREIHAND_THRESHOLDS, PAPER_THRESHOLDS
@@ -484,9 +490,10 @@ def scores_from_errors(ps: dict) -> dict:
 def vr_bin_index(vr, bins=VR_BINS):
     """Index of the visibility-ratio bin of each value, -1 when it falls in none (vectorised).
 
-    The array version of :func:`handmesh_tutorial.visibility.vr_bin`. Bins are half-open
-    ``[lo, hi)`` except the last, which is closed ``[lo, hi]``: with the paper's bins
-    0.4 -> 0, 0.6 -> 1, 0.95 -> 3, 1.0 -> 3, 0.39 -> -1. NaN -> -1.
+    The array version of
+    [`handmesh_tutorial.visibility.vr_bin`][handmesh_tutorial.visibility.vr_bin]. Bins are half-open
+    ``[lo, hi)`` except the last, which is closed ``[lo, hi]``: with the paper's bins 0.4 -> 0, 0.6
+    -> 1, 0.95 -> 3, 1.0 -> 3, 0.39 -> -1. NaN -> -1.
 
     Args:
         vr: a float or an array of visibility ratios in [0, 1].
@@ -509,17 +516,18 @@ def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,
     """A table of scores per visibility-ratio bin (the paper's Table 2 layout).
 
     Args:
-        per_sample: output of :func:`per_sample_scores` for N samples.
+        per_sample: output of [`per_sample_scores`][handmesh_tutorial.metrics.per_sample_scores] for
+            N samples.
         vr: (N,) visibility ratio of each sample's target hand.
-        bins: the VR bins; see :func:`vr_bin_index`.
+        bins: the VR bins; see [`vr_bin_index`][handmesh_tutorial.metrics.vr_bin_index].
         thresholds: PCK thresholds (metres) of the AUC; the paper's 0-20 mm, 20 values.
 
     Returns:
-        One dict per bin with ``bin`` (label), ``lo``, ``hi``, ``count``, ``mpjpe``,
-        ``rr_mpjpe`` (root-relative), ``pa_mpjpe`` (mm), ``auc`` (aligned joints, in [0,1]) and,
-        when vertices were scored, ``pa_mpvpe`` (mm), ``f_at_5mm``, ``f_at_15mm``; the
-        :data:`SURFACE_KEYS` averaged when ``per_sample`` holds them. Empty bins have ``count``
-        0 and NaN scores.
+        One dict per bin with ``bin`` (label), ``lo``, ``hi``, ``count``, ``mpjpe``, ``rr_mpjpe``
+        (root-relative), ``pa_mpjpe`` (mm), ``auc`` (aligned joints, in [0,1]) and, when vertices
+        were scored, ``pa_mpvpe`` (mm), ``f_at_5mm``, ``f_at_15mm``; the
+        [`SURFACE_KEYS`][handmesh_tutorial.metrics.SURFACE_KEYS] averaged when ``per_sample`` holds
+        them. Empty bins have ``count`` 0 and NaN scores.
     """
     v = np.asarray(vr, dtype=np.float64).ravel()
     n = per_sample["joint_err"].shape[0]
@@ -537,9 +545,11 @@ def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,
     return rows
 
 
-#: Per-sample surface scores that group rows average when ``per_sample`` holds them
-#: (:func:`handmesh_tutorial.surface.roughness_deg`, ``flipped_face_fraction``).
 SURFACE_KEYS = ("roughness_deg", "flipped")
+"""Per-sample surface scores that group rows average when ``per_sample`` holds them
+([`handmesh_tutorial.surface.roughness_deg`][handmesh_tutorial.surface.roughness_deg],
+``flipped_face_fraction``).
+"""
 
 
 def _group_scores(per_sample: dict, sel: np.ndarray, thresholds) -> dict:
@@ -572,18 +582,20 @@ def _group_scores(per_sample: dict, sel: np.ndarray, thresholds) -> dict:
 def scores_by_group(per_sample: dict, labels, order=None,
                     thresholds=PAPER_THRESHOLDS) -> list[dict]:
     """A table of scores per group of samples, e.g. per scene kind (rows as in
-    :func:`scores_by_vr_bin`).
+    [`scores_by_vr_bin`][handmesh_tutorial.metrics.scores_by_vr_bin]).
 
     Args:
-        per_sample: output of :func:`per_sample_scores` for N samples (optionally with the
-            :data:`SURFACE_KEYS` added, ``(N,)`` each).
+        per_sample: output of [`per_sample_scores`][handmesh_tutorial.metrics.per_sample_scores] for
+            N samples (optionally with the [`SURFACE_KEYS`][handmesh_tutorial.metrics.SURFACE_KEYS]
+            added, ``(N,)`` each).
         labels: ``(N,)`` group label of each sample (``None`` = in no group).
         order: the groups to report, in order (default: the distinct labels, sorted); a group
             with no sample gets ``count`` 0 and NaN scores.
         thresholds: PCK thresholds (metres) of the AUC.
 
     Returns:
-        One dict per group with ``bin`` (the label) and the scores of :func:`scores_by_vr_bin`.
+        One dict per group with ``bin`` (the label) and the scores of
+        [`scores_by_vr_bin`][handmesh_tutorial.metrics.scores_by_vr_bin].
     """
     lab = np.array([None if x is None else str(x) for x in labels], dtype=object)
     n = per_sample["joint_err"].shape[0]
@@ -602,8 +614,9 @@ def comparison_table(rows: list[dict], *baseline_rows: list[dict],
     (``model / baseline 1 / baseline 2 ...``).
 
     Args:
-        rows: the model's rows (:func:`scores_by_vr_bin`, :func:`scores_by_group`, or an
-            overall row with ``bin`` ``"all"``).
+        rows: the model's rows ([`scores_by_vr_bin`][handmesh_tutorial.metrics.scores_by_vr_bin],
+            [`scores_by_group`][handmesh_tutorial.metrics.scores_by_group], or an overall row with
+            ``bin`` ``"all"``).
         *baseline_rows: each baseline's rows on the same samples, same order and labels.
         columns: score keys to show (those missing from the rows are left out).
         first: title of the label column.
@@ -648,7 +661,8 @@ _COLUMNS = (("count", "N", "{:d}"), ("auc", "AUC 0-20mm", "{:.3f}"),
 
 
 def format_table(rows: list[dict], columns=None) -> str:
-    """Format :func:`scores_by_vr_bin` rows (or any list of such dicts) as a markdown table.
+    """Format [`scores_by_vr_bin`][handmesh_tutorial.metrics.scores_by_vr_bin] rows (or any list of
+    such dicts) as a markdown table.
 
     Args:
         rows: list of dicts with a ``bin`` label and score keys.

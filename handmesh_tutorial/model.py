@@ -2,42 +2,47 @@
 
 Paper section "Multi-path Mesh Decoder" (architecture figure) and Table 3 (ablation). The model:
 
-1. ``encoder`` (ResNet / HRNet, :mod:`handmesh_tutorial.encoder`): image ``(B, 3, H, W)`` to a
-   global feature ``(B, D)``;
+1. ``encoder`` (ResNet / HRNet, [`handmesh_tutorial.encoder`][handmesh_tutorial.encoder]): image
+   ``(B, 3, H, W)`` to a global feature ``(B, D)``;
 2. ``latent_to_mesh`` (the FC of the intermediate module): ``(B, D)`` to ``(B, V_c * C)``, reshaped
    to one ``C``-channel token per coarsest-mesh vertex, ``(B, V_c, C)``;
-3. ``transformer`` (:class:`~handmesh_tutorial.blocks.CoarseMeshTransformer`, or identity when
-   ``attention=False``): long-range interactions between the coarse vertices;
-4. ``decoder`` (:mod:`handmesh_tutorial.decoder`, single- or multi-path) to a per-vertex field
-   ``(B, V, 12)`` (or ``(B, V, 3)``), then ``smoothing`` (a fixed sparse Laplacian smoothing of
-   that field) and :meth:`MSMRNet.vertices_from_field` to vertices ``(B, V, 3)``;
+3. ``transformer`` ([`CoarseMeshTransformer`][handmesh_tutorial.blocks.CoarseMeshTransformer], or
+   identity when ``attention=False``): long-range interactions between the coarse vertices;
+4. ``decoder`` ([`handmesh_tutorial.decoder`][handmesh_tutorial.decoder], single- or multi-path) to
+   a per-vertex field ``(B, V, 12)`` (or ``(B, V, 3)``), then ``smoothing`` (a fixed sparse
+   Laplacian smoothing of that field) and
+   [`MSMRNet.vertices_from_field`][handmesh_tutorial.model.MSMRNet.vertices_from_field] to vertices
+   ``(B, V, 3)``;
 5. joints ``(B, J, 3)`` = the template's joint regressor ``(J, V)`` applied to the vertices.
 
-**What the decoder predicts** (``output`` of :func:`build_model`). The paper's decoder regresses
-vertex coordinates. Fitting it to known hands (:func:`handmesh_tutorial.fit.fit_decoder`, an
-auto-decoder: one learnable code per hand instead of an image) showed why every trained model
-came out as crumpled foil: the finest-level features differ from vertex to vertex, so the
-regressed coordinates carry vertex-level noise, and the surface is very sensitive to it (0.3 mm
-of independent noise per vertex already gives ~3 degrees of roughness,
-:func:`handmesh_tutorial.surface.roughness_deg`). Smoothing the output removes the noise, but not
-when the output is a position or an offset from the template: a bent finger moves its vertices by
-a *rotation* of the template, and the offsets of a thin curved finger are themselves rough (two
-smoothing steps on exact offsets already cost 0.95 mm and 3.2 degrees). The default
-``output="affine"`` therefore predicts, per vertex, an affine map ``A_v`` and a translation
-``t_v`` applied to the root-centred template vertex ``p_v``: ``v = (I + A_v) p_v + t_v``. A
-skinned hand is exactly of this form with ``A_v, t_v`` the skinning-weighted blends of the bone
-transforms, which are smooth (two smoothing steps on exact fields cost 0.35 mm and 1.1 degrees),
-so the field is smoothed before it is applied (``smoothing_length``). With the head starting at
-zero the model's first output is the template itself. ``"offset"`` (``v = p_v + s * d_v``) and
-``"xyz"`` (``v = s * d_v``, the paper's) are kept for comparison.
+**What the decoder predicts** (``output`` of [`build_model`][handmesh_tutorial.model.build_model]).
+The paper's decoder regresses vertex coordinates. Fitting it to known hands
+([`handmesh_tutorial.fit.fit_decoder`][handmesh_tutorial.fit.fit_decoder], an auto-decoder: one
+learnable code per hand instead of an image) showed why every trained model came out as crumpled
+foil: the finest-level features differ from vertex to vertex, so the regressed coordinates carry
+vertex-level noise, and the surface is very sensitive to it (0.3 mm of independent noise per vertex
+already gives ~3 degrees of roughness,
+[`handmesh_tutorial.surface.roughness_deg`][handmesh_tutorial.surface.roughness_deg]). Smoothing the
+output removes the noise, but not when the output is a position or an offset from the template: a
+bent finger moves its vertices by a *rotation* of the template, and the offsets of a thin curved
+finger are themselves rough (two smoothing steps on exact offsets already cost 0.95 mm and 3.2
+degrees). The default ``output="affine"`` therefore predicts, per vertex, an affine map ``A_v`` and
+a translation ``t_v`` applied to the root-centred template vertex ``p_v``:
+``v = (I + A_v) p_v + t_v``. A skinned hand is exactly of this form with ``A_v, t_v`` the
+skinning-weighted blends of the bone transforms, which are smooth (two smoothing steps on exact
+fields cost 0.35 mm and 1.1 degrees), so the field is smoothed before it is applied
+(``smoothing_length``). With the head starting at zero the model's first output is the template
+itself. ``"offset"`` (``v = p_v + s * d_v``) and ``"xyz"`` (``v = s * d_v``, the paper's) are kept
+for comparison.
 
-The FC is kept modest by a small coarse width ``C`` (``latent_channels``, default 16); in CMR
-the FC is ~73% of the decoder's parameters; with a ResNet-18, our hand (49 coarse vertices)
-and the default channels ours is 410k parameters, 0.76 of the single-path decoder and 0.61 of the
-multi-path one. :func:`parameter_table` prints the split.
+The FC is kept modest by a small coarse width ``C`` (``latent_channels``, default 16); in CMR the FC
+is ~73% of the decoder's parameters; with a ResNet-18, our hand (49 coarse vertices) and the default
+channels ours is 410k parameters, 0.76 of the single-path decoder and 0.61 of the multi-path one.
+[`parameter_table`][handmesh_tutorial.model.parameter_table] prints the split.
 
 Everything topological (hierarchy, spirals, up/down maps, joint regressor) comes from the template
-and is rebuilt by :func:`build_model`; the state dict holds only learned weights.
+and is rebuilt by [`build_model`][handmesh_tutorial.model.build_model]; the state dict holds only
+learned weights.
 """
 
 from __future__ import annotations
@@ -62,20 +67,24 @@ __all__ = ["MeshTemplate", "as_template", "root_centred_template", "MSMRNet", "b
            "DEFAULT_MULTI_CHANNELS", "DEFAULT_LATENT_CHANNELS", "DEFAULT_SMOOTHING_LENGTH",
            "OUTPUTS"]
 
-#: Per-level decoder channels of the single-path baseline, finest level first.
 DEFAULT_SINGLE_CHANNELS = (32, 32, 64, 64, 128)
-#: Per-level branch channels of the multi-path decoder, finest first. Narrower than the
-#: single path because level ``l`` (0 = finest) runs in ``L - l`` stages; with these widths the
-#: multi-path decoder plus transformer has ~20-25% more parameters than the single path at the
-#: same depth (``benchmarks/model.py`` prints the ratio).
+"""Per-level decoder channels of the single-path baseline, finest level first."""
 DEFAULT_MULTI_CHANNELS = (16, 24, 32, 48, 64)
-#: Default ``smoothing_length`` of :func:`build_model`, metres: 3 smoothing steps on the open
-#: hand (mean edge 7.3 mm), 0 on a 200-vertex hand, ~6 on a 1,600-vertex one.
+"""Per-level branch channels of the multi-path decoder, finest first. Narrower than the
+single path because level ``l`` (0 = finest) runs in ``L - l`` stages; with these widths the
+multi-path decoder plus transformer has ~20-25% more parameters than the single path at the same
+depth (``benchmarks/model.py`` prints the ratio).
+"""
 DEFAULT_SMOOTHING_LENGTH = 0.009
-#: What the decoder's per-vertex output means (:meth:`MSMRNet.vertices_from_field`).
+"""Default ``smoothing_length`` of [`build_model`][handmesh_tutorial.model.build_model], metres: 3
+smoothing steps on the open hand (mean edge 7.3 mm), 0 on a 200-vertex hand, ~6 on a 1,600-vertex
+one.
+"""
 OUTPUTS = ("xyz", "offset", "affine")
-#: Channels per coarse-mesh token (output of the FC, width of the transformer).
+"""What the decoder's per-vertex output means
+([`MSMRNet.vertices_from_field`][handmesh_tutorial.model.MSMRNet.vertices_from_field])."""
 DEFAULT_LATENT_CHANNELS = 16
+"""Channels per coarse-mesh token (output of the FC, width of the transformer)."""
 
 
 @dataclass
@@ -98,13 +107,13 @@ def as_template(template=None) -> MeshTemplate:
 
     Args:
         template: ``None`` (the library's open right hand, ``hmt.hand.HandModel("right")``); a
-            :class:`MeshTemplate`; a mapping with keys ``vertices``, ``faces``,
-            ``joint_regressor``; a ``(vertices, faces, joint_regressor)`` tuple; or any object
-            with attributes ``faces``, ``joint_regressor`` and ``template_vertices`` or
-            ``vertices`` (e.g. a ``HandModel`` or a user's MANO model).
+            [`MeshTemplate`][handmesh_tutorial.model.MeshTemplate]; a mapping with keys
+            ``vertices``, ``faces``, ``joint_regressor``; a ``(vertices, faces, joint_regressor)``
+            tuple; or any object with attributes ``faces``, ``joint_regressor`` and
+            ``template_vertices`` or ``vertices`` (e.g. a ``HandModel`` or a user's MANO model).
 
     Returns:
-        A validated :class:`MeshTemplate`.
+        A validated [`MeshTemplate`][handmesh_tutorial.model.MeshTemplate].
 
     Raises:
         ValueError: wrong shapes, face ids out of range, or a missing field.
@@ -153,7 +162,7 @@ def root_centred_template(template) -> np.ndarray:
     """Template vertices centred like the training targets.
 
     Args:
-        template: anything :func:`as_template` accepts.
+        template: anything [`as_template`][handmesh_tutorial.model.as_template] accepts.
 
     Returns:
         ``(V, 3)`` float64 vertices minus the root keypoint (joint 9, the middle-finger MCP,
@@ -172,12 +181,12 @@ def _numpy(x):
 class MSMRNet(nn.Module):
     """The full model: ``encoder -> latent_to_mesh -> transformer -> decoder`` (+ joints).
 
-    Build it with :func:`build_model`.
+    Build it with [`build_model`][handmesh_tutorial.model.build_model].
 
     Args:
         encoder: module ``(B, 3, H, W) -> (B, D)`` with attribute ``out_features`` (``D``).
-        decoder: :class:`~handmesh_tutorial.decoder.SinglePathDecoder` or
-            :class:`~handmesh_tutorial.decoder.MultiPathDecoder` with input width
+        decoder: [`SinglePathDecoder`][handmesh_tutorial.decoder.SinglePathDecoder] or
+            [`MultiPathDecoder`][handmesh_tutorial.decoder.MultiPathDecoder] with input width
             ``latent_channels``.
         coarse_vertices: ``V_c``, vertices of the coarsest mesh.
         latent_channels: ``C``, channels per coarse vertex.
@@ -187,16 +196,19 @@ class MSMRNet(nn.Module):
             give O(1) outputs; 0.1 m puts them at hand size); for ``output="affine"`` it scales
             the translation ``t_v`` only.
         faces: ``(F, 3)`` faces of the output mesh (kept for plotting and export).
-        template_vertices: ``(V, 3)`` root-centred template (:func:`root_centred_template`),
-            needed by ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
-        output: ``"affine"``, ``"offset"`` or ``"xyz"``: how :meth:`vertices_from_field`
-            reads the decoder's output (12, 3 or 3 channels per vertex).
+        template_vertices: ``(V, 3)`` root-centred template
+            ([`root_centred_template`][handmesh_tutorial.model.root_centred_template]), needed by
+            ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
+        output: ``"affine"``, ``"offset"`` or ``"xyz"``: how
+            [`vertices_from_field`][handmesh_tutorial.model.MSMRNet.vertices_from_field] reads the
+            decoder's output (12, 3 or 3 channels per vertex).
         smoothing: ``(V, V)`` sparse matrix applied to the decoder's output field (e.g.
-            :func:`~handmesh_tutorial.surface.smoothing_matrix`), a sequence of them applied in
-            order (``k`` one-step matrices are cheaper than their ``k``-step product, whose rows
-            hold the whole ``k``-ring), or ``None``.
+            [`smoothing_matrix`][handmesh_tutorial.surface.smoothing_matrix]), a sequence of them
+            applied in order (``k`` one-step matrices are cheaper than their ``k``-step product,
+            whose rows hold the whole ``k``-ring), or ``None``.
         global_rotation: turn the decoded mesh by a rotation predicted from the features
-            (:class:`~handmesh_tutorial.rotation.GlobalRotationHead`; not in the paper).
+            ([`GlobalRotationHead`][handmesh_tutorial.rotation.GlobalRotationHead]; not in the
+            paper).
 
     Shapes:
         ``images (B, 3, H, W)`` -> ``{"vertices": (B, V, 3), "joints": (B, J, 3)}``, metres.
@@ -281,7 +293,7 @@ class MSMRNet(nn.Module):
     def forward(self, images: torch.Tensor) -> dict[str, torch.Tensor]:
         """Args: images ``(B, 3, H, W)`` float. Returns ``{"vertices", "joints"}`` (metres), and
         ``uv`` ``(B, J, 2)`` (normalised 2D keypoints) with a
-        :class:`~handmesh_tutorial.keypoints.KeypointEncoder`."""
+        [`KeypointEncoder`][handmesh_tutorial.keypoints.KeypointEncoder]."""
         enc = self.encoder(images)
         if isinstance(enc, dict):  # a keypoint encoder: features + 2D keypoints
             out = self.decode(enc["features"])
@@ -307,9 +319,11 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
             ``(B, 3, H, W) -> (B, D)`` with attribute ``out_features``.
         decoder: ``"multi"`` (MSMR multi-path) or ``"single"`` (coarse-to-fine baseline).
         attention: put the transformer on the coarse-mesh tokens.
-        template: see :func:`as_template`; default the open right hand.
+        template: see [`as_template`][handmesh_tutorial.model.as_template]; default the open right
+            hand.
         channels: decoder channels per hierarchy level, finest first (default
-            :data:`DEFAULT_MULTI_CHANNELS` or :data:`DEFAULT_SINGLE_CHANNELS`).
+            [`DEFAULT_MULTI_CHANNELS`][handmesh_tutorial.model.DEFAULT_MULTI_CHANNELS] or
+            [`DEFAULT_SINGLE_CHANNELS`][handmesh_tutorial.model.DEFAULT_SINGLE_CHANNELS]).
         latent_channels: channels per coarse-mesh token (FC output, transformer width).
         spiral_length: spiral length ``L``.
         dilation: spiral dilation.
@@ -324,26 +338,29 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
             ``t_v`` applied to the template vertex), ``"offset"`` (from the template) or ``"xyz"``
             (coordinates, as the paper). See the module docstring.
         smoothing_length: metres; the decoder's output field is smoothed by
-            :func:`~handmesh_tutorial.surface.smoothing_matrix` with
-            :func:`~handmesh_tutorial.surface.smoothing_steps` steps for this length (0 = none;
-            default :data:`DEFAULT_SMOOTHING_LENGTH`).
+            [`smoothing_matrix`][handmesh_tutorial.surface.smoothing_matrix] with
+            [`smoothing_steps`][handmesh_tutorial.surface.smoothing_steps] steps for this length (0
+            = none; default
+            [`DEFAULT_SMOOTHING_LENGTH`][handmesh_tutorial.model.DEFAULT_SMOOTHING_LENGTH]).
         zero_head: start the decoder's head at zero, so the first output is the template
             (``"affine"``, ``"offset"``) or zeros (``"xyz"``).
         head: the decoder's output head, ``"linear"``, ``"spiral"`` or ``"pyramid"``
-            (:mod:`handmesh_tutorial.decoder`).
+            ([`handmesh_tutorial.decoder`][handmesh_tutorial.decoder]).
         keypoints: wrap a ResNet encoder in a
-            :class:`~handmesh_tutorial.keypoints.KeypointEncoder` (2D keypoint head, features
-            pooled at the predicted joints; the model then also returns ``uv``). Not in the
+            [`KeypointEncoder`][handmesh_tutorial.keypoints.KeypointEncoder] (2D keypoint head,
+            features pooled at the predicted joints; the model then also returns ``uv``). Not in the
             paper; what lets training from scratch on a CPU learn articulation (see
-            :mod:`handmesh_tutorial.keypoints`).
-        global_rotation: predict the hand's orientation with a separate head and turn the
-            decoded mesh by it (:mod:`handmesh_tutorial.rotation`; not in the paper).
-        hierarchy: a precomputed :class:`~handmesh_tutorial.sampling.MeshHierarchy` of the
+            [`handmesh_tutorial.keypoints`][handmesh_tutorial.keypoints]).
+        global_rotation: predict the hand's orientation with a separate head and turn the decoded
+            mesh by it ([`handmesh_tutorial.rotation`][handmesh_tutorial.rotation]; not in the
+            paper).
+        hierarchy: a precomputed [`MeshHierarchy`][handmesh_tutorial.sampling.MeshHierarchy] of the
             template (default: computed, cached on disk by ``mesh_hierarchy``).
 
     Returns:
-        :class:`MSMRNet` with submodules ``encoder``, ``latent_to_mesh``, ``transformer``,
-        ``decoder``, and attributes ``hierarchy`` and ``spirals``.
+        [`MSMRNet`][handmesh_tutorial.model.MSMRNet] with submodules ``encoder``,
+        ``latent_to_mesh``, ``transformer``, ``decoder``, and attributes ``hierarchy`` and
+        ``spirals``.
 
     Raises:
         ValueError: unknown encoder or decoder, bad template, channel count mismatch.
@@ -399,7 +416,7 @@ def parameter_counts(model: MSMRNet) -> dict[str, int]:
     """Trainable parameters per part.
 
     Args:
-        model: an :class:`MSMRNet`.
+        model: an [`MSMRNet`][handmesh_tutorial.model.MSMRNet].
 
     Returns:
         dict ``encoder``, ``latent_to_mesh``, ``transformer``, ``decoder``, ``total``.
@@ -418,7 +435,7 @@ def parameter_table(model: MSMRNet) -> str:
     that DESIGN.md measures as ~0.73 in CMR.
 
     Args:
-        model: an :class:`MSMRNet`.
+        model: an [`MSMRNet`][handmesh_tutorial.model.MSMRNet].
 
     Returns:
         The table as a string (print it).

@@ -241,7 +241,6 @@ def _ring_cyls(center, normal, major: float, minor: float, n: int, name: str) ->
 # Object builders: each returns (mesh, cylinders in the mesh's frame before centring, params)
 # --------------------------------------------------------------------------------------------
 
-#: Sampled dimension ranges per kind, metres (low, high).
 SIZE_RANGES: dict[str, dict[str, tuple[float, float]]] = {
     "cylinder": {"radius": (0.030, 0.040), "height": (0.08, 0.14)},
     "bottle": {"radius": (0.030, 0.040), "height": (0.16, 0.22), "neck_radius": (0.011, 0.015)},
@@ -252,6 +251,7 @@ SIZE_RANGES: dict[str, dict[str, tuple[float, float]]] = {
             "handle_gap": (0.020, 0.026)},
     "plate": {"pitch": (0.028, 0.034), "bar": (0.007, 0.010), "holes": (2, 3)},
 }
+"""Sampled dimension ranges per kind, metres (low, high)."""
 
 _SECTIONS = 40
 
@@ -412,8 +412,8 @@ _BUILDERS = {
     "plate": _build_plate,
 }
 
-#: The static object kinds `make_object` builds.
 OBJECT_KINDS: tuple[str, ...] = tuple(_BUILDERS)
+"""The static object kinds `make_object` builds."""
 
 
 def make_object(kind: str, rng: np.random.Generator | int | None = None,
@@ -530,14 +530,15 @@ def primitive_fit(body: Body, samples: int = 2000, tol: float = 0.001,
 # The articulated chain of interlocking rings
 # --------------------------------------------------------------------------------------------
 
-#: Chain dimension ranges: ring centre-line radius (metres), tube radius as a fraction of it,
-#: clearance at the hook (metres). Thin enough tubes keep link ``k`` and link ``k + 2`` (same
-#: plane) apart: their tubes are ``2 major - 6 tube - 4 clearance`` apart at rest.
 CHAIN_SIZE_RANGES: dict[str, tuple[float, float]] = {
     "major_radius": (0.016, 0.022),
     "tube_ratio": (0.17, 0.21),
     "clearance": (0.001, 0.002),
 }
+"""Chain dimension ranges: ring centre-line radius (metres), tube radius as a fraction of it,
+clearance at the hook (metres). Thin enough tubes keep link ``k`` and link ``k + 2`` (same plane)
+apart: their tubes are ``2 major - 6 tube - 4 clearance`` apart at rest.
+"""
 
 _RING_CYLINDERS = 16  # short cylinders per ring (annulus primitive)
 

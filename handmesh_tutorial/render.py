@@ -72,9 +72,10 @@ __all__ = [
     "skimage_data_dir",
 ]
 
-#: Pose of the pyrender (OpenGL) camera in the OpenCV camera frame, and its own inverse: it flips
-#: y (down -> up) and z (forward -> backward). Points are never transformed; only the camera is.
 CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+"""Pose of the pyrender (OpenGL) camera in the OpenCV camera frame, and its own inverse: it flips
+y (down -> up) and z (forward -> backward). Points are never transformed; only the camera is.
+"""
 
 _MAX_LABEL = 2**24 - 1  # labels are encoded in the 24 bits of the RGB segmentation colour
 
@@ -495,12 +496,6 @@ class BackgroundPhoto:
     sha256: str = ""
 
 
-#: The photographs `photo_background` draws from: only images that scikit-image *bundles in its
-#: wheel* (not the ones ``skimage.data`` downloads with pooch) and whose ``skimage.data``
-#: docstring states CC0 or the public domain. Left out: the astronaut and camera portraits
-#: (faces), the Hubble deep field (black sky), microscopy and retina images, and the Middlebury
-#: motorcycle pair (no licence stated). Nothing is copied into this library: the files are read
-#: from the installed scikit-image at run time.
 BACKGROUND_PHOTOS: tuple[BackgroundPhoto, ...] = (
     BackgroundPhoto("coffee", "coffee.png", False, "CC0",
                     "Rachel Michetti (photographer), courtesy of Pikolo Espresso Bar",
@@ -523,6 +518,13 @@ BACKGROUND_PHOTOS: tuple[BackgroundPhoto, ...] = (
                     "gravel, grey", ((0.5, 0.48, 0.45), (0.62, 0.56, 0.46), (0.4, 0.4, 0.42)),
                     "c48615b451bf1e606fbd72c0aa9f8cc0f068ab7111ef7d93bb9b0f2586440c12"),
 )
+"""The photographs `photo_background` draws from: only images that scikit-image *bundles in its
+wheel* (not the ones ``skimage.data`` downloads with pooch) and whose ``skimage.data`` docstring
+states CC0 or the public domain. Left out: the astronaut and camera portraits (faces), the Hubble
+deep field (black sky), microscopy and retina images, and the Middlebury motorcycle pair (no licence
+stated). Nothing is copied into this library: the files are read from the installed scikit-image at
+run time.
+"""
 
 
 def _photo(name: str) -> BackgroundPhoto:

@@ -42,7 +42,8 @@ def rotation_6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
 
 
 def matrix_to_rotation_6d(rot: torch.Tensor) -> torch.Tensor:
-    """The inverse of :func:`rotation_6d_to_matrix` for rotations: the first two columns.
+    """The inverse of [`rotation_6d_to_matrix`][handmesh_tutorial.rotation.rotation_6d_to_matrix]
+    for rotations: the first two columns.
 
     Args:
         rot: ``(..., 3, 3)`` rotation matrices.

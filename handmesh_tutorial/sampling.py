@@ -54,8 +54,8 @@ __all__ = [
     "vertex_quadrics",
 ]
 
-#: Bumped whenever the decimation or the matrices change, so stale cache files are not reused.
 ALGORITHM_VERSION = "2"
+"""Bumped whenever the decimation or the matrices change, so stale cache files are not reused."""
 
 # Weight of the planes that pin open boundaries (Garland & Heckbert's "boundary constraints"),
 # relative to a face plane. Closed meshes (the hand) never use it.
@@ -558,11 +558,13 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
         faces: (F, 3) int triangles of a manifold, consistently oriented mesh; every vertex must
             belong to a face.
         factors: reduction factor per step, each > 1.
-        cache_dir: directory of the cache; ``None`` means :func:`default_cache_dir`.
+        cache_dir: directory of the cache; ``None`` means
+            [`default_cache_dir`][handmesh_tutorial.sampling.default_cache_dir].
         use_cache: read and write the cache (``False`` always recomputes and writes nothing).
 
     Returns:
-        A :class:`MeshHierarchy` with ``len(factors) + 1`` levels, finest first.
+        A [`MeshHierarchy`][handmesh_tutorial.sampling.MeshHierarchy] with ``len(factors) + 1``
+        levels, finest first.
 
     Raises:
         ValueError: bad shapes, ids out of range, degenerate faces, unused vertices, bad factors.

@@ -10,7 +10,8 @@ the concatenated features of the sequence (paper, eq. "graph_conv"; Lim et al. 2
 (f * g)_v = sum_i g_i f(e(v))_i        e(v) = spiral of v, length L
 ```
 
-Conventions of :func:`spiral_indices` (everything follows from the faces alone):
+Conventions of [`spiral_indices`][handmesh_tutorial.spiral.spiral_indices] (everything follows from
+the faces alone):
 
 * **Rotational order.** Around a vertex ``v`` every face ``(v, a, b)`` (rotated so that ``v`` is
   first, keeping the winding) says "``b`` follows ``a``". Following these links walks the
@@ -30,12 +31,12 @@ Conventions of :func:`spiral_indices` (everything follows from the faces alone):
   component has fewer than ``length`` vertices is the sequence repeated cyclically from its start
   (the only case with duplicates). Isolated vertices repeat themselves.
 
-Relabelling vertices (a permutation ``p`` applied to the faces) maps every spiral to
-``p(spiral)`` exactly, except that an interior vertex's first ring may start at a different
-(lowest-id) neighbour: the sequence is the same rotation read from another start, and every
-later ring follows from it deterministically (:func:`vertex_spiral` takes that start explicitly).
-Boundary vertices are exactly equivariant. (Non-manifold vertices, whose neighbours form several
-fans, list the fans ordered by lowest id.)
+Relabelling vertices (a permutation ``p`` applied to the faces) maps every spiral to ``p(spiral)``
+exactly, except that an interior vertex's first ring may start at a different (lowest-id) neighbour:
+the sequence is the same rotation read from another start, and every later ring follows from it
+deterministically ([`vertex_spiral`][handmesh_tutorial.spiral.vertex_spiral] takes that start
+explicitly). Boundary vertices are exactly equivariant. (Non-manifold vertices, whose neighbours
+form several fans, list the fans ordered by lowest id.)
 """
 
 from __future__ import annotations
@@ -215,7 +216,7 @@ def vertex_spiral(faces, vertex: int, length: int, dilation: int = 1,
         length: L, entries of the spiral.
         dilation: keep every ``dilation``-th vertex.
         start: a neighbour of ``vertex`` that begins the first ring (default: the convention of
-            :func:`spiral_indices`).
+            [`spiral_indices`][handmesh_tutorial.spiral.spiral_indices]).
 
     Returns:
         (L,) int64 vertex ids.
@@ -242,9 +243,9 @@ class SpiralConv(nn.Module):
     Args:
         in_channels: Cin, features per input vertex.
         out_channels: Cout, features per output vertex.
-        indices: (V, L) int spiral indices (numpy or tensor), e.g. from :func:`spiral_indices`.
-            Stored as a non-persistent buffer, so ``.to(device)`` moves it and checkpoints do
-            not contain it.
+        indices: (V, L) int spiral indices (numpy or tensor), e.g. from
+            [`spiral_indices`][handmesh_tutorial.spiral.spiral_indices]. Stored as a non-persistent
+            buffer, so ``.to(device)`` moves it and checkpoints do not contain it.
 
     Shape:
         input (B, V, Cin) -> output (B, V, Cout).

@@ -5,12 +5,12 @@ like a hand: a prediction a few millimetres off everywhere can be smooth, or a c
 foil with the same error. Two metrics that see the difference, both computed per sample on meshes
 with the same topology (vertex ``i`` of the prediction corresponds to vertex ``i`` of the truth):
 
-* :func:`roughness_deg`: the mean absolute difference between the predicted and the true
-  *signed dihedral angle* (bending angle) over the interior edges, in degrees. Invariant to
-  rigid motion and uniform scale of either mesh; 0 for a copy of the truth.
-* :func:`flipped_face_fraction`: after a per-sample Procrustes alignment with scale (no
-  reflection by default), the fraction of faces whose normal points away from the true face's
-  normal (negative dot product).
+* [`roughness_deg`][handmesh_tutorial.surface.roughness_deg]: the mean absolute difference between
+  the predicted and the true *signed dihedral angle* (bending angle) over the interior edges, in
+  degrees. Invariant to rigid motion and uniform scale of either mesh; 0 for a copy of the truth.
+* [`flipped_face_fraction`][handmesh_tutorial.surface.flipped_face_fraction]: after a per-sample
+  Procrustes alignment with scale (no reflection by default), the fraction of faces whose normal
+  points away from the true face's normal (negative dot product).
 
 The signed dihedral angle of an edge shared by faces ``f1`` and ``f2`` with unit normals ``n1``,
 ``n2`` is ``atan2((n1 x n2) . e, n1 . n2)``, ``e`` the unit edge direction as it runs in ``f1``:
@@ -109,11 +109,13 @@ def dihedral_angles(vertices, faces, edges=None) -> np.ndarray:
     Args:
         vertices: ``(B, V, 3)`` or ``(V, 3)``.
         faces: ``(F, 3)`` int.
-        edges: precomputed :func:`interior_edges` of ``faces`` (optional).
+        edges: precomputed [`interior_edges`][handmesh_tutorial.surface.interior_edges] of ``faces``
+            (optional).
 
     Returns:
-        ``(B, E)`` float64 angles in radians, in ``(-pi, pi]``; 0 where the two faces are
-        coplanar (the ``E`` interior edges in the order of :func:`interior_edges`).
+        ``(B, E)`` float64 angles in radians, in ``(-pi, pi]``; 0 where the two faces are coplanar
+        (the ``E`` interior edges in the order of
+        [`interior_edges`][handmesh_tutorial.surface.interior_edges]).
     """
     v = _as_batch(vertices, "vertices")
     f = _as_faces(faces, v.shape[1])
@@ -170,7 +172,7 @@ def flipped_face_fraction(pred_vertices, gt_vertices, faces, align: bool = True,
         gt_vertices: ``(B, V, 3)`` (or ``(V, 3)``) ground truth, same topology.
         faces: ``(F, 3)`` int triangles.
         align: first align each prediction to its truth with a similarity transform
-            (:func:`handmesh_tutorial.metrics.procrustes_align`).
+            ([`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes_align]).
         allow_reflection: let that alignment mirror the prediction. Off by default: a mirrored
             hand is a different (inside-out) surface, so a mirrored copy of the truth has every
             face flipped.
@@ -245,7 +247,8 @@ def mean_edge_length(vertices, faces) -> float:
 
 
 def smoothing_steps(vertices, faces, length: float) -> int:
-    """Steps of :func:`smoothing_matrix` (weight 0.5) that smooth over a given length.
+    """Steps of [`smoothing_matrix`][handmesh_tutorial.surface.smoothing_matrix] (weight 0.5) that
+    smooth over a given length.
 
     Each step is half a step of a random walk on the edges, so ``k`` steps spread a value over
     about ``sigma = e * sqrt(k / 2)`` (``e`` the mean edge length): ``k = round(2 (sigma / e)^2)``.

@@ -1,12 +1,12 @@
 """Training and evaluating MSMR-Net: config, loop, checkpoints, exact resume, DDP, evaluation.
 
 Paper, Sec. "Training": the loss is the L1 distance between predicted and ground-truth mesh
-vertices, the vertices translated so that the middle MCP joint (keypoint 9) is at the origin;
-Adam with learning rate ``1e-4`` for 200 epochs, halved every 50 epochs; batch size 32; images
-normalised with mean 0.5 and standard deviation 1.0; random crops and transformations. Those are
-the defaults of :class:`TrainConfig`. Our loss is the mean absolute error over vertices *and*
-coordinates, i.e. the paper's per-vertex L1 norm divided by 3 (a constant factor that Adam
-ignores).
+vertices, the vertices translated so that the middle MCP joint (keypoint 9) is at the origin; Adam
+with learning rate ``1e-4`` for 200 epochs, halved every 50 epochs; batch size 32; images normalised
+with mean 0.5 and standard deviation 1.0; random crops and transformations. Those are the defaults
+of [`TrainConfig`][handmesh_tutorial.train.TrainConfig]. Our loss is the mean absolute error over
+vertices *and* coordinates, i.e. the paper's per-vertex L1 norm divided by 3 (a constant factor that
+Adam ignores).
 
 A notebook trains and evaluates in a few lines::
 
@@ -17,10 +17,10 @@ A notebook trains and evaluates in a few lines::
 
 What the loop guarantees:
 
-* **Determinism.** Model initialisation uses ``torch.manual_seed(seed)``; the sample order of
-  epoch ``e`` is ``numpy.random.default_rng([seed, e]).permutation``; augmentation draws come from
-  ``(seed, epoch, index)`` (see :mod:`handmesh_tutorial.augment`). No global RNG is touched by the
-  data pipeline.
+* **Determinism.** Model initialisation uses ``torch.manual_seed(seed)``; the sample order of epoch
+  ``e`` is ``numpy.random.default_rng([seed, e]).permutation``; augmentation draws come from
+  ``(seed, epoch, index)`` (see [`handmesh_tutorial.augment`][handmesh_tutorial.augment]). No global
+  RNG is touched by the data pipeline.
 * **Exact resume.** ``checkpoint_last.pt`` (written atomically after every
   ``checkpoint_every`` epochs) holds the model, optimiser, scheduler, epoch, step, the torch /
   numpy / python RNG states, the history and the config; ``train(cfg, resume=True)`` continues
@@ -77,22 +77,24 @@ __all__ = [
     "CHECKPOINT_FORMAT", "METRIC_COLUMNS", "RUN_CHECKPOINTS", "RESUMABLE_KEYS",
 ]
 
-#: ``format`` entry of every checkpoint written by :func:`save_checkpoint`.
 CHECKPOINT_FORMAT = "handmesh_tutorial.checkpoint/1"
-#: Columns of ``metrics.csv``, in order (empty cells where a value does not exist).
+"""``format`` entry of every checkpoint written by
+[`save_checkpoint`][handmesh_tutorial.train.save_checkpoint]."""
 METRIC_COLUMNS = ("epoch", "step", "train_loss", "lr", "seconds", "val_loss", "val_mpjpe",
                   "val_mpvpe", "val_pa_mpjpe", "val_pa_mpvpe", "val_auc_joints", "val_auc_verts",
                   "val_f_at_5mm", "val_f_at_15mm")
+"""Columns of ``metrics.csv``, in order (empty cells where a value does not exist)."""
 _VAL_KEYS = ("mpjpe", "mpvpe", "pa_mpjpe", "pa_mpvpe", "auc_joints", "auc_verts", "f_at_5mm",
              "f_at_15mm")
 # config keys that define the network: they must match when resuming or loading
 _ARCH_KEYS = ("encoder", "decoder", "attention", "channels", "latent_channels", "model_kwargs")
-#: :class:`TrainConfig` fields a resumed run may change (how long, where, how fast, what is
-#: logged); every other field must equal the checkpoint's, so a run never silently mixes data,
-#: seeds, batch sizes or learning rates.
 RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_workers", "cache_data",
                   "val_every", "checkpoint_every", "val_batch_size", "progress", "durable",
                   "skip_bad")
+"""[`TrainConfig`][handmesh_tutorial.train.TrainConfig] fields a resumed run may change (how long,
+where, how fast, what is logged, whether bad samples are skipped); every other field must equal
+the checkpoint's, so a run never silently mixes data, seeds, batch sizes or learning rates.
+"""
 _PATH_KEYS = ("data", "val_data", "template")
 
 
@@ -105,8 +107,9 @@ class TrainConfig:
     """Everything a training run needs; the defaults are the paper's recipe.
 
     Attributes:
-        data: training data root (INTER-SH root, or FreiHAND root with ``dataset="freihand"``).
-            May be ``None`` when datasets are passed to :func:`train` directly.
+        data: training data root (INTER-SH root, or FreiHAND root with ``dataset="freihand"``). May
+            be ``None`` when datasets are passed to [`train`][handmesh_tutorial.train.train]
+            directly.
         dataset: ``"intersh"`` or ``"freihand"``.
         val_data: separate validation root (INTER-SH root; FreiHAND root whose ``evaluation``
             split is used). ``None``: hold out ``val_fraction`` of ``data``.
@@ -128,10 +131,11 @@ class TrainConfig:
         attention: transformer on the coarse mesh.
         channels: decoder channels per level, finest first (``None``: model defaults).
         latent_channels: channels per coarse-mesh token.
-        model_kwargs: further :func:`~handmesh_tutorial.model.build_model` arguments
+        model_kwargs: further [`build_model`][handmesh_tutorial.model.build_model] arguments
             (``spiral_length``, ``num_blocks``, ``num_heads``, ...).
         template: ``None`` = the open right hand; else a ``.npz`` path written by
-            :func:`save_template` (``vertices``, ``faces``, ``joint_regressor``).
+            [`save_template`][handmesh_tutorial.train.save_template] (``vertices``, ``faces``,
+            ``joint_regressor``).
         out_dir: output folder (checkpoints, ``metrics.csv``, ``steps.csv``, ``config.json``).
         seed: seed of initialisation, data order, split and augmentation.
         device: ``"auto"`` (CUDA when available), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``.
@@ -149,7 +153,8 @@ class TrainConfig:
         aligned_weight: weight of the L1 loss of Procrustes-aligned joints; 0 = off.
         edge_weight: weight of the edge-length loss; 0 = off.
         normal_weight: weight of the normal loss; 0 = off. (The four terms:
-            :func:`training_loss`, :mod:`handmesh_tutorial.losses`.)
+            [`training_loss`][handmesh_tutorial.train.training_loss],
+            [`handmesh_tutorial.losses`][handmesh_tutorial.losses].)
         skip_bad: before training, load every training and validation item once and leave out
             those that cannot be read (listed in ``TrainResult.skipped`` and ``skipped.json``);
             ``False``: the first bad sample stops the run with its file named. May change on
@@ -234,8 +239,8 @@ class TrainConfig:
         the ``full`` tier's 200 epochs, as in the paper).
 
         Args:
-            budget: a :class:`~handmesh_tutorial.budget.Budget` (default ``hmt.budget()``).
-            **overrides: any field of :class:`TrainConfig`.
+            budget: a [`Budget`][handmesh_tutorial.budget.Budget] (default ``hmt.budget()``).
+            **overrides: any field of [`TrainConfig`][handmesh_tutorial.train.TrainConfig].
 
         Returns:
             The config.
@@ -260,7 +265,8 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
+        """Inverse of [`to_dict`][handmesh_tutorial.train.TrainConfig.to_dict]; unknown keys raise
+        ``ValueError``."""
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
@@ -275,14 +281,15 @@ class TrainConfig:
 
 @dataclass
 class TrainResult:
-    """What :func:`train` returns.
+    """What [`train`][handmesh_tutorial.train.train] returns.
 
     Attributes:
         out_dir: the output folder.
         checkpoint: ``checkpoint_last.pt`` (``None`` on ranks other than 0).
         best_checkpoint: ``checkpoint_best.pt`` (lowest validation PA-MPVPE; model weights
             and config, no optimiser state), or ``None``.
-        metrics_csv: ``metrics.csv`` (one row per epoch; columns :data:`METRIC_COLUMNS`).
+        metrics_csv: ``metrics.csv`` (one row per epoch; columns
+            [`METRIC_COLUMNS`][handmesh_tutorial.train.METRIC_COLUMNS]).
         history: the rows of ``metrics.csv`` as dicts (NaN where missing).
         step_losses: training loss of every step so far (mean over ranks), metres.
         final: the last row of ``history``.
@@ -320,12 +327,12 @@ def resolve_template(spec=None):
     """The mesh template of a run.
 
     Args:
-        spec: ``None`` (the open right hand), a path to a ``.npz`` with ``vertices``,
-            ``faces``, ``joint_regressor`` (see :func:`save_template`), or anything
-            :func:`~handmesh_tutorial.model.as_template` accepts.
+        spec: ``None`` (the open right hand), a path to a ``.npz`` with ``vertices``, ``faces``,
+            ``joint_regressor`` (see [`save_template`][handmesh_tutorial.train.save_template]), or
+            anything [`as_template`][handmesh_tutorial.model.as_template] accepts.
 
     Returns:
-        A :class:`~handmesh_tutorial.model.MeshTemplate`.
+        A [`MeshTemplate`][handmesh_tutorial.model.MeshTemplate].
 
     Raises:
         FileNotFoundError: the ``.npz`` does not exist.
@@ -351,7 +358,7 @@ def save_template(path: str | os.PathLike, template) -> Path:
 
     Args:
         path: output file.
-        template: anything :func:`resolve_template` accepts.
+        template: anything [`resolve_template`][handmesh_tutorial.train.resolve_template] accepts.
 
     Returns:
         The path.
@@ -379,11 +386,11 @@ def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
     """The network described by a config (weights freshly initialised from torch's global RNG).
 
     Args:
-        config: the run's :class:`TrainConfig`.
+        config: the run's [`TrainConfig`][handmesh_tutorial.train.TrainConfig].
         template: overrides ``config.template`` (a template object or path).
 
     Returns:
-        An :class:`~handmesh_tutorial.model.MSMRNet` on the CPU.
+        An [`MSMRNet`][handmesh_tutorial.model.MSMRNet] on the CPU.
     """
     from .model import build_model
 
@@ -472,8 +479,8 @@ def make_datasets(config: TrainConfig):
 
     Returns:
         ``(train_dataset, val_dataset or None)``:
-        :class:`~handmesh_tutorial.augment.InterSHTorchDataset` or
-        :class:`~handmesh_tutorial.augment.FreiHANDTorchDataset`; validation without
+        [`InterSHTorchDataset`][handmesh_tutorial.augment.InterSHTorchDataset] or
+        [`FreiHANDTorchDataset`][handmesh_tutorial.augment.FreiHANDTorchDataset]; validation without
         augmentation.
 
     Raises:
@@ -596,7 +603,7 @@ def save_checkpoint(path: str | os.PathLike, *, model: nn.Module, config: TrainC
         path: output file (``.pt``).
         model: the network (a DDP wrapper is unwrapped).
         config: the run's config (stored as a dict).
-        template_id: :func:`template_hash` of the template.
+        template_id: [`template_hash`][handmesh_tutorial.train.template_hash] of the template.
         optimizer: its ``state_dict`` is stored when given.
         scheduler: its ``state_dict`` is stored when given.
         epoch: completed epochs.
@@ -665,7 +672,8 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
     """Rebuild the network of a checkpoint and load its weights (``weights_only=True``).
 
     Args:
-        path: a file written by :func:`train` / :func:`save_checkpoint`.
+        path: a file written by [`train`][handmesh_tutorial.train.train] /
+            [`save_checkpoint`][handmesh_tutorial.train.save_checkpoint].
         device: where the model goes (``map_location`` too).
         template: the mesh template (default: the config's ``template``, i.e. the MakeHuman hand
             unless a template file was used); its hash must equal the checkpoint's.
@@ -756,7 +764,7 @@ def predict(model: nn.Module, images, batch_size: int = 32,
     """Run the network on crops, in eval mode, without gradients.
 
     Args:
-        model: an :class:`~handmesh_tutorial.model.MSMRNet`.
+        model: an [`MSMRNet`][handmesh_tutorial.model.MSMRNet].
         images: ``(B, 3, S, S)`` normalised float tensor (as the datasets return), or uint8
             ``(B, S, S, 3)`` / ``(S, S, 3)`` RGB crops (normalised here).
         batch_size: images per forward pass.
@@ -764,8 +772,8 @@ def predict(model: nn.Module, images, batch_size: int = 32,
 
     Returns:
         dict with ``vertices`` ``(B, V, 3)`` and ``joints`` ``(B, 21, 3)`` CPU float32 tensors:
-        right-hand, root-relative network frame (see :func:`~handmesh_tutorial.augment.to_camera`
-        to go back to the camera).
+        right-hand, root-relative network frame (see
+        [`to_camera`][handmesh_tutorial.augment.to_camera] to go back to the camera).
     """
     if not isinstance(images, torch.Tensor) or images.dtype == torch.uint8:
         arr = images if isinstance(images, torch.Tensor) else np.asarray(images)
@@ -792,7 +800,7 @@ def predict(model: nn.Module, images, batch_size: int = 32,
 
 def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.device,
                  num_workers: int = 0, progress: bool = False, desc: str = "eval") -> dict:
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar
 
     loader = torch.utils.data.DataLoader(dataset, batch_size=batch_size, shuffle=False,
                                          num_workers=num_workers)
@@ -802,7 +810,7 @@ def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.devic
     model.eval()
     try:
         with torch.no_grad():
-            for batch in tqdm(loader, desc=desc, disable=not progress, leave=False):
+            for batch in progress_bar(loader, desc=desc, disable=not progress, leave=False):
                 out = model(batch["image"].to(device))
                 acc["pred_vertices"].append(out["vertices"].float().cpu())
                 acc["pred_joints"].append(out["joints"].float().cpu())
@@ -822,14 +830,14 @@ def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
 
     Args:
         model: the network.
-        dataset: a :class:`~handmesh_tutorial.augment.HandCropDataset` (``train=False``).
+        dataset: a [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] (``train=False``).
         batch_size: evaluation batch size.
         device: default: the model's device.
         progress: tqdm bar.
 
     Returns:
         dict: ``loss`` (metres) and the keys of
-        :func:`~handmesh_tutorial.metrics.freihand_scores` (mm, AUCs, F-scores).
+        [`freihand_scores`][handmesh_tutorial.metrics.freihand_scores] (mm, AUCs, F-scores).
     """
     dev = next(model.parameters()).device if device is None else _resolve_device(device)
     r = _run_dataset(model, dataset, batch_size, dev, progress=progress, desc="validate")
@@ -851,8 +859,8 @@ def training_loss(out: dict, batch: Mapping, config: TrainConfig,
         out: the network's output (``vertices``, ``joints``, and ``uv`` with a keypoint
             encoder).
         batch: the items (``vertices``, ``joints``, ``root``, ``K``), on ``out``'s device.
-        config: weights ``keypoint_weight``, ``aligned_weight``, ``edge_weight``,
-            ``normal_weight`` (0 = term off; see :mod:`handmesh_tutorial.losses`) and
+        config: weights ``keypoint_weight``, ``aligned_weight``, ``edge_weight``, ``normal_weight``
+            (0 = term off; see [`handmesh_tutorial.losses`][handmesh_tutorial.losses]) and
             ``image_size``.
         faces: ``(F, 3)`` int64 faces (needed by the edge and normal terms).
 
@@ -928,21 +936,21 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
     """Train MSMR-Net (single process, or one rank of a ``torchrun`` job).
 
     Args:
-        config: the run (see :class:`TrainConfig`).
+        config: the run (see [`TrainConfig`][handmesh_tutorial.train.TrainConfig]).
         resume: continue from ``out_dir/checkpoint_last.pt`` (must exist); the architecture
             and template must match; ``epochs`` may be larger than before.
         overwrite: start afresh in an ``out_dir`` that already holds a run's checkpoints
             (they are replaced). Without ``resume`` or ``overwrite`` such a folder is refused,
             so a forgotten ``--resume`` never destroys a run.
         dataset: a training dataset to use instead of ``config.data`` (items as
-            :class:`~handmesh_tutorial.augment.HandCropDataset` returns; ``set_epoch`` is called
-            when it exists).
+            [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] returns; ``set_epoch`` is
+            called when it exists).
         val_dataset: a validation dataset (with ``dataset``), or ``None``.
         template: overrides ``config.template`` (object or path; only its hash is stored).
         callback: called on every rank after each epoch with that epoch's metrics row.
 
     Returns:
-        A :class:`TrainResult`.
+        A [`TrainResult`][handmesh_tutorial.train.TrainResult].
 
     Raises:
         FloatingPointError: the loss became NaN or infinite (message names epoch and step).
@@ -952,7 +960,7 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         ValueError: inconsistent config, template/data vertex counts that differ, or a
             checkpoint of another architecture.
     """
-    from tqdm.auto import tqdm
+    from ._progress import progress_bar as tqdm
 
     t_start = time.perf_counter()
     if config.threads is not None:
@@ -975,8 +983,8 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
 def changed_settings(saved: Mapping, config: TrainConfig) -> dict:
     """Fields of ``config`` that differ from a checkpoint's ``saved`` config and may not.
 
-    Fields in :data:`RESUMABLE_KEYS` may change; paths (``data``, ``val_data``, ``template``)
-    count as equal when they name the same file or folder.
+    Fields in [`RESUMABLE_KEYS`][handmesh_tutorial.train.RESUMABLE_KEYS] may change; paths
+    (``data``, ``val_data``, ``template``) count as equal when they name the same file or folder.
 
     Returns:
         ``{field: (saved value, new value)}``, empty when the run can resume.
@@ -995,8 +1003,9 @@ def changed_settings(saved: Mapping, config: TrainConfig) -> dict:
     return diff
 
 
-#: Files of a run that a fresh start would replace (:func:`train` refuses them by default).
 RUN_CHECKPOINTS = ("checkpoint_last.pt", "checkpoint_best.pt")
+"""Files of a run that a fresh start would replace ([`train`][handmesh_tutorial.train.train] refuses
+them by default)."""
 
 
 def existing_run(out_dir) -> list[str]:
@@ -1127,7 +1136,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         model.train()
         lr = opt.param_groups[0]["lr"]
         losses = []
-        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}",
+        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}", per="epoch",
                    disable=not (config.progress and is_main), leave=False)
         for batch in bar:
             opt.zero_grad(set_to_none=True)
@@ -1228,8 +1237,8 @@ def _broadcast_row(row: dict, world: int) -> dict:
 # evaluation
 
 
-#: Names of the two constant baselines in tables and reports.
 REST_HAND, MEAN_HAND = "rest hand (no network)", "mean training hand (no network)"
+"""Names of the two constant baselines in tables and reports."""
 
 
 def constant_hand_predictions(template_vertices, joint_regressor, num: int):
@@ -1237,8 +1246,8 @@ def constant_hand_predictions(template_vertices, joint_regressor, num: int):
 
     Args:
         template_vertices: ``(V, 3)`` the constant hand in the network frame (the rest hand,
-            :func:`~handmesh_tutorial.model.root_centred_template`, or :func:`mean_hand`),
-            metres; numpy or torch.
+            [`root_centred_template`][handmesh_tutorial.model.root_centred_template], or
+            [`mean_hand`][handmesh_tutorial.train.mean_hand]), metres; numpy or torch.
         joint_regressor: ``(21, V)`` regressor the network uses for its joints.
         num: number of predictions.
 
@@ -1264,9 +1273,9 @@ def mean_hand(dataset, template=None, iterations: int = 5) -> np.ndarray:
     pose, not to read each hand's pose from its image.
 
     Args:
-        dataset: a :class:`~handmesh_tutorial.augment.HandCropDataset` (e.g. the training split
-            of :func:`make_datasets`; its ``target_shape``, without images) or any dataset of
-            items with ``vertices``.
+        dataset: a [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] (e.g. the training
+            split of [`make_datasets`][handmesh_tutorial.train.make_datasets]; its ``target_shape``,
+            without images) or any dataset of items with ``vertices``.
         template: the network's template (default: the library's hand).
         iterations: alignment-and-average rounds (the mean changes by < 0.01 mm after 3 on
             INTER-SH).
@@ -1303,15 +1312,16 @@ def constant_hand_scores(dataset, vertices=None, template=None) -> dict:
     """FreiHAND-style scores of one constant mesh predicted for every item (no network).
 
     Args:
-        dataset: a :class:`~handmesh_tutorial.augment.HandCropDataset` (or a ``Subset`` of one);
-            only its ``vertices`` and ``joints`` are read.
-        vertices: ``(V, 3)`` the constant mesh in the network frame, e.g. :func:`mean_hand`;
-            default the rest hand (the template's root-centred open hand).
+        dataset: a [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] (or a ``Subset``
+            of one); only its ``vertices`` and ``joints`` are read.
+        vertices: ``(V, 3)`` the constant mesh in the network frame, e.g.
+            [`mean_hand`][handmesh_tutorial.train.mean_hand]; default the rest hand (the template's
+            root-centred open hand).
         template: the network's template (default: the library's hand); its joint regressor
             gives the constant mesh's joints.
 
     Returns:
-        :func:`~handmesh_tutorial.metrics.freihand_scores` (mm, AUC, F-scores).
+        [`freihand_scores`][handmesh_tutorial.metrics.freihand_scores] (mm, AUC, F-scores).
     """
     tmpl = resolve_template(template)
     if len(dataset) == 0:
@@ -1393,7 +1403,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         checkpoint_or_model: a checkpoint path, or a network (then give ``image_size``).
         data: INTER-SH root (``kind="intersh"``) or FreiHAND root (``kind="freihand"``, split
             ``split``).
-        dataset: a ready :class:`~handmesh_tutorial.augment.HandCropDataset` instead of
+        dataset: a ready [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] instead of
             ``data``.
         kind: ``"intersh"`` or ``"freihand"`` (default: the checkpoint's ``dataset``, else
             ``"intersh"``).
@@ -1406,39 +1416,42 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         camera_frame: predictions un-mirrored and moved back to the source camera frame
             (ground-truth root added); ``False``: the network's root-centred right-hand frame.
         num_samples: evaluate only the first ``num_samples`` items.
-        template: template for loading a checkpoint (see :func:`load_checkpoint`).
+        template: template for loading a checkpoint (see
+            [`load_checkpoint`][handmesh_tutorial.train.load_checkpoint]).
         progress: tqdm bar.
         threads: ``torch.set_num_threads`` value.
-        baseline: also score the **rest-hand baseline** on the same items: the network's
-            template (the open rest-pose hand, root-centred) predicted for every image, no
-            network at all (:func:`constant_hand_predictions`). After Procrustes alignment it is
-            the bar a model must clear to have learnt the hand's articulation.
-        mean_hand: ``(V, 3)`` network-frame vertices of a second constant baseline scored
-            the same way, normally :func:`mean_hand` of the training data (the data's average
-            articulation): the bar a model must clear to read *each* hand's pose from its image.
+        baseline: also score the **rest-hand baseline** on the same items: the network's template
+            (the open rest-pose hand, root-centred) predicted for every image, no network at all
+            ([`constant_hand_predictions`][handmesh_tutorial.train.constant_hand_predictions]).
+            After Procrustes alignment it is the bar a model must clear to have learnt the hand's
+            articulation.
+        mean_hand: ``(V, 3)`` network-frame vertices of a second constant baseline scored the same
+            way, normally [`mean_hand`][handmesh_tutorial.train.mean_hand] of the training data (the
+            data's average articulation): the bar a model must clear to read *each* hand's pose from
+            its image.
         skip_bad: load every item once first and leave out those that cannot be read (listed
             in ``skipped``); ``False``: the first bad sample stops the evaluation, named.
 
     Returns:
-        dict with ``scores`` (:func:`~handmesh_tutorial.metrics.freihand_scores`: mm, AUC,
-        F-scores, plus the surface scores ``roughness_deg`` and ``flipped`` when the network
-        has ``faces``: :func:`~handmesh_tutorial.surface.roughness_deg`, the mean
-        :func:`~handmesh_tutorial.surface.flipped_face_fraction`), ``per_sample`` (``index``,
-        ``vr``, ``mirrored``, ``kind`` (INTER-SH) and per-sample ``mpjpe``, ``mpvpe``,
+        dict with ``scores`` ([`freihand_scores`][handmesh_tutorial.metrics.freihand_scores]: mm,
+        AUC, F-scores, plus the surface scores ``roughness_deg`` and ``flipped`` when the network
+        has ``faces``: [`roughness_deg`][handmesh_tutorial.surface.roughness_deg], the mean
+        [`flipped_face_fraction`][handmesh_tutorial.surface.flipped_face_fraction]), ``per_sample``
+        (``index``, ``vr``, ``mirrored``, ``kind`` (INTER-SH) and per-sample ``mpjpe``, ``mpvpe``,
         ``pa_mpjpe``, ``pa_mpvpe`` in mm, ``f_at_5mm``, ``f_at_15mm``, ``roughness_deg``,
         ``flipped``; (N,) arrays), ``errors``
-        (:func:`~handmesh_tutorial.metrics.per_sample_scores`, metres), ``vr_table`` (rows of
-        :func:`~handmesh_tutorial.metrics.scores_by_vr_bin` over the target hands' VR; empty
-        when no sample has a VR), ``kind_table`` (rows of
-        :func:`~handmesh_tutorial.metrics.scores_by_group` per scene kind, INTER-SH only, else
-        empty), ``table`` (markdown), ``baseline`` (with ``baseline=True``: the rest hand's
-        ``scores``, ``per_sample``, ``errors``, ``vr_table``, ``kind_table`` on the same items, else
-        ``None``), ``mean_hand_baseline`` (the same for ``mean_hand``, or ``None``),
-        ``comparison`` (markdown, model / rest hand / mean hand, those scored, per VR bin, kind
-        and overall; ``""`` without either baseline), ``predictions`` (``vertices``
-        (N, V, 3), ``joints`` (N, 21, 3) numpy, metres), ``num_samples`` and ``files`` (paths
-        written), ``skipped`` (``[{"index": reader index, "error": message}, ...]``, the items
-        ``skip_bad`` left out; also in ``eval.json``).
+        ([`per_sample_scores`][handmesh_tutorial.metrics.per_sample_scores], metres), ``vr_table``
+        (rows of [`scores_by_vr_bin`][handmesh_tutorial.metrics.scores_by_vr_bin] over the target
+        hands' VR; empty when no sample has a VR), ``kind_table`` (rows of
+        [`scores_by_group`][handmesh_tutorial.metrics.scores_by_group] per scene kind, INTER-SH
+        only, else empty), ``table`` (markdown), ``baseline`` (with ``baseline=True``: the rest
+        hand's ``scores``, ``per_sample``, ``errors``, ``vr_table``, ``kind_table`` on the same
+        items, else ``None``), ``mean_hand_baseline`` (the same for ``mean_hand``, or ``None``),
+        ``comparison`` (markdown, model / rest hand / mean hand, those scored, per VR bin, kind and
+        overall; ``""`` without either baseline), ``predictions`` (``vertices`` (N, V, 3),
+        ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
+        ``skipped`` (``[{"index": reader index, "error": message}, ...]``, the items ``skip_bad``
+        left out; also in ``eval.json``).
     """
     if threads is not None:
         torch.set_num_threads(int(threads))
@@ -1625,8 +1638,8 @@ def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict
     No OpenGL: the faces of both meshes are sampled at 10 points each, projected and z-buffered
     (shaded by the face normal), over a random colour gradient. Masks, VR, meshes and joints are
     mutually consistent, so it trains, evaluates and stratifies by VR like the real data (just
-    simpler images). Use it with :func:`~handmesh_tutorial.dataset.generate_dataset` for
-    tests and quick demos; the real scenes come from ``interact``.
+    simpler images). Use it with [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]
+    for tests and quick demos; the real scenes come from ``interact``.
 
     Args:
         seed: sample seed (same seed -> same sample).
@@ -1635,7 +1648,7 @@ def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict
             is of the opposite side and a little nearer the camera.
 
     Returns:
-        A sample dict for :func:`~handmesh_tutorial.dataset.write_sample`.
+        A sample dict for [`write_sample`][handmesh_tutorial.dataset.write_sample].
     """
     from scipy.spatial.transform import Rotation
 

@@ -34,9 +34,10 @@ __all__ = [
     "vr_bin",
 ]
 
-#: The four VR categories of the paper (Table "Results on INTER-SH"): each is ``[low, high)``
-#: except the last, ``[0.95, 1.00]``, which is closed. A VR below 0.40 is in no bin.
 VR_BINS: tuple[tuple[float, float], ...] = ((0.40, 0.60), (0.60, 0.80), (0.80, 0.95), (0.95, 1.00))
+"""The four VR categories of the paper (Table "Results on INTER-SH"): each is ``[low, high)``
+except the last, ``[0.95, 1.00]``, which is closed. A VR below 0.40 is in no bin.
+"""
 
 _ON_OUTSIDE = ("raise", "warn", "ignore")
 

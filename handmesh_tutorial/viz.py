@@ -132,7 +132,7 @@ def plot_frames(ax, origins, frames, length: float = 0.012,
         ax: a matplotlib ``Axes3D``.
         origins: (J,3) frame origins (e.g. joint positions), metres.
         frames: (J,3,3) rotation matrices whose *columns* are the x, y, z axes
-            (:func:`handmesh_tutorial.lcs.local_frames`).
+            ([`handmesh_tutorial.lcs.local_frames`][handmesh_tutorial.lcs.local_frames]).
         length: arrow length, same unit as ``origins``.
         colors: colours of the x, y and z arrows.
         linewidth: arrow line width.
@@ -149,11 +149,12 @@ def plot_frames(ax, origins, frames, length: float = 0.012,
             ax.text(*tip, "xyz"[axis], color=colors[axis], fontsize=9)
 
 
-#: Default camera for hands in the hand template's frame (fingers +x, palm -y): y is drawn
-#: up, seen from above the back of the hand and from the side.
 HAND_VIEW = {"elev": 40.0, "azim": -65.0, "vertical_axis": "y"}
-#: Light for that view (travels down and away from the viewer).
+"""Default camera for hands in the hand template's frame (fingers +x, palm -y): y is drawn
+up, seen from above the back of the hand and from the side.
+"""
 HAND_LIGHT = (-0.3, -1.0, -0.6)
+"""Light for that view (travels down and away from the viewer)."""
 
 
 def plot_hand(ax, vertices, faces, colors=None, joints=None, view: dict | None = None,
@@ -167,7 +168,8 @@ def plot_hand(ax, vertices, faces, colors=None, joints=None, view: dict | None =
         faces: (F,3) int.
         colors: (V,3) RGB in [0,1], e.g. ``HandModel.vertex_colors()``.
         joints: optional (21,3) keypoints, FreiHAND order, drawn on top.
-        view: ``ax.view_init`` keywords; :data:`HAND_VIEW` when ``None``.
+        view: ``ax.view_init`` keywords; [`HAND_VIEW`][handmesh_tutorial.viz.HAND_VIEW] when
+            ``None``.
         title: axes title.
         light: light direction for the shading (flipped to the palm side for views from below).
         edgecolor: triangle edge colour (``None``: no edges).
@@ -191,8 +193,8 @@ def save_hand_gallery(path: str | os.PathLike, seed: int = 0, dpi: int = 90) -> 
     """Figure of the hand model, right and left, in a few poses, saved atomically as PNG.
 
     Rows: right hand, left hand (the left is posed with the mirrored pose, see
-    :func:`handmesh_tutorial.hand.mirror_axis_angle`). Columns: flat (rest), fist, pointing,
-    pinch, and a random pose drawn from ``seed``.
+    [`handmesh_tutorial.hand.mirror_axis_angle`][handmesh_tutorial.hand.mirror_axis_angle]).
+    Columns: flat (rest), fist, pointing, pinch, and a random pose drawn from ``seed``.
 
     Args:
         path: output ``.png`` (parent folders are created).
@@ -243,9 +245,10 @@ def plot_pck_curves(ax, curves: dict, thresholds=None, unit: str = "mm", show_au
 
     Args:
         ax: a matplotlib ``Axes``.
-        curves: {label: errors or (thresholds, pck)}: either an array of point errors in metres
-            (any shape; the curve is computed with :func:`handmesh_tutorial.metrics.pck_curve`)
-            or a precomputed pair of (T,) thresholds in metres and (T,) PCK values.
+        curves: {label: errors or (thresholds, pck)}: either an array of point errors in metres (any
+            shape; the curve is computed with
+            [`handmesh_tutorial.metrics.pck_curve`][handmesh_tutorial.metrics.pck_curve]) or a
+            precomputed pair of (T,) thresholds in metres and (T,) PCK values.
         thresholds: (T,) thresholds in metres for error arrays; FreiHAND's 0-50 mm, 100 values
             when ``None``.
         unit: x-axis unit, ``"mm"`` or ``"m"``.
@@ -383,7 +386,7 @@ def _cylinder_polygons(p0, p1, r, n: int = 24):
 def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: int = 24,
                    edgecolor=None, axes: bool = True, labels: bool = False,
                    capsule: bool = False):
-    """Draw a :class:`~handmesh_tutorial.collision.Cylinders` body on a 3D axes.
+    """Draw a [`Cylinders`][handmesh_tutorial.collision.Cylinders] body on a 3D axes.
 
     Args:
         ax: a matplotlib ``Axes3D``.

@@ -71,6 +71,23 @@ class TestNotebook:
             for out in c.get("outputs", []):
                 assert out.get("output_type") != "error", f"{nb.name}: code cell {i} holds an error"
 
+    def test_opens_with_before_you_start(self, nb):
+        cells = _cells(nb)
+        header = _source(cells[1]) if len(cells) > 1 else ""
+        first = cells[1]["cell_type"] == "markdown" and header.startswith("<!-- before-you-start")
+        assert first, (
+            f"{nb.name}: the second cell must be the 'Before you start' cell "
+            "(python tools/notebook_runtimes.py writes it)")
+        for item in ("You will learn", "Prerequisites", "Runtime on a laptop CPU",
+                     "Needs a trained model"):
+            assert item in header, f"{nb.name}: 'Before you start' lacks {item!r}"
+
+    def test_no_mkdocs_admonitions(self, nb):
+        md = [_source(c) for c in _cells(nb) if c["cell_type"] == "markdown"]
+        bad = [ln for m in md for ln in m.splitlines() if ln.lstrip().startswith("!!!")]
+        assert not bad, (f"{nb.name}: '!!!' admonitions print literally in Jupyter and on the "
+                         f"site; use a '> **Note.** ...' quote: {bad}")
+
     def test_size_under_cap(self, nb):
         size = nb.stat().st_size
         assert size < MAX_BYTES, f"{nb.name}: {size / 1e6:.2f} MB, over the ~2 MB cap"
