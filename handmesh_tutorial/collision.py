@@ -1077,6 +1077,26 @@ def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL,
 SELF_CONTACT_COMPRESSION: float = 0.3
 
 
+_PAIRS_CACHE: dict = {}
+
+
+def _non_adjacent_pairs(n: int, adjacent: np.ndarray):
+    """(i, j) with i < j over n cylinders, minus the adjacent pairs; cached per topology (the
+    generator asks for the same hand's pairs thousands of times). Returns copies."""
+    key = (n, adjacent.tobytes())
+    hit = _PAIRS_CACHE.get(key)
+    if hit is None:
+        i, j = np.triu_indices(n, 1)
+        if len(adjacent):
+            code = adjacent[:, 0] * n + adjacent[:, 1]
+            keep = ~np.isin(i * n + j, code)
+            i, j = i[keep], j[keep]
+        if len(_PAIRS_CACHE) > 64:
+            _PAIRS_CACHE.clear()
+        hit = _PAIRS_CACHE[key] = (i, j)
+    return hit[0].copy(), hit[1].copy()
+
+
 def self_collisions(body: Cylinders, *, atol: float = ATOL,
                     compression: float = SELF_CONTACT_COMPRESSION, backend: str | None = None):
     """Intersecting pairs of NON-ADJACENT cylinders of one body (e.g. fingers crossing).
@@ -1101,12 +1121,7 @@ def self_collisions(body: Cylinders, *, atol: float = ATOL,
     Returns:
         ``(i, j)`` int arrays with ``i < j``.
     """
-    n = len(body)
-    i, j = np.triu_indices(n, 1)
-    if len(body.adjacent):
-        code = body.adjacent[:, 0] * n + body.adjacent[:, 1]
-        keep = ~np.isin(i * n + j, code)
-        i, j = i[keep], j[keep]
+    i, j = _non_adjacent_pairs(len(body), body.adjacent)
     if i.size == 0:
         return i, j
     if not 0 <= compression < 1:
