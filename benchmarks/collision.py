@@ -1,19 +1,21 @@
-"""Benchmark: the vectorised exact cylinder test vs python-fcl and vs the capsule test.
+"""Benchmark: the exact cylinder test (numba kernels and numpy reference) vs python-fcl.
 
-Prints, measured in the same run on the same pairs:
+Prints, measured in the same run on the same pairs (repeats interleaved, medians), each figure with
+its baseline and the ratio:
 
 1. Pairs per second of :func:`hmt.collision.cylinders_intersect` on ``--pairs`` random
-   finger-sized pairs (radius 5-12 mm, length 15-50 mm, centres in a 6 cm cube; ~20 % intersect),
-   and on the hard subset whose capsules overlap (every such pair reaches the exact stages).
-   Target: >= 1M exact cylinder pairs/s.
-2. The same for :func:`hmt.collision.capsules_intersect` (the conservative pre-filter).
+   finger-sized pairs (radius 5-12 mm, length 15-50 mm, centres in a 6 cm cube; ~20 % intersect)
+   with ``backend="numba"`` (the default when numba is installed) and ``backend="numpy"`` (the
+   vectorised reference, the library's only path before issue 14); the same on the hard subset
+   whose capsules overlap (every such pair reaches the exact stages). Target: >= 5 M pairs/s.
+2. :func:`hmt.collision.capsules_intersect` (the conservative pre-filter, numpy).
 3. python-fcl (``fcl.Cylinder`` + ``fcl.collide``, GJK/EPA, one call per pair from Python, objects
-   built beforehand) on a ``--fcl-pairs`` subsample; its rate is extrapolated. Also fcl's agreement
-   with ours: disagreements are located with the independent oracle
-   (:func:`hmt.collision.distance_bounds`), i.e. how far from contact they are.
+   built beforehand) on a ``--fcl-pairs`` subsample; its rate is extrapolated. Target: the numba
+   path >= 6x fcl. Also fcl's agreement with ours: disagreements are located with the independent
+   oracle (:func:`hmt.collision.distance_bounds`), i.e. how far from contact they are.
 4. A full hand-vs-hand query (two hands as 20 cylinders each, all 400 primitive pairs):
    median :func:`bodies_collide` and :func:`colliding_pairs` times over random relative poses near
-   contact, vs fcl's per-pair loop on the same primitives. Target: well under a millisecond.
+   contact, numba vs numpy (target: >= 3x), and fcl's per-pair loop on the same primitives.
 
 Run: ``python benchmarks/collision.py [--pairs 1000000] [--fcl-pairs 20000]``.
 """
@@ -22,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import time
-import timeit
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -45,13 +46,17 @@ def random_pairs(n: int, seed: int = 0, box: float = 0.03):
     return (*one(), *one())
 
 
-def best_time(fn, repeats: int = 3) -> float:
-    times = []
+def interleaved(fns: dict, repeats: int = 3, number: int = 1) -> dict:
+    """Median seconds per call of each function, repeats interleaved (A B A B ...) so that the
+    load of a shared machine falls on all of them alike."""
+    times = {k: [] for k in fns}
     for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+        for k, fn in fns.items():
+            t = time.perf_counter()
+            for _ in range(number):
+                fn()
+            times[k].append((time.perf_counter() - t) / number)
+    return {k: float(np.median(v)) for k, v in times.items()}
 
 
 def fcl_objects(fcl, p0, p1, r):
@@ -90,35 +95,50 @@ def main() -> None:
     n = args.pairs
     pairs = random_pairs(n)
     print(f"# cylinder pairs: {n:,} random finger-sized pairs")
-    C.cylinders_intersect(*(p[:1000] for p in pairs))  # warm-up
-    res = C.cylinders_intersect(*pairs)
+    backends = ["numba", "numpy"] if C._kernels("auto") is not None else ["numpy"]
+    for b in backends:  # warm-up (loads or compiles the numba kernels)
+        C.cylinders_intersect(*(p[:1000] for p in pairs), backend=b)
+    res = {b: C.cylinders_intersect(*pairs, backend=b) for b in backends}
     cap = C.capsules_intersect(*pairs)
-    t_cyl = best_time(lambda: C.cylinders_intersect(*pairs))
-    t_cap = best_time(lambda: C.capsules_intersect(*pairs))
     hard = np.flatnonzero(cap)
     hard_pairs = tuple(p[hard] for p in pairs)
-    t_hard = best_time(lambda: C.cylinders_intersect(*hard_pairs))
-    print(f"intersecting: cylinders {res.mean():.1%}, capsules {cap.mean():.1%}; "
-          f"cylinder but not capsule: {int((res & ~cap).sum())} (must be 0)")
-    print(f"cylinders_intersect : {n / t_cyl / 1e6:8.2f} M pairs/s  ({t_cyl * 1e3:.0f} ms)")
-    print(f"capsules_intersect  : {n / t_cap / 1e6:8.2f} M pairs/s  ({t_cap * 1e3:.0f} ms)")
-    print(f"cylinders, capsule-overlapping subset ({hard.size:,} pairs, all reach the exact "
-          f"stages): {hard.size / t_hard / 1e6:.2f} M pairs/s")
-    print(f"ratio capsule / cylinder time: {t_cap / t_cyl:.2f}")
+    t_cyl = interleaved({b: (lambda b=b: C.cylinders_intersect(*pairs, backend=b))
+                         for b in backends} | {"capsules": lambda: C.capsules_intersect(*pairs)})
+    t_hard = interleaved({b: (lambda b=b: C.cylinders_intersect(*hard_pairs, backend=b))
+                          for b in backends})
+    ref = res["numpy"]
+    print(f"intersecting: cylinders {ref.mean():.1%}, capsules {cap.mean():.1%}; "
+          f"cylinder but not capsule: {int((ref & ~cap).sum())} (must be 0)")
+    if "numba" in res:
+        print(f"numba and numpy answers differ on {int((res['numba'] != ref).sum())} pairs "
+              f"(must be 0)")
+    for b in backends:
+        print(f"cylinders_intersect, {b:5s}: {n / t_cyl[b] / 1e6:8.2f} M pairs/s  "
+              f"({t_cyl[b] * 1e3:.0f} ms); capsule-overlapping subset ({hard.size:,} pairs, all "
+              f"reach the exact stages): {hard.size / t_hard[b] / 1e6:.2f} M pairs/s")
+    print(f"capsules_intersect (numpy): {n / t_cyl['capsules'] / 1e6:8.2f} M pairs/s  "
+          f"({t_cyl['capsules'] * 1e3:.0f} ms)")
+    if "numba" in res:
+        print(f"RATIO cylinders_intersect numba / numpy (baseline {n / t_cyl['numpy'] / 1e6:.2f} "
+              f"M pairs/s): {t_cyl['numpy'] / t_cyl['numba']:.1f}x; capsule-overlapping subset "
+              f"{t_hard['numpy'] / t_hard['numba']:.1f}x")
+    fast = backends[0]
 
     if fcl is not None:
         m = min(args.fcl_pairs, n)
         sub = tuple(p[:m] for p in pairs)
         oa, ob = fcl_objects(fcl, *sub[:3]), fcl_objects(fcl, *sub[3:])
         got = fcl_collide_all(fcl, oa, ob)
-        t_fcl = best_time(lambda: fcl_collide_all(fcl, oa, ob))  # best of 3, like ours
+        t_fcl = interleaved({"fcl": lambda: fcl_collide_all(fcl, oa, ob)})["fcl"]
         fcl_rate = m / t_fcl
         print(f"\n# python-fcl on {m:,} of the pairs (one fcl.collide per pair, objects prebuilt, "
-              f"best of 3)")
+              f"median of 3)")
         print(f"fcl.collide         : {fcl_rate / 1e6:8.3f} M pairs/s  "
               f"(extrapolated to {n:,}: {n / fcl_rate:.1f} s)")
-        print(f"speed-up of cylinders_intersect over fcl: {(n / t_cyl) / fcl_rate:.0f}x")
-        mine = res[:m]
+        for b in backends:
+            print(f"RATIO cylinders_intersect {b} / fcl (baseline {fcl_rate / 1e6:.2f} M pairs/s):"
+                  f" {(n / t_cyl[b]) / fcl_rate:.1f}x")
+        mine = res[fast][:m]
         bad = np.flatnonzero(got != mine)
         print(f"agreement with fcl: {m - bad.size:,}/{m:,} ({1 - bad.size / m:.3%})")
         if bad.size:
@@ -138,17 +158,23 @@ def main() -> None:
     out = model(pose=torch.as_tensor(hmt.hand.example_pose("pinch"))[None])
     A = C.hand_cylinders(out, model=model)
     rng = np.random.default_rng(0)
-    t_hit, t_miss, t_pairs, t_fcl_hand = [], [], [], []
+    t_hit = {b: [] for b in backends}
+    t_miss = {b: [] for b in backends}
+    t_pairs = {b: [] for b in backends}
+    t_fcl_hand = []
     for k in range(args.hand_poses):
         R = Rotation.random(random_state=k).as_matrix()
         t = rng.normal(size=3)
         t *= rng.uniform(0.02, 0.12) / np.linalg.norm(t)
         B = A.transform(R, t)
         hit = C.bodies_collide(A, B)
-        tb = np.median(timeit.repeat(lambda B=B: C.bodies_collide(A, B), number=20, repeat=5)) / 20
-        (t_hit if hit else t_miss).append(tb)
-        t_pairs.append(np.median(timeit.repeat(lambda B=B: C.colliding_pairs(A, B), number=20,
-                                               repeat=5)) / 20)
+        tb = interleaved({b: (lambda B=B, b=b: C.bodies_collide(A, B, backend=b))
+                          for b in backends}, number=20, repeats=5)
+        tp = interleaved({b: (lambda B=B, b=b: C.colliding_pairs(A, B, backend=b))
+                          for b in backends}, number=20, repeats=5)
+        for b in backends:
+            (t_hit if hit else t_miss)[b].append(tb[b])
+            t_pairs[b].append(tp[b])
         if fcl is not None and k < 10:
             ia, ib = np.divmod(np.arange(400), 20)
             oa = fcl_objects(fcl, A.p0[ia], A.p1[ia], A.radius[ia])
@@ -162,15 +188,20 @@ def main() -> None:
             if (got != mine).any():
                 print(f"  pose {k}: fcl disagrees on {int((got != mine).sum())} primitive pairs")
     med = lambda x: np.median(x) * 1e6 if x else float("nan")  # noqa: E731
-    print(f"bodies_collide, colliding poses    : median {med(t_hit):6.0f} us "
-          f"({len(t_hit)} poses)")
-    print(f"bodies_collide, non-colliding poses: median {med(t_miss):6.0f} us "
-          f"({len(t_miss)} poses)")
-    print(f"colliding_pairs (all 400 pairs)    : median {med(t_pairs):6.0f} us")
+    for b in backends:
+        print(f"{b:5s} bodies_collide: colliding poses median {med(t_hit[b]):6.1f} us "
+              f"({len(t_hit[b])} poses), non-colliding {med(t_miss[b]):6.1f} us "
+              f"({len(t_miss[b])}); colliding_pairs (all 400 pairs) {med(t_pairs[b]):6.1f} us")
+    if "numba" in backends:
+        all_b = {b: t_hit[b] + t_miss[b] for b in backends}
+        print(f"RATIO bodies_collide numba / numpy (baseline {med(all_b['numpy']):.0f} us): "
+              f"{np.median(all_b['numpy']) / np.median(all_b['numba']):.0f}x; colliding_pairs "
+              f"(baseline {med(t_pairs['numpy']):.0f} us): "
+              f"{np.median(t_pairs['numpy']) / np.median(t_pairs['numba']):.0f}x")
     if t_fcl_hand:
         print(f"fcl per-pair loop over 400 pairs   : median {med(t_fcl_hand):6.0f} us  "
-              f"(ratio fcl / colliding_pairs: {np.median(t_fcl_hand) / np.median(t_pairs):.1f})")
-
+              f"(ratio fcl / colliding_pairs {fast}: "
+              f"{np.median(t_fcl_hand) / np.median(t_pairs[fast]):.1f})")
 
 if __name__ == "__main__":
     main()

@@ -104,7 +104,7 @@ def _channels(text: str) -> tuple[int, ...]:
 _TRAIN_OPTIONS = ("data", "dataset", "val_data", "val_fraction", "epochs", "batch_size",
                   "image_size", "lr", "lr_step", "micro_batches", "encoder", "decoder",
                   "channels", "latent_channels", "template", "seed", "device", "threads",
-                  "num_workers", "val_every", "checkpoint_every")
+                  "num_workers", "val_every", "checkpoint_every", "precision")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -255,6 +255,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int)
     tr.add_argument("--device", help="auto | cpu | cuda")
     tr.add_argument("--threads", type=int, help="torch threads")
+    tr.add_argument("--precision", choices=("float32", "bfloat16"),
+                    help="bfloat16: autocast forward pass (faster on CPUs with bf16 units)")
     tr.add_argument("--workers", dest="num_workers", type=int, help="DataLoader workers")
     tr.add_argument("--val-every", type=int, help="validate every N epochs")
     tr.add_argument("--checkpoint-every", type=int, help="checkpoint every N epochs")

@@ -222,6 +222,35 @@ def _prepare(a0, a1, ra, b0, b1, rb, atol):
     return pts[0], pts[1], rad[0], pts[2], pts[3], rad[1], shape
 
 
+BACKEND: str = "auto"
+"""Which implementation the exact tests use: ``"auto"`` (the compiled numba kernels of
+``handmesh_tutorial._collision_numba`` when numba imports, else numpy), ``"numba"`` or
+``"numpy"`` (the vectorised reference below). Every public test also takes ``backend=``."""
+_NUMBA_STATE: list = []  # [module or None], filled on first use (numba imports in ~0.3 s)
+
+
+def _kernels(backend):
+    """The numba kernels module for this call, or None for the numpy path."""
+    backend = BACKEND if backend is None else backend
+    if backend == "numpy":
+        return None
+    if backend not in ("auto", "numba"):
+        raise ValueError(f"backend must be 'auto', 'numba' or 'numpy', got {backend!r}")
+    if not _NUMBA_STATE:
+        try:
+            from . import _collision_numba
+        except ImportError:
+            _collision_numba = None
+        _NUMBA_STATE.append(_collision_numba)
+    if _NUMBA_STATE[0] is None and backend == "numba":
+        raise ImportError("backend='numba' needs the numba package (pip install numba)")
+    return _NUMBA_STATE[0]
+
+
+def _contig(*arrays):
+    return [np.ascontiguousarray(a, dtype=np.float64) for a in arrays]
+
+
 def _rows(p):
     """(K, 3) -> contiguous (3, K)."""
     return np.ascontiguousarray(p.T)
@@ -524,7 +553,8 @@ def _caps_meet(A0, U, LA, RA, B0, V, LB, RB, early=False):
     return hit
 
 
-def cylinders_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.ndarray:
+def cylinders_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL,
+                        backend: str | None = None) -> np.ndarray:
     """Exact intersection test for finite solid cylinders, batched (Ketchel–Larochelle structure).
 
     A cylinder is its axis end points and radius. The test follows Ketchel and Larochelle (2005):
@@ -550,6 +580,9 @@ def cylinders_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.nda
         b1: (..., 3) axis end points of the second cylinders.
         rb: (...,) radii of the second cylinders.
         atol: contact tolerance, metres (default 1e-9).
+        backend: ``"numba"`` (compiled, one pair at a time), ``"numpy"`` (vectorised reference)
+            or ``"auto"``; None: [`BACKEND`][handmesh_tutorial.collision.BACKEND]. Both give the
+            same answers (tested).
 
     Returns:
         bool array of the broadcast batch shape (e.g. (N,) for (N, 3) inputs; (N, M) for
@@ -564,7 +597,14 @@ def cylinders_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.nda
         array(True)
     """
     a0, a1, ra, b0, b1, rb, shape = _prepare(a0, a1, ra, b0, b1, rb, atol)
-    return _cylinders_core(a0, a1, ra, b0, b1, rb, 0.5 * atol).reshape(shape)
+    nb = _kernels(backend)
+    if nb is None:
+        return _cylinders_core(a0, a1, ra, b0, b1, rb, 0.5 * atol).reshape(shape)
+    out = np.empty(ra.shape, dtype=bool)
+    if nb.cylinders_core(*_contig(a0, a1, ra, b0, b1, rb), 0.5 * atol, out) >= 0:
+        _check_length(_rows(a1 - a0), "a0->a1")  # raises with the numpy path's message
+        _check_length(_rows(b1 - b0), "b0->b1")
+    return out.reshape(shape)
 
 
 def capsules_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.ndarray:
@@ -982,7 +1022,8 @@ def _all_pairs_test(A: Cylinders, B: Cylinders, atol: float, early: bool):
     return i, j, hit
 
 
-def colliding_pairs(A: Cylinders, B: Cylinders, *, atol: float = ATOL):
+def colliding_pairs(A: Cylinders, B: Cylinders, *, atol: float = ATOL,
+                    backend: str | None = None):
     """All pairs of intersecting cylinders between two bodies.
 
     Every primitive pair is tested at once (vectorised): capsule prefilter, then the exact
@@ -992,17 +1033,27 @@ def colliding_pairs(A: Cylinders, B: Cylinders, *, atol: float = ATOL):
         A: the first body, a [`Cylinders`][handmesh_tutorial.collision.Cylinders].
         B: the second body.
         atol: contact tolerance, metres.
+        backend: see
+            [`cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect].
 
     Returns:
-        ``(i, j)``: two int arrays, cylinder ``A[i[k]]`` meets ``B[j[k]]``.
+        ``(i, j)``: two int arrays, cylinder ``A[i[k]]`` meets ``B[j[k]]``, in row-major order.
     """
     if len(A) == 0 or len(B) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    nb = _kernels(backend)
+    if nb is not None:
+        hit = np.empty((len(A), len(B)), dtype=bool)
+        if nb.all_pairs(*_contig(A.p0, A.p1, A.radius, B.p0, B.p1, B.radius), float(atol), hit):
+            i, j = np.nonzero(hit)
+            return i.astype(np.int64, copy=False), j.astype(np.int64, copy=False)
+        _units(A, 0.0), _units(B, 0.0)  # raises with the numpy path's message
     i, j, hit = _all_pairs_test(A, B, atol, early=False)
     return i[hit], j[hit]
 
 
-def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL) -> bool:
+def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL,
+                   backend: str | None = None) -> bool:
     """Does any cylinder of body A intersect any cylinder of body B?
 
     Bounding boxes of the whole bodies first (most generator steps are far from contact), then all
@@ -1012,12 +1063,20 @@ def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL) -> bool:
         A: the first body, a [`Cylinders`][handmesh_tutorial.collision.Cylinders] (e.g. a hand).
         B: the second body (e.g. another hand, or an object).
         atol: contact tolerance, metres.
+        backend: see
+            [`cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect].
 
     Returns:
         True when at least one pair of primitives intersects.
     """
     if len(A) == 0 or len(B) == 0:
         return False
+    nb = _kernels(backend)
+    if nb is not None:
+        res = nb.bodies_collide(*_contig(A.p0, A.p1, A.radius, B.p0, B.p1, B.radius), float(atol))
+        if res >= 0:
+            return bool(res)
+        _units(A, 0.0), _units(B, 0.0)  # raises with the numpy path's message
     ra, rb = A.radius[:, None], B.radius[:, None]
     lo_a = np.minimum(A.p0, A.p1) - ra
     hi_a = np.maximum(A.p0, A.p1) + ra
@@ -1035,8 +1094,28 @@ hand free of self-collisions while a finger crossed through its neighbour still 
 """
 
 
+_PAIRS_CACHE: dict = {}
+
+
+def _non_adjacent_pairs(n: int, adjacent: np.ndarray):
+    """(i, j) with i < j over n cylinders, minus the adjacent pairs; cached per topology (the
+    generator asks for the same hand's pairs thousands of times). Returns copies."""
+    key = (n, adjacent.tobytes())
+    hit = _PAIRS_CACHE.get(key)
+    if hit is None:
+        i, j = np.triu_indices(n, 1)
+        if len(adjacent):
+            code = adjacent[:, 0] * n + adjacent[:, 1]
+            keep = ~np.isin(i * n + j, code)
+            i, j = i[keep], j[keep]
+        if len(_PAIRS_CACHE) > 64:
+            _PAIRS_CACHE.clear()
+        hit = _PAIRS_CACHE[key] = (i, j)
+    return hit[0].copy(), hit[1].copy()
+
+
 def self_collisions(body: Cylinders, *, atol: float = ATOL,
-                    compression: float = SELF_CONTACT_COMPRESSION):
+                    compression: float = SELF_CONTACT_COMPRESSION, backend: str | None = None):
     """Intersecting pairs of NON-ADJACENT cylinders of one body (e.g. fingers crossing).
 
     Pairs listed in ``body.adjacent`` touch by design and are skipped. For hands built by
@@ -1054,20 +1133,24 @@ def self_collisions(body: Cylinders, *, atol: float = ATOL,
         body: a [`Cylinders`][handmesh_tutorial.collision.Cylinders].
         atol: contact tolerance, metres.
         compression: fraction of each radius that may be compressed, in [0, 1).
+        backend: see
+            [`cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect].
 
     Returns:
         ``(i, j)`` int arrays with ``i < j``.
     """
-    n = len(body)
-    i, j = np.triu_indices(n, 1)
-    if len(body.adjacent):
-        code = body.adjacent[:, 0] * n + body.adjacent[:, 1]
-        keep = ~np.isin(i * n + j, code)
-        i, j = i[keep], j[keep]
+    i, j = _non_adjacent_pairs(len(body), body.adjacent)
     if i.size == 0:
         return i, j
     if not 0 <= compression < 1:
         raise ValueError(f"compression must be in [0, 1), got {compression}")
+    nb = _kernels(backend)
+    if nb is not None:
+        hit = np.empty(i.size, dtype=bool)
+        radius = body.radius * (1.0 - compression) if compression else body.radius
+        if nb.listed_pairs(*_contig(body.p0, body.p1, radius), i, j, float(atol), hit):
+            return i[hit], j[hit]
+        _units(body, 0.0)  # raises with the numpy path's message
     if compression:
         body = Cylinders(body.p0, body.p1, body.radius * (1.0 - compression), body.names,
                          body.parts, body.adjacent)

@@ -239,3 +239,34 @@ def test_coarse_transformer_positional_embedding_breaks_permutation_symmetry():
     assert not torch.allclose(tr(x[:, perm]), tr(x)[:, perm], atol=1e-3)
     with pytest.raises(ValueError, match=r"expected tokens \(B, 6, 8\)"):
         tr(torch.zeros(1, 7, 8))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_sparse_vertex_map_csr_equals_gather_reference(hier, dtype):
+    import copy
+    # composed upsampling (several non-zeros per row) and a dense-ish random map
+    rng = np.random.default_rng(4)
+    dense = rng.random((30, 20)) * (rng.random((30, 20)) < 0.4) + np.eye(30, 20)
+    for mat in (blocks.compose_up(hier.up, 0, 2), hier.up[1], sp.csr_matrix(dense)):
+        m = blocks.SparseVertexMap(mat).to(dtype)
+        assert m.method == "csr"
+        x = torch.randn(3, mat.shape[1], 5, dtype=dtype, requires_grad=True)
+        g = torch.randn(3, mat.shape[0], 5, dtype=dtype)
+        outs = {}
+        for method in ("gather", "csr"):
+            m.method = method
+            y = m(x)
+            (gx,) = torch.autograd.grad((y * g).sum(), x)
+            outs[method] = (y.detach(), gx)
+        tol = {"rtol": 1e-5, "atol": 1e-6} if dtype == torch.float32 else {}
+        torch.testing.assert_close(outs["csr"][0], outs["gather"][0], **tol)
+        torch.testing.assert_close(outs["csr"][1], outs["gather"][1], **tol)
+        # and against the dense product with the stored (float32) weights
+        d = m.to_dense().to(dtype)
+        torch.testing.assert_close(outs["csr"][0], torch.einsum("vk,bkc->bvc", d, x.detach()),
+                                   **tol)
+        torch.testing.assert_close(outs["csr"][1], torch.einsum("vk,bvc->bkc", d, g), **tol)
+        m.method = "csr"
+        torch.testing.assert_close(copy.deepcopy(m)(x.detach()), outs["csr"][0])
+    with pytest.raises(ValueError, match="method"):
+        blocks.SparseVertexMap(dense, method="dense")

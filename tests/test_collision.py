@@ -21,6 +21,12 @@ from scipy.spatial.transform import Rotation
 import handmesh_tutorial as hmt
 from handmesh_tutorial import collision as C
 
+try:
+    import numba  # noqa: F401
+    BACKENDS = ("numpy", "numba")
+except ImportError:  # the numpy reference alone
+    BACKENDS = ("numpy",)
+
 MUST_TRUE = 0.5e-9   # certified distance at most this -> must intersect
 MUST_FALSE = 1.5e-9  # certified distance above this -> must not intersect
 
@@ -89,23 +95,26 @@ def test_oracle_bounds_are_consistent():
 def test_random_pairs_agree_with_oracle():
     n = min(hmt.budget().test_pairs, 2000)
     pairs = random_pairs(n, np.random.default_rng(2))
-    res = C.cylinders_intersect(*pairs)
-    counts = agreement(res, *certified(*pairs))
-    print("uniform pairs:", counts)
-    assert counts["missed"] == 0 and counts["false_hits"] == 0
-    assert counts["band"] <= 0.01 * n
+    bounds = certified(*pairs)
+    for backend in BACKENDS:
+        counts = agreement(C.cylinders_intersect(*pairs, backend=backend), *bounds)
+        print("uniform pairs:", backend, counts)
+        assert counts["missed"] == 0 and counts["false_hits"] == 0
+        assert counts["band"] <= 0.01 * n
 
 
 def test_near_contact_pairs_agree_with_oracle():
     n = min(hmt.budget().test_pairs, 2000)
     pairs, _ = near_contact_pairs(min(n, 800), seed=3)
-    res = C.cylinders_intersect(*pairs)
-    counts = agreement(res, *certified(*pairs))
-    print("near-contact pairs:", counts)
-    assert counts["missed"] == 0 and counts["false_hits"] == 0
-    # both answers occur often; the band holds the pairs placed within ~1e-9 m of contact
-    assert counts["true"] > 0.3 * len(res) and counts["false"] > 0.3 * len(res)
-    assert counts["band"] <= 0.1 * len(res)
+    bounds = certified(*pairs)
+    for backend in BACKENDS:
+        res = C.cylinders_intersect(*pairs, backend=backend)
+        counts = agreement(res, *bounds)
+        print("near-contact pairs:", backend, counts)
+        assert counts["missed"] == 0 and counts["false_hits"] == 0
+        # both answers occur often; the band holds the pairs placed within ~1e-9 m of contact
+        assert counts["true"] > 0.3 * len(res) and counts["false"] > 0.3 * len(res)
+        assert counts["band"] <= 0.1 * len(res)
 
 
 def test_near_parallel_pairs_agree_with_oracle():
@@ -131,10 +140,12 @@ def test_near_parallel_pairs_agree_with_oracle():
     offset = np.where(end_to_end[:, None], along, across)
     cb = 0.5 * (a0 + a1) + offset
     pairs = (a0, a1, ra, cb - 0.5 * lb[:, None] * db, cb + 0.5 * lb[:, None] * db, rb)
-    counts = agreement(C.cylinders_intersect(*pairs), *certified(*pairs))
-    print("near-parallel pairs:", counts)
-    assert counts["missed"] == 0 and counts["false_hits"] == 0
-    assert counts["band"] <= 0.05 * n and min(counts["true"], counts["false"]) > 0.2 * n
+    bounds = certified(*pairs)
+    for backend in BACKENDS:
+        counts = agreement(C.cylinders_intersect(*pairs, backend=backend), *bounds)
+        print("near-parallel pairs:", backend, counts)
+        assert counts["missed"] == 0 and counts["false_hits"] == 0
+        assert counts["band"] <= 0.05 * n and min(counts["true"], counts["false"]) > 0.2 * n
 
 
 def test_cylinder_implies_capsule_and_capsule_is_segment_distance():
@@ -263,10 +274,13 @@ def test_special_cases(name):
             pa0, pa1, pb0, pb1 = (np.asarray(p, float) for p in (a0, a1, b0, b1))
             if seed is not None:
                 pa0, pa1, pb0, pb1 = _moved([pa0, pa1, pb0, pb1], seed)
-            got = [bool(C.cylinders_intersect(pa0, pa1, RA, pb0, pb1, rb)),
-                   bool(C.cylinders_intersect(pb0, pb1, rb, pa0, pa1, RA)),   # swapped bodies
-                   bool(C.cylinders_intersect(pa1, pa0, RA, pb1, pb0, rb))]   # swapped end points
-            assert got == [expected] * 3, (name, g, seed, got)
+            for backend in BACKENDS:
+                got = [bool(C.cylinders_intersect(pa0, pa1, RA, pb0, pb1, rb, backend=backend)),
+                       bool(C.cylinders_intersect(pb0, pb1, rb, pa0, pa1, RA,   # swapped bodies
+                                                  backend=backend)),
+                       bool(C.cylinders_intersect(pa1, pa0, RA, pb1, pb0, rb,   # swapped ends
+                                                  backend=backend))]
+                assert got == [expected] * 3, (name, g, seed, backend, got)
             assert not expected or C.capsules_intersect(pa0, pa1, RA, pb0, pb1, rb)
         if abs(g) == 1e-3:  # the independent oracle agrees with the construction
             lo, hi = certified(*(np.atleast_2d(x) for x in (a0, a1, RA, b0, b1, rb)))
@@ -285,8 +299,10 @@ def test_special_cases(name):
 ])
 def test_always_intersecting_cases(b0, b1, rb):
     a0, a1 = [0.0, 0, 0], [0.0, 0, L]
-    assert C.cylinders_intersect(a0, a1, RA, b0, b1, rb)
-    assert C.cylinders_intersect(*_moved([b0, b1], 3), rb, *_moved([a0, a1], 3), RA)
+    for backend in BACKENDS:
+        assert C.cylinders_intersect(a0, a1, RA, b0, b1, rb, backend=backend)
+        assert C.cylinders_intersect(*_moved([b0, b1], 3), rb, *_moved([a0, a1], 3), RA,
+                                     backend=backend)
 
 
 def test_capsule_differs_near_end_caps():
@@ -382,6 +398,9 @@ def test_validation(args, match):
     for fn in (C.cylinders_intersect, C.capsules_intersect):
         with pytest.raises(ValueError, match=match):
             fn(*args)
+    for backend in BACKENDS:
+        with pytest.raises(ValueError, match=match):
+            C.cylinders_intersect(*args, backend=backend)
 
 
 def test_zero_radius_is_a_segment():
@@ -557,3 +576,93 @@ def test_hand_vs_hand_queries(hands):
     out = _posed(model, "flat")
     body = C.hand_cylinders(out.vertices, out.joints)
     assert C.coverage(out.vertices[0], body)["max_outside_mm"] < 10
+
+
+# ------------------------------------------------------------------------------------------------
+# The compiled kernels (numba) against the numpy reference
+# ------------------------------------------------------------------------------------------------
+
+def _adversarial_pairs(rng, n):
+    """Pairs built to hit every branch: exact contact, parallel / anti-parallel / coaxial axes,
+    shared end points, zero radii, identical and nested cylinders, tiny and huge scales."""
+    a0, a1, ra, b0, b1, rb = (np.array(x, dtype=float) for x in random_pairs(n, rng))
+    d = a1 - a0
+    kind = rng.integers(0, 8, n)
+    t = rng.uniform(-0.5, 1.5, (n, 1))
+    side = np.cross(d, rng.normal(size=(n, 3)))
+    side /= np.linalg.norm(side, axis=1)[:, None]
+    gap = rng.choice([0.0, 1e-12, -1e-12, 5e-10, -5e-10, 2e-9, 1e-6], n)
+    touch = (ra + rb + gap)[:, None] * side
+    par = kind == 0            # parallel, side by side at a gap around 0
+    b0[par], b1[par] = (a0 + t * d + touch)[par], (a1 + t * d + touch)[par]
+    anti = kind == 1           # anti-parallel
+    b0[anti], b1[anti] = (a1 + touch)[anti], (a0 + touch)[anti]
+    coax = kind == 2           # coaxial, end to end at a gap around 0
+    u = d / np.linalg.norm(d, axis=1)[:, None]
+    b0[coax] = (a1 + gap[:, None] * u)[coax]
+    b1[coax] = (b0 + 0.02 * u)[coax]
+    shared = kind == 3         # V shape: a shared end point
+    b0[shared] = a1[shared]
+    same = kind == 4           # identical
+    b0[same], b1[same], rb[same] = a0[same], a1[same], ra[same]
+    zero = kind == 5           # zero radii (segments)
+    ra[zero & (rng.random(n) < 0.5)] = 0.0
+    rb[zero] = 0.0
+    cap = kind == 6            # cap disk face on cap disk face, offset and tilted by 1e-9 rad
+    b0[cap] = (a1 + 0.003 * side + gap[:, None] * u)[cap]
+    b1[cap] = (b0 + 0.02 * (u + 1e-9 * side))[cap]
+    scale = np.where(kind == 7, 10.0 ** rng.uniform(-3, 1, n), 1.0)[:, None]  # other scales
+    return a0 * scale, a1 * scale, ra * scale[:, 0], b0 * scale, b1 * scale, rb * scale[:, 0]
+
+
+@pytest.mark.skipif("numba" not in BACKENDS, reason="numba not installed")
+def test_numba_kernels_match_numpy_reference():
+    from handmesh_tutorial import _collision_numba as K
+    assert (K._PARALLEL_SIN, K._COPLANAR, K._AXES_PARALLEL_SIN) == (
+        C._PARALLEL_SIN, C._COPLANAR, C._AXES_PARALLEL_SIN)
+    rng = np.random.default_rng(12)
+    families = {"uniform": random_pairs(20000, rng), "near contact": near_contact_pairs(500, 13)[0],
+                "adversarial": _adversarial_pairs(rng, 20000)}
+    for name, pairs in families.items():
+        ref = C.cylinders_intersect(*pairs, backend="numpy")
+        for atol in (C.ATOL, 0.0, 1e-6):
+            ref = C.cylinders_intersect(*pairs, atol=atol, backend="numpy")
+            got = C.cylinders_intersect(*pairs, atol=atol, backend="numba")
+            # same formulas in the same order: the answers are identical, not just close
+            np.testing.assert_array_equal(got, ref, err_msg=f"{name}, atol {atol}")
+        assert 0.05 < ref.mean() < 0.95, name  # both answers occur
+    # broadcasting and scalars go through the same kernel
+    a0, a1, ra, b0, b1, rb = random_pairs(9, rng)
+    grid = [C.cylinders_intersect(a0[:, None], a1[:, None], ra[:, None], b0, b1, rb, backend=b)
+            for b in BACKENDS]
+    np.testing.assert_array_equal(grid[0], grid[1])
+    with pytest.raises(ValueError, match="backend"):
+        C.cylinders_intersect(a0, a1, ra, b0, b1, rb, backend="fortran")
+
+
+@pytest.mark.skipif("numba" not in BACKENDS, reason="numba not installed")
+def test_numba_body_queries_match_numpy_reference(hands):
+    model = hands["right"]
+    rng = np.random.default_rng(14)
+    rod = C.Cylinders([[0, 0, -0.05]], [[0, 0, 0.05]], [0.01])
+    n_hit = 0
+    for k, name in enumerate(("flat", "fist", "pinch", "spread") * 6):
+        a = C.hand_cylinders(_posed(model, name), model=model)
+        t = rng.normal(size=3)
+        t *= rng.uniform(0.0, 0.12) / np.linalg.norm(t)
+        b = a.transform(Rotation.random(random_state=k).as_matrix(), t)
+        for x, y in ((a, b), (b, rod), (a, a)):
+            ref = C.colliding_pairs(x, y, backend="numpy")
+            got = C.colliding_pairs(x, y, backend="numba")
+            for r, g in zip(ref, got, strict=True):
+                np.testing.assert_array_equal(g, r)
+                assert g.dtype == np.int64
+            hit = C.bodies_collide(x, y, backend="numba")
+            assert hit == C.bodies_collide(x, y, backend="numpy") == (ref[0].size > 0)
+            n_hit += hit
+        for compression in (0.0, C.SELF_CONTACT_COMPRESSION):
+            ref = C.self_collisions(b, compression=compression, backend="numpy")
+            got = C.self_collisions(b, compression=compression, backend="numba")
+            for r, g in zip(ref, got, strict=True):
+                np.testing.assert_array_equal(g, r)
+    assert 10 < n_hit < 3 * 24  # some poses collide, some do not

@@ -70,6 +70,8 @@ def test_config_defaults_budget_and_dict_round_trip():
         T.TrainConfig(epochs=0)
     with pytest.raises(ValueError, match="dataset must be"):
         T.TrainConfig(dataset="coco")
+    with pytest.raises(ValueError, match="precision must be"):
+        T.TrainConfig(precision="float16")
 
 
 def test_epoch_batch_sampler_slices_pad_and_order():
@@ -623,3 +625,18 @@ def test_skip_bad_keeps_the_dataset_type_and_refuses_an_all_bad_set(toy_root, tm
     with pytest.raises(ValueError, match="every evaluation sample is bad"):
         T.evaluate(T.build_model_from_config(T.TrainConfig(**TINY)), dataset=only_bad,
                    progress=False, skip_bad=True)
+
+
+def test_bfloat16_precision_trains_close_to_float32(samples, tmp_path):
+    # the opt-in autocast: weights stay float32, the loss falls like the float32 run's
+    tr, _ = _data(samples)
+    runs = {}
+    for precision in ("float32", "bfloat16"):
+        torch.manual_seed(0)
+        cfg = T.TrainConfig(out_dir=str(tmp_path / precision), epochs=6, batch_size=4, lr=1e-3,
+                            checkpoint_every=100, precision=precision, **TINY)
+        runs[precision] = T.train(cfg, dataset=tr)
+    f32, b16 = (np.array(runs[p].step_losses) for p in ("float32", "bfloat16"))
+    assert all(p.dtype == torch.float32 for p in runs["bfloat16"].model.parameters())
+    assert np.isfinite(b16).all() and b16[-1] < 0.97 * b16[0], b16
+    np.testing.assert_allclose(b16, f32, rtol=0.05)
