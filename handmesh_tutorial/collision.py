@@ -222,10 +222,11 @@ def _prepare(a0, a1, ra, b0, b1, rb, atol):
     return pts[0], pts[1], rad[0], pts[2], pts[3], rad[1], shape
 
 
-BACKEND: str = "auto"
-"""Which implementation the exact tests use: ``"auto"`` (the compiled numba kernels of
-``handmesh_tutorial._collision_numba`` when numba imports, else numpy), ``"numba"`` or
-``"numpy"`` (the vectorised reference below). Every public test also takes ``backend=``."""
+BACKEND: str = "numpy"
+"""Which implementation the exact tests use: ``"numpy"`` (the vectorised reference below, the
+default), ``"numba"`` (the compiled kernels of ``handmesh_tutorial._collision_numba``, opt-in: docs
+page "Performance" says why it is not the default) or ``"auto"`` (numba when it imports, else
+numpy). Every public test also takes ``backend=``."""
 _NUMBA_STATE: list = []  # [module or None], filled on first use (numba imports in ~0.3 s)
 
 
