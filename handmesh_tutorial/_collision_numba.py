@@ -308,17 +308,27 @@ def _aabb_apart(p0a, p1a, ra, p0b, p1b, rb, atol):
 
 
 @_jit
-def bodies_collide(p0a, p1a, rada, p0b, p1b, radb, atol):
-    """collision.bodies_collide on raw arrays: 1 hit, 0 none, -1 zero-length axis."""
-    if _aabb_apart(p0a, p1a, rada, p0b, p1b, radb, atol):
-        return 0
+def _body_units(p0a, p1a, rada, p0b, p1b, radb, atol):
+    """Grown unit axes of two bodies: ``(ok, sa, ua, la, ra, sb, ub, lb, rb)``; ok False on a
+    zero-length axis (the arrays are then incomplete)."""
     na, nb = p0a.shape[0], p0b.shape[0]
     grow = 0.5 * atol
     sa, ua, la, ra = np.empty((na, 3)), np.empty((na, 3)), np.empty(na), np.empty(na)
     sb, ub, lb, rb = np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb), np.empty(nb)
-    if not (units(p0a, p1a, rada, grow, sa, ua, la, ra)
-            and units(p0b, p1b, radb, grow, sb, ub, lb, rb)):
+    ok = (units(p0a, p1a, rada, grow, sa, ua, la, ra)
+          and units(p0b, p1b, radb, grow, sb, ub, lb, rb))
+    return ok, sa, ua, la, ra, sb, ub, lb, rb
+
+
+@_jit
+def bodies_collide(p0a, p1a, rada, p0b, p1b, radb, atol):
+    """collision.bodies_collide on raw arrays: 1 hit, 0 none, -1 zero-length axis."""
+    if _aabb_apart(p0a, p1a, rada, p0b, p1b, radb, atol):
+        return 0
+    ok, sa, ua, la, ra, sb, ub, lb, rb = _body_units(p0a, p1a, rada, p0b, p1b, radb, atol)
+    if not ok:
         return -1
+    na, nb = p0a.shape[0], p0b.shape[0]
     for i in range(na):
         for j in range(nb):
             if _pair(sa, ua, la, ra, i, sb, ub, lb, rb, j):
@@ -329,13 +339,10 @@ def bodies_collide(p0a, p1a, rada, p0b, p1b, radb, atol):
 @_jit
 def all_pairs(p0a, p1a, rada, p0b, p1b, radb, atol, hit):
     """collision.colliding_pairs on raw arrays into hit (NA, NB) bool; False on a zero axis."""
-    na, nb = p0a.shape[0], p0b.shape[0]
-    grow = 0.5 * atol
-    sa, ua, la, ra = np.empty((na, 3)), np.empty((na, 3)), np.empty(na), np.empty(na)
-    sb, ub, lb, rb = np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb), np.empty(nb)
-    if not (units(p0a, p1a, rada, grow, sa, ua, la, ra)
-            and units(p0b, p1b, radb, grow, sb, ub, lb, rb)):
+    ok, sa, ua, la, ra, sb, ub, lb, rb = _body_units(p0a, p1a, rada, p0b, p1b, radb, atol)
+    if not ok:
         return False
+    na, nb = p0a.shape[0], p0b.shape[0]
     for i in range(na):
         for j in range(nb):
             hit[i, j] = _pair(sa, ua, la, ra, i, sb, ub, lb, rb, j)
