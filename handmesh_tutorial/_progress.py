@@ -43,13 +43,15 @@ def progress_bar(iterable: Iterable | None = None, *, per: str = "job", disable:
         The ``tqdm`` instance (iterate over it, or call ``update``/``close``).
     """
     from tqdm.auto import tqdm as auto_tqdm
+    from tqdm.notebook import tqdm as notebook_tqdm
     from tqdm.std import tqdm as std_tqdm
 
     if per not in ("job", "epoch"):
         raise ValueError(f"per must be 'job' or 'epoch', got {per!r}")
     if disable:
         return std_tqdm(iterable, disable=True, **kwargs)
-    if auto_tqdm is not std_tqdm and file is None:  # Jupyter: the notebook widget
+    # tqdm.auto is never tqdm.std itself (it adds asyncio support): test for the notebook class
+    if file is None and issubclass(auto_tqdm, notebook_tqdm):  # Jupyter: the notebook widget
         return auto_tqdm(iterable, **kwargs)
     stream = sys.stderr if file is None else file
     if is_interactive(stream):

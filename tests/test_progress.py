@@ -64,3 +64,14 @@ def test_disabled_and_terminal_bars():
 def test_per_is_checked():
     with pytest.raises(ValueError, match="per must be"):
         progress_bar(range(3), per="step", file=io.StringIO())
+
+
+def test_default_stream_in_a_log_gets_whole_lines_not_redraws(capsys):
+    # stderr captured by pytest is not a terminal and this is no Jupyter kernel: the default
+    # stream must get the throttled lines (the bug: tqdm.auto's class was taken for a notebook's)
+    for _ in progress_bar(range(200), desc="job"):
+        pass
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    lines = err.strip().splitlines()
+    assert 1 <= len(lines) <= 11 and lines[-1].startswith("job: 100%"), lines
