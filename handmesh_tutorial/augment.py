@@ -55,7 +55,7 @@ __all__ = [
     "InterSHTorchDataset", "FreiHANDTorchDataset", "normalize_image", "denormalize_image",
     "flip_intrinsics", "rotation_z", "crop_transform", "warp_image", "color_jitter",
     "mirror_matrix", "unmirror", "to_camera", "project", "BadSampleError", "BAD_SAMPLE_ERRORS",
-    "find_bad_items", "without_items",
+    "find_bad_items", "without_items", "drop_bad_items",
 ]
 
 IMAGE_MEAN = 0.5
@@ -618,6 +618,32 @@ def find_bad_items(dataset, progress: bool = False, desc: str = "checking sample
             bad.append({"position": i, "index": i if index is None else int(index),
                         "error": getattr(e, "reason", str(e))})
     return bad
+
+
+def drop_bad_items(dataset, progress: bool = False, name: str = "dataset", *,
+                   allow_empty: bool = False):
+    """``(dataset without its bad items, the bad items)``.
+
+    [`find_bad_items`][handmesh_tutorial.augment.find_bad_items], then
+    [`without_items`][handmesh_tutorial.augment.without_items].
+
+    Args:
+        dataset: any map-style dataset.
+        progress: tqdm bar.
+        name: what the set is, for the bar and the error (``"training"``, ``"evaluation"``...).
+        allow_empty: return an empty dataset when every item is bad instead of raising.
+
+    Raises:
+        ValueError: every item is bad (unless ``allow_empty``); the message gives the first error.
+    """
+    bad = find_bad_items(dataset, progress, desc=f"checking {name} samples")
+    if not bad:
+        return dataset, bad
+    kept = without_items(dataset, [b["position"] for b in bad])
+    if len(kept) == 0 and not allow_empty:
+        raise ValueError(f"every {name} sample is bad ({len(bad)} skipped; first: "
+                         f"{bad[0]['error']})")
+    return kept, bad
 
 
 def without_items(dataset, positions):

@@ -64,6 +64,7 @@ from . import augment as A
 from . import metrics as M
 from ._io import atomic_write_bytes as _atomic_write_bytes
 from ._io import leftover_temporaries
+from ._progress import progress_bar
 from .dataset import KINDS
 from .keypoints import keypoint_loss, normalised_keypoints
 from .losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
@@ -807,8 +808,6 @@ def predict(model: nn.Module, images, batch_size: int = 32,
 
 def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.device,
                  num_workers: int = 0, progress: bool = False, desc: str = "eval") -> dict:
-    from ._progress import progress_bar
-
     loader = torch.utils.data.DataLoader(dataset, batch_size=batch_size, shuffle=False,
                                          num_workers=num_workers)
     keys = ("vertices", "joints", "root", "R", "mirrored", "vr", "index", "K")
@@ -971,8 +970,6 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         ValueError: inconsistent config, template/data vertex counts that differ, or a
             checkpoint of another architecture.
     """
-    from ._progress import progress_bar as tqdm
-
     t_start = time.perf_counter()
     if config.threads is not None:
         torch.set_num_threads(int(config.threads))
@@ -983,7 +980,7 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
     rank, world, owns_pg = _init_distributed(device)
     try:
         return _train(config, resume, overwrite, dataset, val_dataset, template, callback,
-                      device, rank, world, t_start, tqdm)
+                      device, rank, world, t_start)
     finally:
         if owns_pg:
             import torch.distributed as dist
@@ -1043,7 +1040,7 @@ def remove_stale_temp_files(out_dir) -> list[Path]:
 
 
 def _train(config, resume, overwrite, dataset, val_dataset, template, callback, device, rank,
-           world, t_start, tqdm) -> TrainResult:
+           world, t_start) -> TrainResult:
     out = Path(config.out_dir)
     is_main = rank == 0
     if not resume and not overwrite and (found := existing_run(out)):
@@ -1150,7 +1147,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         model.train()
         lr = opt.param_groups[0]["lr"]
         losses = []
-        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}", per="epoch",
+        bar = progress_bar(loader, desc=f"epoch {epoch + 1}/{config.epochs}", per="epoch",
                    disable=not (config.progress and is_main), leave=False)
         for batch in bar:
             opt.zero_grad(set_to_none=True)
@@ -1216,15 +1213,12 @@ def _skip_bad_items(train_ds, val_ds, progress: bool):
     for split, ds in (("train", train_ds), ("val", val_ds)):
         if ds is None:
             continue
-        bad = A.find_bad_items(ds, progress, desc=f"checking {split} samples")
+        found[split], bad = A.drop_bad_items(ds, progress, "training" if split == "train"
+                                             else "validation", allow_empty=split == "val")
         skipped += [{"split": split, "index": b["index"], "error": b["error"]} for b in bad]
-        found[split] = A.without_items(ds, [b["position"] for b in bad]) if bad else ds
         if bad:
             warnings.warn(f"skipping {len(bad)} of {len(ds)} {split} samples that cannot be "
                           f"read (first: {bad[0]['error']})", stacklevel=4)
-    if len(found["train"]) == 0:
-        raise ValueError(f"every training sample is bad ({len(skipped)} skipped; first: "
-                         f"{skipped[0]['error']})")
     val = found.get("val")
     return found["train"], None if val is not None and len(val) == 0 else val, skipped
 
@@ -1499,12 +1493,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
     skipped = []
     if skip_bad:
-        bad = A.find_bad_items(dataset, progress, desc="checking samples")
+        dataset, bad = A.drop_bad_items(dataset, progress, "evaluation")
         skipped = [{"index": b["index"], "error": b["error"]} for b in bad]
-        dataset = A.without_items(dataset, [b["position"] for b in bad])
-        if bad and len(dataset) == 0:
-            raise ValueError(f"every evaluation sample is bad ({len(bad)} skipped; first: "
-                             f"{bad[0]['error']})")
     if len(dataset) == 0:
         raise ValueError("the evaluation set is empty")
 
