@@ -33,7 +33,10 @@ skinning-weighted blends of the bone transforms, which are smooth (two smoothing
 fields cost 0.35 mm and 1.1 degrees), so the field is smoothed before it is applied
 (``smoothing_length``). With the head starting at zero the model's first output is the template
 itself. ``"offset"`` (``v = p_v + s * d_v``) and ``"xyz"`` (``v = s * d_v``, the paper's) are kept
-for comparison.
+for comparison. ``"skinned"`` goes one step further
+([`handmesh_tutorial.skinned`][handmesh_tutorial.skinned]): the field is pooled per bone with the
+template's skinning weights into one local rotation per joint and the shape parameters, and the
+vertices are the template skinned with them, so every output is a hand surface.
 
 The FC is kept modest by a small coarse width ``C`` (``latent_channels``, default 16); in CMR the FC
 is ~73% of the decoder's parameters; with a ResNet-18, our hand (49 coarse vertices) and the default
@@ -60,6 +63,7 @@ from .encoder import build_encoder
 from .keypoints import KeypointEncoder
 from .rotation import GlobalRotationHead
 from .sampling import mesh_hierarchy
+from .skinned import SkinnedOutput, skinning_of
 from .surface import smoothing_matrix, smoothing_steps
 
 __all__ = ["MeshTemplate", "as_template", "root_centred_template", "MSMRNet", "build_model",
@@ -80,7 +84,7 @@ DEFAULT_SMOOTHING_LENGTH = 0.009
 smoothing steps on the open hand (mean edge 7.3 mm), 0 on a 200-vertex hand, ~6 on a 1,600-vertex
 one.
 """
-OUTPUTS = ("xyz", "offset", "affine")
+OUTPUTS = ("xyz", "offset", "affine", "skinned")
 """What the decoder's per-vertex output means
 ([`MSMRNet.vertices_from_field`][handmesh_tutorial.model.MSMRNet.vertices_from_field])."""
 DEFAULT_LATENT_CHANNELS = 16
@@ -199,9 +203,9 @@ class MSMRNet(nn.Module):
         template_vertices: ``(V, 3)`` root-centred template
             ([`root_centred_template`][handmesh_tutorial.model.root_centred_template]), needed by
             ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
-        output: ``"affine"``, ``"offset"`` or ``"xyz"``: how
+        output: ``"affine"``, ``"offset"``, ``"xyz"`` or ``"skinned"``: how
             [`vertices_from_field`][handmesh_tutorial.model.MSMRNet.vertices_from_field] reads the
-            decoder's output (12, 3 or 3 channels per vertex).
+            decoder's output (12, 3, 3 or ``skinned.channels`` channels per vertex).
         smoothing: ``(V, V)`` sparse matrix applied to the decoder's output field (e.g.
             [`smoothing_matrix`][handmesh_tutorial.surface.smoothing_matrix]), a sequence of them
             applied in order (``k`` one-step matrices are cheaper than their ``k``-step product,
@@ -209,6 +213,8 @@ class MSMRNet(nn.Module):
         global_rotation: turn the decoded mesh by a rotation predicted from the features
             ([`GlobalRotationHead`][handmesh_tutorial.rotation.GlobalRotationHead]; not in the
             paper).
+        skinned: the [`SkinnedOutput`][handmesh_tutorial.skinned.SkinnedOutput] that
+            ``output="skinned"`` needs.
 
     Shapes:
         ``images (B, 3, H, W)`` -> ``{"vertices": (B, V, 3), "joints": (B, J, 3)}``, metres.
@@ -217,13 +223,17 @@ class MSMRNet(nn.Module):
     def __init__(self, encoder: nn.Module, decoder: nn.Module, coarse_vertices: int,
                  latent_channels: int, joint_regressor, transformer: nn.Module | None = None,
                  output_scale: float = 0.1, faces=None, template_vertices=None,
-                 output: str = "xyz", smoothing=None, global_rotation: bool = False):
+                 output: str = "xyz", smoothing=None, global_rotation: bool = False,
+                 skinned: nn.Module | None = None):
         super().__init__()
         if output not in OUTPUTS:
             raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
         if output != "xyz" and template_vertices is None:
             raise ValueError(f"output={output!r} needs template_vertices")
+        if output == "skinned" and skinned is None:
+            raise ValueError("output='skinned' needs a SkinnedOutput (skinned=)")
         self.output = output
+        self.skinned = skinned if output == "skinned" else None
         self.encoder = encoder
         self.coarse_vertices = coarse_vertices
         self.latent_channels = latent_channels
@@ -273,14 +283,18 @@ class MSMRNet(nn.Module):
         """Vertices from the decoder's per-vertex output field.
 
         Args:
-            raw: ``(B, V, 3)`` (``output`` ``"xyz"`` or ``"offset"``) or ``(B, V, 12)``
-                (``"affine"``: 9 entries of ``A_v - I`` row-major, then 3 of ``t_v``).
+            raw: ``(B, V, 3)`` (``output`` ``"xyz"`` or ``"offset"``), ``(B, V, 12)``
+                (``"affine"``: 9 entries of ``A_v - I`` row-major, then 3 of ``t_v``) or
+                ``(B, V, 6 + S)`` (``"skinned"``, see
+                [`SkinnedOutput`][handmesh_tutorial.skinned.SkinnedOutput]).
 
         Returns:
             ``(B, V, 3)`` vertices, metres: ``s * raw`` (xyz), ``p_v + s * raw`` (offset) or
             ``(I + A_v) p_v + s * t_v`` (affine), with ``p_v`` the root-centred template and
-            ``s`` the ``output_scale``.
+            ``s`` the ``output_scale``, or the skinned template (skinned).
         """
+        if self.output == "skinned":
+            return self.skinned(raw)
         if self.output == "xyz":
             return raw * self.output_scale
         tmpl = self.template.to(raw.dtype)
@@ -311,7 +325,7 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
                 output_scale: float = 0.1, hierarchy=None, output: str = "affine",
                 smoothing_length: float = DEFAULT_SMOOTHING_LENGTH, zero_head: bool = True,
                 head: str = "linear", keypoints: bool = False,
-                global_rotation: bool = False) -> MSMRNet:
+                global_rotation: bool = False, skinning=None) -> MSMRNet:
     """Build MSMR-Net (or the single-path / no-attention ablations of the paper's Table 3).
 
     Args:
@@ -335,8 +349,11 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
         fuse_head: multi-path only; head on all branches upsampled and concatenated.
         output_scale: metres per decoder output unit (the translation part for ``"affine"``).
         output: what the decoder predicts per vertex: ``"affine"`` (default; ``I + A_v`` and
-            ``t_v`` applied to the template vertex), ``"offset"`` (from the template) or ``"xyz"``
-            (coordinates, as the paper). See the module docstring.
+            ``t_v`` applied to the template vertex), ``"offset"`` (from the template), ``"xyz"``
+            (coordinates, as the paper) or ``"skinned"`` (per-joint rotations and shape pooled
+            from the field, then skinning;
+            [`handmesh_tutorial.skinned`][handmesh_tutorial.skinned]; no output smoothing). See
+            the module docstring.
         smoothing_length: metres; the decoder's output field is smoothed by
             [`smoothing_matrix`][handmesh_tutorial.surface.smoothing_matrix] with
             [`smoothing_steps`][handmesh_tutorial.surface.smoothing_steps] steps for this length (0
@@ -354,6 +371,9 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
         global_rotation: predict the hand's orientation with a separate head and turn the decoded
             mesh by it ([`handmesh_tutorial.rotation`][handmesh_tutorial.rotation]; not in the
             paper).
+        skinning: for ``output="skinned"``, the hand model whose skinning weights, joints and
+            shape space are used (default: ``template`` when it has them, else the library's right
+            hand); its rest vertices must be the template's.
         hierarchy: a precomputed [`MeshHierarchy`][handmesh_tutorial.sampling.MeshHierarchy] of the
             template (default: computed, cached on disk by ``mesh_hierarchy``).
 
@@ -386,7 +406,8 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
         enc = KeypointEncoder(enc, num_joints=len(tmpl.joint_regressor))
     if output not in OUTPUTS:
         raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
-    out_ch = 12 if output == "affine" else 3
+    skinned = _skinned_output(template, tmpl, skinning) if output == "skinned" else None
+    out_ch = {"affine": 12, "skinned": skinned.channels if skinned else 0}.get(output, 3)
     if decoder == "multi":
         dec = MultiPathDecoder(hierarchy, spirals, channels, num_blocks, fuse_head=fuse_head,
                                in_channels=latent_channels, head=head, out_channels=out_ch,
@@ -398,14 +419,38 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
     coarse = len(spirals[-1])
     transformer = (CoarseMeshTransformer(coarse, latent_channels, num_heads, transformer_layers)
                    if attention else None)
-    steps = smoothing_steps(tmpl.vertices, tmpl.faces, smoothing_length)
+    steps = smoothing_steps(tmpl.vertices, tmpl.faces, smoothing_length) if not skinned else 0
     smooth = [smoothing_matrix(tmpl.faces, 1, len(tmpl.vertices))] * steps if steps else None
     model = MSMRNet(enc, dec, coarse, latent_channels, tmpl.joint_regressor, transformer,
                     output_scale, faces=tmpl.faces, template_vertices=root_centred_template(tmpl),
-                    output=output, smoothing=smooth, global_rotation=global_rotation)
+                    output=output, smoothing=smooth, global_rotation=global_rotation,
+                    skinned=skinned)
     model.hierarchy = hierarchy
     model.spirals = spirals
     return model
+
+
+def _skinned_output(template, tmpl: MeshTemplate, skinning) -> SkinnedOutput:
+    """The skinned output head for ``tmpl``, from ``skinning``, ``template`` or the library's
+    right hand (the first that has skinning data), checked against ``tmpl``'s vertices."""
+    if skinning is None:
+        skinning = template if getattr(template, "skinning_weights", None) is not None else None
+    if skinning is None:
+        from .hand import HandModel
+
+        skinning = HandModel("right")
+    data = skinning_of(skinning)
+    if data["vertices"].shape != tmpl.vertices.shape or \
+            np.abs(data["vertices"] - tmpl.vertices).max() > 1e-6:
+        raise ValueError(f"output='skinned': the skinning model's rest vertices "
+                         f"{data['vertices'].shape} are not the template's "
+                         f"{tmpl.vertices.shape}; pass skinning= the template's hand model")
+    from .hand import MANO_TO_FREIHAND
+
+    # the targets' root is keypoint 9 (middle MCP): MANO joint 4 on a 16-joint tree
+    root = int(MANO_TO_FREIHAND[9]) if len(data["joints"]) == 16 else 0
+    return SkinnedOutput(data["vertices"], data["weights"], data["joints"], data["parents"],
+                         root, data.get("shape_dirs"), data.get("joint_shape_dirs"))
 
 
 def _count(module: nn.Module) -> int:
