@@ -44,11 +44,12 @@ made so that the ``default`` tier finishes in about ten minutes on a 2-core CPU:
   quarters of the run;
 * **ResNet-10** instead of the paper's ImageNet-pretrained ResNet-50 / HRNet, **no augmentation**
   below the ``full`` tier, and the **CPU recipe** ([`RECIPES`][handmesh_tutorial.demo.RECIPES]): a
-  2D keypoint head whose features are pooled at the joints, a global-rotation head, and keypoint and
-  aligned-joint losses beside the paper's L1. With the paper's recipe (``recipe="paper"``) a
-  from-scratch network stays for thousands of steps on a plateau of the L1 loss (about 28 mm) where
-  it predicts one average mesh for every image. The docs page "Training from scratch on a CPU" has
-  the measurements behind every choice.
+  2D keypoint head whose features are pooled at the joints, a global-rotation head, the skinned
+  decoder output (the decoder's field read as joint rotations and shape, then skinning: smooth
+  hand surfaces), and keypoint and aligned-joint losses beside the paper's L1. With the paper's
+  recipe (``recipe="paper"``) a from-scratch network stays for thousands of steps on a plateau
+  of the L1 loss (about 28 mm) where it predicts one average mesh for every image. The docs page
+  "Training from scratch on a CPU" has the measurements behind every choice.
 
 The ``full`` tier is the paper's scale instead: ``budget.samples`` training scenes (40,000),
 ``budget.epochs`` epochs (200), augmentation on.
@@ -86,16 +87,18 @@ __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "train_confi
 
 RECIPES = {
     "paper": {},
-    "cpu": {"model_kwargs": {"keypoints": True, "global_rotation": True},
+    "cpu": {"model_kwargs": {"keypoints": True, "global_rotation": True, "output": "skinned"},
             "keypoint_weight": 0.5, "aligned_weight": 1.0},
 }
 """Training recipes ([`TrainConfig`][handmesh_tutorial.train.TrainConfig] fields on top of
 [`train_config`][handmesh_tutorial.demo.train_config]): the paper's (one L1 vertex loss, an encoder
 that ends in global average pooling) and the CPU recipe, which adds a 2D keypoint head whose
 features are pooled at the joints ([`handmesh_tutorial.keypoints`][handmesh_tutorial.keypoints]), a
-global-rotation head ([`handmesh_tutorial.rotation`][handmesh_tutorial.rotation]) and the keypoint
-and aligned-joint losses ([`handmesh_tutorial.losses`][handmesh_tutorial.losses]). Why: docs page
-"Training from scratch on a CPU".
+global-rotation head ([`handmesh_tutorial.rotation`][handmesh_tutorial.rotation]), the skinned
+decoder output ([`handmesh_tutorial.skinned`][handmesh_tutorial.skinned]: every prediction is a
+skinned hand surface) and the keypoint and aligned-joint losses
+([`handmesh_tutorial.losses`][handmesh_tutorial.losses]). Why: docs page "Training from scratch on
+a CPU".
 """
 
 MODEL_ROW, BASELINE_ROW, MEAN_ROW = ("MSMR-Net", "rest hand (no network)",
@@ -133,8 +136,9 @@ class DemoConfig:
         attention: coarse-mesh transformer on.
         augment: random crop / scale / rotation / colour jitter of training crops.
         recipe: ``"cpu"`` (default; [`RECIPES`][handmesh_tutorial.demo.RECIPES]: 2D keypoint head
-            with pose pooling, a global-rotation head, keypoint and aligned-joint losses beside the
-            paper's L1) or ``"paper"`` (L1 vertex loss only, global-pooling encoder).
+            with pose pooling, a global-rotation head, the skinned decoder output, keypoint and
+            aligned-joint losses beside the paper's L1) or ``"paper"`` (L1 vertex loss only,
+            global-pooling encoder).
         balance_train: VR-balance the training scenes too (about 5x slower to generate).
         threads: torch threads.
         workers: data-generation processes.
@@ -444,7 +448,8 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         f"{config.decoder}-path decoder, attention {'on' if config.attention else 'off'}, "
         f"{train_info['parameters'] / 1e6:.1f} M parameters; recipe `{config.recipe}`"
         + (": 2D keypoint head with features pooled at the joints, global-rotation head, "
-           "keypoint and aligned-joint losses beside the paper's L1" if config.recipe == "cpu"
+           "skinned decoder output, keypoint and aligned-joint losses beside the paper's L1"
+           if config.recipe == "cpu"
            else ": the paper's L1 only")
         + ") trained from scratch on CPU for "
         f"{train_info['epochs']} epochs ({train_info['steps']} steps, batch "

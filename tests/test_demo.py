@@ -193,7 +193,8 @@ def test_plot_mesh_on_image_projects_with_K():
 def test_recipes_reach_the_training_config(smoke_run, tmp_path):
     ck = torch.load(smoke_run / "train" / "checkpoint_last.pt", weights_only=True)
     cfg = ck["config"]
-    assert cfg["model_kwargs"] == {"keypoints": True, "global_rotation": True}
+    assert cfg["model_kwargs"] == {"keypoints": True, "global_rotation": True,
+                                   "output": "skinned"}
     assert (cfg["keypoint_weight"], cfg["aligned_weight"]) == (0.5, 1.0)
     assert "recipe `cpu`" in (smoke_run / "report.md").read_text()
     paper = demo.train_config(demo.DemoConfig(recipe="paper"), tmp_path, tmp_path / "t")
