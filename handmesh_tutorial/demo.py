@@ -54,10 +54,10 @@ made so that the ``default`` tier finishes in about ten minutes on a 2-core CPU:
 The ``full`` tier is the paper's scale instead: ``budget.samples`` training scenes (40,000),
 ``budget.epochs`` epochs (200), augmentation on.
 
-What to expect at the ``default`` size (measured on a 2-core CPU, seed 0, 9.8 min in all: 3.7
-min generating, 6.0 min training): on the 100 held-out scenes MPJPE 36.6 mm, PA-MPJPE 10.3 mm,
-PA-MPVPE 9.6 mm, roughness 10.4 degrees, 2.2% flipped faces. The rest hand (the template's open
-hand for every image) scores PA-MPJPE 13.1 mm, the mean training hand
+What to expect at the ``default`` size (measured on a 2-core CPU, seed 0, 2026-11-25, 12.4 min in
+all: 5.5 min generating, 6.8 min training): on the 100 held-out scenes MPJPE 37.2 mm, PA-MPJPE
+10.35 mm, PA-MPVPE 9.5 mm, roughness 3.9 degrees, 1.0% flipped faces. The rest hand (the
+template's open hand for every image) scores PA-MPJPE 13.1 mm, the mean training hand
 ([`mean_hand`][handmesh_tutorial.train.mean_hand]) 10.3 mm: the network has learnt the hand's
 orientation and the data's average articulation, not yet each hand's finger pose.
 
