@@ -77,20 +77,19 @@ TRAINED = {
     "00_quickstart": "trains a small one itself",
     "08_training": "trains it (this is the training notebook)",
     "09_evaluation": "yes: notebook 08's checkpoint (`runs/train08_<budget>/`); trains it if absent",
-    "10_ablation": "trains three variants; reuses notebook 08's run for the multi-path + attention one",
+    "10_ablation": "trains three variants with three seeds each; reuses notebook 08's run for "
+                   "multi-path + attention, seed 0",
 }
 
 #: Where the committed ``default`` run picked up what an earlier run had left in ``notebooks/runs/``
 #: (the notebooks reuse data sets and checkpoints): its time is then less than a first run's.
 REUSED = {
-    "00_quickstart": "the committed run reused the scenes and checkpoint an earlier run left in "
-                     "`notebooks/runs/`; a first run also generates and trains them",
     "08_training": "the committed run reused the INTER-SH set in `notebooks/runs/` and spent its "
                    "time training; a first run also generates the scenes",
     "09_evaluation": "reuses notebook 08's data set and checkpoint",
-    "10_ablation": "the committed run reused trainings an earlier execution left in "
-                   "`notebooks/runs/`; a first run also trains the two variants notebook 08 "
-                   "did not (not measured here)",
+    "10_ablation": "the committed run evaluated trainings done beforehand in `notebooks/runs/` "
+                   "(one thread each, about 10 min per run on this CPU); a first run also "
+                   "trains the eight runs notebook 08 did not, about an hour",
 }
 
 
@@ -99,7 +98,7 @@ TRAINED_SHORT = {
     "00_quickstart": "trains a small one",
     "08_training": "trains it",
     "09_evaluation": "08's checkpoint",
-    "10_ablation": "trains 3 (one is 08's)",
+    "10_ablation": "trains 9 (one is 08's)",
 }
 
 
