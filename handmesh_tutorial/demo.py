@@ -30,7 +30,7 @@ Evaluation and report are cheap and always redone.
 **Sizes** come from the run-size tier
 ([`handmesh_tutorial.budget.budget`][handmesh_tutorial.budget.budget]) through
 [`DemoConfig.from_budget`][handmesh_tutorial.demo.DemoConfig.from_budget]; the demo's own choices,
-made so that the ``default`` tier finishes in about ten minutes on a 2-core CPU:
+made so that the ``default`` tier finishes in about twelve minutes on a 2-core CPU:
 
 * training scenes = 5 x ``budget.samples`` (``default``: 3,000; about 7 scenes/s with two
   workers at 128 px on a 2-core CPU) and VR-balanced test scenes = 1/2 of
