@@ -18,6 +18,7 @@ docs page "Training from scratch on a CPU" came from runs of this script, e.g.::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -26,7 +27,7 @@ import numpy as np
 import torch
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial.keypoints import normalised_keypoints
+from handmesh_tutorial.keypoints import KeypointEncoder, normalised_keypoints
 
 
 def keypoint_errors(model, dataset, batch_size: int = 32) -> np.ndarray:
@@ -89,7 +90,7 @@ def main(argv=None) -> dict:
     model, _ = hmt.train.load_checkpoint(result.best_checkpoint)
     ev = hmt.train.evaluate(model, dataset=test_set, image_size=args.image_size, progress=False,
                             threads=args.threads, mean_hand=mean, device="cpu")
-    kp = keypoint_errors(model, test_set) if "uv" in model(test_set[0]["image"][None]) else None
+    kp = keypoint_errors(model, test_set) if isinstance(model.encoder, KeypointEncoder) else None
 
     def pick(scores):
         return {k: float(scores[k]) for k in ("mpjpe", "pa_mpjpe", "pa_mpvpe", "f_at_5mm",
@@ -97,7 +98,7 @@ def main(argv=None) -> dict:
                 if k in scores}
 
     report = {
-        "args": vars(args), "config": {k: v for k, v in vars(cfg).items()},
+        "args": vars(args), "config": dataclasses.asdict(cfg),
         "steps": result.steps, "train_seconds": train_s,
         "model": pick(ev["scores"]), "rest_hand": pick(ev["baseline"]["scores"]),
         "mean_hand": pick(ev["mean_hand_baseline"]["scores"]),
@@ -105,8 +106,7 @@ def main(argv=None) -> dict:
             "mean_fraction": float(kp.mean()), "mean_px": float(kp.mean() * args.image_size),
             "median_px": float(np.median(kp) * args.image_size),
             "fingertips_px": float(kp[:, [4, 8, 12, 16, 20]].mean() * args.image_size)},
-        "per_kind": {row["group"] if "group" in row else str(i): row
-                     for i, row in enumerate(ev.get("kind_table", []))},
+        "per_kind": {row["bin"]: row for row in ev["kind_table"]},
     }
     Path(args.out, "levers.json").write_text(json.dumps(report, indent=1, default=float))
     m, r, h = report["model"], report["rest_hand"], report["mean_hand"]
