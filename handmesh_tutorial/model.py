@@ -407,7 +407,7 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
     if output not in OUTPUTS:
         raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
     skinned = _skinned_output(template, tmpl, skinning) if output == "skinned" else None
-    out_ch = {"affine": 12, "skinned": skinned.channels if skinned else 0}.get(output, 3)
+    out_ch = skinned.channels if skinned else (12 if output == "affine" else 3)
     if decoder == "multi":
         dec = MultiPathDecoder(hierarchy, spirals, channels, num_blocks, fuse_head=fuse_head,
                                in_channels=latent_channels, head=head, out_channels=out_ch,
