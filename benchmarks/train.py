@@ -15,7 +15,7 @@ Prints images/s, the ratio to ``reference``, and achieved GFLOP/s (FLOPs of one 
 ``torch.utils.flop_counter``) against a plain matmul roofline measured in the same run (float32
 and bfloat16, 2048^2 x 2048 at the same threads). ``--accuracy`` also trains the float32 and
 bfloat16 variants for ``--accuracy-steps`` steps from the same initialisation on toy hands
-(``hmt.train.toy_sample``) and prints the held-out vertex L1 error of both (the effect of
+(``hmt.testing.toy_sample``) and prints the held-out vertex L1 error of both (the effect of
 bfloat16 on accuracy at this scale).
 
     .venv/bin/python benchmarks/train.py [--repeats 5] [--threads N] [--accuracy]
@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from handmesh_tutorial import augment, demo, train
+from handmesh_tutorial import augment, demo, testing, train
 from handmesh_tutorial.blocks import SparseVertexMap
 from handmesh_tutorial.budget import budget
 
@@ -90,7 +90,7 @@ def matmul_roofline(dtype, n: int = 2048, repeats: int = 5) -> float:
 def accuracy(cfg32, steps: int, n_train: int = 32, n_test: int = 16) -> dict:
     """Held-out vertex L1 (mm) after ``steps`` steps, float32 vs bfloat16, same init and data."""
     size = cfg32.image_size
-    samples = [train.toy_sample(i, image_size=2 * size) for i in range(n_train + n_test)]
+    samples = [testing.toy_sample(i, image_size=2 * size) for i in range(n_train + n_test)]
     ds_tr = augment.InterSHTorchDataset(samples[:n_train], size, train=True, augment=False)
     ds_te = augment.InterSHTorchDataset(samples[n_train:], size, train=False)
     test = torch.utils.data.default_collate([ds_te[i] for i in range(len(ds_te))])

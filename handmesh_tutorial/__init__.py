@@ -15,10 +15,10 @@ __version__ = "0.1.0"
 
 # One module per concept; see docs/index.md for the data flow between them.
 _SUBMODULES = (
-    "augment", "blocks", "budget", "cli", "collision", "dataset", "decoder", "demo", "encoder",
-    "fit", "freihand", "hand", "interact", "keypoints", "lcs", "losses", "makehuman", "mano",
+    "augment", "blocks", "budget", "camera", "cli", "collision", "dataset", "decoder", "demo",
+    "encoder", "fit", "freihand", "hand", "interact", "keypoints", "lcs", "losses", "makehuman", "mano",
     "metrics", "model", "objects", "render", "rotation", "sampling", "skinned", "spiral", "surface",
-    "train", "visibility", "viz",
+    "testing", "train", "visibility", "viz",
 )
 
 __all__ = ["Budget", "budget", "__version__", *_SUBMODULES]

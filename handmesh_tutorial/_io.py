@@ -1,16 +1,28 @@
-"""Atomic file writes (temp file in the same folder + rename): a crash never leaves half a file."""
+"""Atomic file writes and JSON-safe values: the one copy every writer of the library uses.
+
+A write goes to a temporary file in the destination's folder and is renamed over it
+(``os.replace``), so a crash or a kill leaves the old file or the new one, never half a file
+(docs page *Reliability*). `json_safe` turns numpy scalars/arrays, paths and non-finite floats
+into plain JSON values, and names where a value that JSON cannot hold sits.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import io
+import json
+import math
 import os
 import tempfile
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 
-__all__ = ["atomic_write_bytes", "atomic_savez", "leftover_temporaries"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
+           "write_json", "json_safe", "fsync_dir", "leftover_temporaries"]
 
 
 _TMP_SUFFIX = ".tmp"
@@ -24,45 +36,136 @@ def leftover_temporaries(path: str | os.PathLike) -> list[Path]:
     return sorted(p for p in path.parent.glob(pattern) if p.is_file())
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = True) -> Path:
-    """Write ``data`` to ``path`` atomically; parent folders are created.
+def fsync_dir(path: str | os.PathLike) -> None:
+    """``fsync`` a folder so a rename inside it survives a power cut (a no-op where the
+    platform or filesystem cannot)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, binary: bool = True,
+                      durable: bool = True, tmp_path: str | os.PathLike | None = None) -> Path:
+    """Call ``write(file)`` on a temporary file beside ``path``, then rename it to ``path``.
 
     Args:
-        path: destination file.
-        data: the bytes.
-        durable: ``fsync`` the file before the rename (a crash then leaves the old or the new
-            file, never a truncated one, even on a power cut).
+        path: destination file; parent folders are created.
+        write: writes the content into the open file object it is given.
+        binary: open the temporary file in ``"wb"`` (default) or ``"w"`` (UTF-8 text).
+        durable: ``fsync`` the file before the rename and the folder after it (a crash then
+            leaves the old or the new file, never a truncated one, even on a power cut).
+        tmp_path: where to put the temporary file (must be in ``path``'s folder); default
+            ``.<name>.<random>.tmp`` (the form `leftover_temporaries` finds).
 
     Returns:
         The written path.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=_TMP_SUFFIX)
+    if tmp_path is None:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=_TMP_SUFFIX)
+    else:
+        tmp = os.fspath(tmp_path)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+        mode = "wb" if binary else "w"
+        with os.fdopen(fd, mode, **({} if binary else {"encoding": "utf-8"})) as fh:
+            write(fh)
             if durable:
                 fh.flush()
                 os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600; outputs are meant to be shared
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+    if durable:
+        fsync_dir(path.parent)
     return path
 
 
-def atomic_savez(path: str | os.PathLike, **arrays) -> Path:
-    """``numpy.savez_compressed`` to ``path`` atomically (no pickled objects allowed).
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, durable: bool = True, *,
+                       tmp_path: str | os.PathLike | None = None) -> Path:
+    """Write ``data`` to ``path`` atomically; parent folders are created.
 
     Args:
-        path: destination ``.npz``.
-        **arrays: the arrays by name.
+        path: destination file.
+        data: the bytes.
+        durable: ``fsync`` the file before the rename and its folder after it.
+        tmp_path: where the temporary file goes (default: see `atomic_write_with`).
 
     Returns:
         The written path.
     """
+    return atomic_write_with(path, lambda fh: fh.write(data), durable=durable, tmp_path=tmp_path)
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, durable: bool = True) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically; see `atomic_write_bytes`."""
+    return atomic_write_bytes(path, text.encode("utf-8"), durable)
+
+
+def atomic_savez(path: str | os.PathLike, *, compressed: bool = True, **arrays) -> Path:
+    """``numpy.savez_compressed`` (or ``savez``) to ``path`` atomically.
+
+    Args:
+        path: destination ``.npz``.
+        compressed: ``savez_compressed`` (default) or plain ``savez`` (faster to read).
+        **arrays: the arrays by name (object arrays are refused: they would need a pickle).
+
+    Returns:
+        The written path.
+    """
+    arrays = {k: np.asarray(v) for k, v in arrays.items()}
+    for k, v in arrays.items():
+        if v.dtype == object:
+            raise ValueError(f"{path}: array {k!r} has dtype object (would need a pickle)")
     buf = io.BytesIO()
-    np.savez_compressed(buf, **{k: np.asarray(v) for k, v in arrays.items()})
+    (np.savez_compressed if compressed else np.savez)(buf, **arrays)
     return atomic_write_bytes(path, buf.getvalue())
+
+
+def json_safe(obj: Any, where: str = "value") -> Any:
+    """Plain JSON values from numpy scalars/arrays, tuples and paths; non-finite floats -> ``None``.
+
+    Args:
+        obj: nested dicts / lists / tuples of numbers, strings, booleans, ``None``, numpy
+            scalars or arrays, ``pathlib`` paths.
+        where: a name for ``obj`` in error messages (nested keys are appended: ``stats['a']``).
+
+    Returns:
+        The same structure with only ``dict``, ``list``, ``str``, ``int``, ``float``, ``bool``
+        and ``None``; dict keys become strings.
+
+    Raises:
+        ValueError: ``"<where>: value of type T cannot be stored in JSON"``.
+    """
+    if obj is None or isinstance(obj, (bool, str)):
+        return obj
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist(), where)
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v, where) for v in obj]
+    if isinstance(obj, Mapping):
+        return {str(k): json_safe(v, f"{where}[{k!r}]") for k, v in obj.items()}
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    raise ValueError(f"{where}: value of type {type(obj).__name__} cannot be stored in JSON")
+
+
+def write_json(path: str | os.PathLike, obj: Any, *, indent: int = 1, sort_keys: bool = True,
+               durable: bool = True) -> Path:
+    """`json_safe` ``obj`` and write it to ``path`` atomically (strict JSON: no NaN), with a
+    final newline."""
+    text = json.dumps(json_safe(obj, Path(path).name), indent=indent, sort_keys=sort_keys,
+                      allow_nan=False)
+    return atomic_write_text(path, text + "\n", durable)

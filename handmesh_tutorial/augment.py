@@ -50,11 +50,14 @@ import numpy as np
 import torch
 import torch.nn.functional as F  # noqa: N812 - the usual torch alias
 
+from .camera import project
+from .metrics import ROOT_INDEX
+
 __all__ = [
-    "IMAGE_MEAN", "IMAGE_STD", "ROOT_INDEX", "AugmentConfig", "HandCropDataset",
+    "IMAGE_MEAN", "IMAGE_STD", "AugmentConfig", "HandCropDataset",
     "InterSHTorchDataset", "FreiHANDTorchDataset", "normalize_image", "denormalize_image",
     "flip_intrinsics", "rotation_z", "crop_transform", "warp_image", "color_jitter",
-    "mirror_matrix", "unmirror", "to_camera", "project", "BadSampleError", "BAD_SAMPLE_ERRORS",
+    "mirror_matrix", "unmirror", "to_camera", "BadSampleError", "BAD_SAMPLE_ERRORS",
     "find_bad_items", "without_items", "drop_bad_items",
 ]
 
@@ -62,8 +65,6 @@ IMAGE_MEAN = 0.5
 """Image normalisation of the paper: ``(x / 255 - IMAGE_MEAN) / IMAGE_STD``."""
 IMAGE_STD = 1.0
 """See [`IMAGE_MEAN`][handmesh_tutorial.augment.IMAGE_MEAN]."""
-ROOT_INDEX = 9
-"""Keypoint at the origin of the targets (middle-finger MCP, FreiHAND order)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -211,21 +212,6 @@ def warp_image(image: torch.Tensor, transform, out_size: int, supersample: int |
     if f > 1:
         out = F.avg_pool2d(out, f)
     return out[0]
-
-
-def project(points, K):
-    """Pinhole projection ``uv = (K p)[:2] / (K p)[2]``.
-
-    Args:
-        points: ``(..., P, 3)`` camera-frame points (numpy or torch).
-        K: ``(..., 3, 3)`` intrinsics, broadcastable.
-
-    Returns:
-        ``(..., P, 2)`` pixels, same library as ``points``.
-    """
-    from .freihand import project as _project
-
-    return _project(points, K)
 
 
 # --------------------------------------------------------------------------------------------
@@ -674,7 +660,7 @@ class InterSHTorchDataset(HandCropDataset):
         root_or_dataset: an INTER-SH root folder, an
             [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset], or any sequence of
             INTER-SH sample dicts (e.g. a list of
-            [`synthetic_sample`][handmesh_tutorial.dataset.synthetic_sample] outputs, for in-memory
+            [`synthetic_sample`][handmesh_tutorial.testing.synthetic_sample] outputs, for in-memory
             experiments).
         image_size: crop side, pixels.
         train: augmentation on.

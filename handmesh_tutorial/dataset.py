@@ -20,7 +20,7 @@ every sample folder appears atomically (written in a temporary folder, then rena
 same bytes as an uninterrupted one. See ``docs/concepts/dataset_format.md`` for the format in full.
 
 The driver knows nothing about hands or rendering: it calls ``make_sample(sample_seed) -> dict``.
-[`synthetic_sample`][handmesh_tutorial.dataset.synthetic_sample] is a tiny stand-in (two spheres
+[`synthetic_sample`][handmesh_tutorial.testing.synthetic_sample] is a tiny stand-in (two spheres
 ray-cast with numpy) for tests and demos.
 """
 
@@ -29,7 +29,6 @@ from __future__ import annotations
 import contextlib
 import io
 import json
-import math
 import os
 import pickle
 import re
@@ -46,6 +45,9 @@ from typing import Any
 
 import numpy as np
 
+from ._io import atomic_write_bytes, fsync_dir, json_safe
+from .visibility import VR_BINS, vr_bin
+
 FORMAT_NAME = "INTER-SH"
 FORMAT_VERSION = 2
 """Version written by this library. 2: FreiHAND-like framing, photo backgrounds, anatomical
@@ -56,7 +58,9 @@ READABLE_FORMAT_VERSIONS = (1, 2)
 """Versions this library reads (version 1 roots read the same; resuming one with this version
 is refused, as any change of parameters is).
 """
-KINDS = ("hand-hand", "hand-object", "hand-chain")
+KINDS: tuple[str, ...] = ("hand-hand", "hand-object", "hand-chain")
+"""Scene kinds of INTER-SH (``"mixed"`` in
+[`make_sample`][handmesh_tutorial.interact.make_sample] draws one per sample)."""
 META_FILE = "meta.json"
 SAMPLES_DIR = "samples"
 TMP_PREFIX = ".tmp-"
@@ -158,8 +162,6 @@ def vr_bins(bins: Sequence | None = None) -> tuple[tuple[float, float], ...]:
 
     Accepts pairs ``[(lo, hi), ...]`` or bin edges ``[e0, e1, ..., en]``.
     """
-    from .visibility import VR_BINS  # numpy-only module; the one place the bins are defined
-
     seq = list(VR_BINS if bins is None else bins)
     if seq and all(np.ndim(b) == 0 for b in seq):  # edges
         seq = list(zip(seq[:-1], seq[1:], strict=True))
@@ -169,16 +171,9 @@ def vr_bins(bins: Sequence | None = None) -> tuple[tuple[float, float], ...]:
     return out
 
 
-def vr_bin_index(vr: float, bins: Sequence[tuple[float, float]]) -> int:
-    """Index of the bin holding ``vr``, -1 if none (the rule of ``visibility.vr_bin``)."""
-    from .visibility import vr_bin
-
-    return vr_bin(vr, tuple(bins))
-
-
 def vr_histogram(values: Sequence[float], bins: Sequence[tuple[float, float]]) -> list[int]:
     """Counts of ``values`` per bin (a value in no bin is not counted)."""
-    idx = [vr_bin_index(v, bins) for v in values]
+    idx = [vr_bin(v, bins) for v in values]
     return [idx.count(k) for k in range(len(bins))]
 
 
@@ -222,25 +217,6 @@ def _array(a: Any, where: str, shape: tuple, kind: str, dtype: Any) -> np.ndarra
     if kind == "f" and not np.isfinite(out).all():
         raise _fail(where, "has non-finite values")
     return out
-
-
-def _jsonable(obj: Any, where: str) -> Any:
-    """Plain JSON types from numpy scalars/arrays; non-finite floats become ``None``."""
-    if obj is None or isinstance(obj, (bool, str)):
-        return obj
-    if isinstance(obj, (np.bool_,)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist(), where)
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v, where) for v in obj]
-    if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v, f"{where}[{k!r}]") for k, v in obj.items()}
-    raise _fail(where, f"value of type {type(obj).__name__} cannot be stored in JSON")
 
 
 def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
@@ -331,7 +307,7 @@ def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
         raise _fail(loc("names"), f"labels {sorted(names)}, expected {labels}")
     s["names"] = {lab: str(names.get(lab, f"{s['sides'][lab]}_hand" if lab in sides else "object"))
                   for lab in labels}
-    s["stats"] = _jsonable(dict(sample.get("stats") or {}), loc("stats"))
+    s["stats"] = json_safe(dict(sample.get("stats") or {}), loc("stats"))
     for key in ("index", "seed", "attempt"):
         v = sample.get(key)
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))
@@ -343,7 +319,7 @@ def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
             continue
         if not isinstance(key, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", key):
             raise _fail(loc("extra"), f"extra key {key!r} must be an identifier")
-        s[key] = np.asarray(v) if isinstance(v, np.ndarray) else _jsonable(v, loc(key))
+        s[key] = np.asarray(v) if isinstance(v, np.ndarray) else json_safe(v, loc(key))
         if isinstance(s[key], np.ndarray) and s[key].dtype.kind not in "biuf":
             raise _fail(loc(key), f"extra array of dtype {s[key].dtype} cannot be stored")
     return s
@@ -442,7 +418,7 @@ def _encode(s: dict) -> dict[str, bytes]:
         "extra_arrays": sorted(k for k in s if k not in _KNOWN_KEYS
                                and isinstance(s[k], np.ndarray)),
     }
-    files["annotation.json"] = _json_bytes(_jsonable(ann, "annotation"))
+    files["annotation.json"] = _json_bytes(json_safe(ann, "annotation"))
     return files
 
 
@@ -454,15 +430,6 @@ def _write_file(path: Path, data: bytes, durable: bool) -> None:
             os.fsync(fh.fileno())
 
 
-def _fsync_dir(path: Path) -> None:
-    with contextlib.suppress(OSError):  # not every platform/filesystem can fsync a directory
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
 def _temporary(path: Path) -> Path:
     """Where a writer puts ``path`` before renaming it: ``.tmp-<name>-<pid>-<8 hex>`` beside it
     (the form `_is_own_temporary` recognises)."""
@@ -470,16 +437,8 @@ def _temporary(path: Path) -> Path:
 
 
 def _write_atomic(path: Path, data: bytes, durable: bool = True) -> None:
-    """Write a file via a temporary file in the same folder and ``os.replace``."""
-    tmp = _temporary(path)
-    try:
-        _write_file(tmp, data, durable)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    if durable:
-        _fsync_dir(path.parent)
+    """Write a file atomically with a temporary name `_is_own_temporary` recognises."""
+    atomic_write_bytes(path, data, durable, tmp_path=_temporary(path))
 
 
 def _write_folder(directory: Path, files: Mapping[str, bytes], durable: bool) -> None:
@@ -491,7 +450,7 @@ def _write_folder(directory: Path, files: Mapping[str, bytes], durable: bool) ->
         for name, data in files.items():
             _write_file(tmp / name, data, durable)
         if durable:
-            _fsync_dir(tmp)
+            fsync_dir(tmp)
         try:
             os.replace(tmp, directory)  # atomic: readers see no folder or a complete one
         except OSError:
@@ -505,7 +464,7 @@ def _write_folder(directory: Path, files: Mapping[str, bytes], durable: bool) ->
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     if durable:
-        _fsync_dir(parent)
+        fsync_dir(parent)
 
 
 def write_sample(directory: str | os.PathLike, sample: Mapping, *, overwrite: bool = False,
@@ -1114,7 +1073,7 @@ def _make_and_write(task: _Task, index: int) -> dict:
         if canon is None:
             continue
         vr = canon["vr"][canon["target"]]
-        if want is not None and vr_bin_index(vr, task.bins) != want:
+        if want is not None and vr_bin(vr, task.bins) != want:
             dist = _bin_distance(vr, task.bins[want])
             if (best is None or dist < best[0]) and (task.accept is None or task.accept(canon)):
                 best = (dist, attempt, canon)
@@ -1147,7 +1106,7 @@ def _probe(task: _Task, num: int) -> dict:
         if canon is None or (task.accept is not None and not task.accept(canon)):
             rejected += 1
             continue
-        b = vr_bin_index(canon["vr"][canon["target"]], task.bins)
+        b = vr_bin(canon["vr"][canon["target"]], task.bins)
         if b < 0:
             outside += 1
         else:
@@ -1544,102 +1503,5 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
                 raise
             copied += 1
         if durable:
-            _fsync_dir(out / SAMPLES_DIR)
+            fsync_dir(out / SAMPLES_DIR)
     return {"copied": copied, "skipped": skipped, "ranges": ranges, "complete": complete}
-
-
-# --------------------------------------------------------------------------------------------
-# a synthetic sample for tests and demos of the storage layer
-# --------------------------------------------------------------------------------------------
-def _uv_sphere(resolution: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit UV sphere: ``resolution`` latitude bands, ``2 * resolution`` longitudes, two poles.
-
-    Returns vertices (2 + (r - 1) * 2r, 3) and faces (4r(r - 1), 3), counter-clockwise seen
-    from outside (normals point out).
-    """
-    r, n = resolution, 2 * resolution
-    theta = np.linspace(0.0, np.pi, r + 1)[1:-1]
-    phi = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    rings = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
-    verts = np.concatenate([[[0.0, 0.0, 1.0]], rings, [[0.0, 0.0, -1.0]]])
-    j = np.arange(n)
-    ring = lambda k: 1 + k * n + j  # noqa: E731 - vertex ids of ring k
-    faces = [np.stack([np.zeros(n, int), ring(0), np.roll(ring(0), -1)], -1)]
-    for k in range(r - 2):
-        a, b, c, d = ring(k), np.roll(ring(k), -1), ring(k + 1), np.roll(ring(k + 1), -1)
-        faces += [np.stack([a, c, d], -1), np.stack([a, d, b], -1)]
-    last, south = ring(r - 2), len(verts) - 1
-    faces.append(np.stack([last, np.full(n, south), np.roll(last, -1)], -1))
-    return verts, np.concatenate(faces).astype(np.int32)
-
-
-def synthetic_sample(seed: int, kind: str = "hand-hand", image_size: int = 64,
-                     resolution: int = 8) -> dict:
-    """A stand-in INTER-SH sample: two spheres ray-cast with numpy (no hands, no OpenGL).
-
-    Body 1 is the target "hand", body 2 the other hand (``hand-hand``) or an object; body 2 sits
-    a little nearer the camera with a random sideways offset, so the target's VR covers (0, 1].
-    Masks, VR and meshes are mutually consistent: ``scene_mask`` is the nearest sphere per pixel,
-    ``alone_masks`` each sphere alone, ``vr`` = visible / alone pixels; meshes are UV spheres of
-    the same centres and radii; joints are 21 points on each hand's sphere.
-
-    Args:
-        seed: the sample seed.
-        kind: one of ``KINDS`` (changes only names and sides).
-        image_size: image side, pixels.
-        resolution: latitude bands of the sphere meshes (8 -> 114 vertices, 20 -> 762, about
-            the size of a MANO hand).
-
-    Returns:
-        A sample dict accepted by [`write_sample`][handmesh_tutorial.dataset.write_sample] /
-        ``make_sample`` of [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset].
-    """
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    rng = np.random.default_rng(seed)
-    s = image_size
-    f = 1.6 * s
-    c = (s - 1) / 2  # OpenCV: pixel centres at integer coordinates, as in render.py
-    K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
-    r1, r2 = rng.uniform(0.03, 0.05), rng.uniform(0.03, 0.05)
-    c1 = np.array([*rng.uniform(-0.03, 0.03, 2), rng.uniform(0.45, 0.55)])
-    ang = rng.uniform(0, 2 * np.pi)
-    off = rng.uniform(0.0, 1.3) * (r1 + r2)
-    c2 = c1 + np.array([off * np.cos(ang), off * np.sin(ang), -rng.uniform(0.1, 0.15)])
-    u, v = np.meshgrid(np.arange(s, dtype=np.float64), np.arange(s, dtype=np.float64))
-    rays = np.stack([(u - K[0, 2]) / f, (v - K[1, 2]) / f, np.ones_like(u)], -1)
-    depth = []
-    for ctr, r in ((c1, r1), (c2, r2)):  # nearest root of |t d - ctr|^2 = r^2
-        a, b, cc = (rays**2).sum(-1), (rays @ ctr), ctr @ ctr - r * r
-        disc = b * b - a * cc
-        t = np.where(disc >= 0, (b - np.sqrt(np.maximum(disc, 0))) / a, np.inf)
-        depth.append(t)
-    depth = np.stack(depth)
-    alone = np.isfinite(depth)
-    scene = np.where(alone.any(0), depth.argmin(0) + 1, 0).astype(np.int32)
-    colours = rng.integers(60, 255, size=(3, 3)).astype(np.float64)
-    shade = np.clip(1.2 - 2.0 * (np.min(np.where(alone, depth, 1.0), 0) - 0.35), 0.3, 1.0)
-    image = colours[scene] * np.where(scene > 0, shade, 1.0)[..., None]
-    image = np.clip(image + rng.normal(0, 4, image.shape), 0, 255).astype(np.uint8)
-    vr = {lab: float((scene == lab).sum() / alone[lab - 1].sum()) if alone[lab - 1].any()
-          else 0.0 for lab in (1, 2)}
-    sv, sf = _uv_sphere(resolution)
-    dirs = rng.normal(size=(21, 3))
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    side1 = "left" if kind == "hand-hand" else str(rng.choice(["left", "right"]))
-    other = {"hand-hand": "right_hand", "hand-object": "sphere", "hand-chain": "chain"}[kind]
-    sides = {1: side1, 2: "right"} if kind == "hand-hand" else {1: side1}
-    gap_mm = 1000 * (np.linalg.norm(c2 - c1) - r1 - r2)
-    return {
-        "image": image, "scene_mask": scene,
-        "alone_masks": {1: alone[0], 2: alone[1]},
-        "meshes": {1: ((sv * r1 + c1).astype(np.float32), sf),
-                   2: ((sv * r2 + c2).astype(np.float32), sf)},
-        "joints": {lab: (c1 + r1 * dirs if lab == 1 else c2 + r2 * dirs).astype(np.float32)
-                   for lab in sides},
-        "pose": {lab: rng.normal(0, 0.3, (15, 3)).astype(np.float32) for lab in sides},
-        "K": K, "vr": vr, "kind": kind, "target": 1, "sides": sides,
-        "names": {1: f"{side1}_hand", 2: other},
-        "stats": {"gap_mm": float(gap_mm), "stop": "synthetic"},
-    }

@@ -74,12 +74,13 @@ import json
 import math
 import os
 import re
-import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+
+from ._io import atomic_write_text, json_safe
 
 __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "train_config", "plot_overlays",
            "plot_loss_curves", "write_report", "headline", "parse_headline", "HEADLINE",
@@ -224,19 +225,6 @@ class DemoResult:
     baseline_scores: dict | None = None
     comparison: str = ""
     mean_hand_scores: dict | None = None
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def _generate(root: Path, num: int, seed: int, cfg: DemoConfig, progress: bool, balance: bool):
@@ -509,7 +497,7 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         "paper's accuracy (see notebooks 08-10).",
         "",
     ]
-    _atomic_write_text(path, "\n".join(lines))
+    atomic_write_text(path, "\n".join(lines))
     return path
 
 
@@ -674,23 +662,11 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
                "counts": counts,
                "train": train_info, "files": {k: str(v) for k, v in files.items()}}
     files["json"] = out / "demo.json"
-    _atomic_write_text(files["json"], json.dumps(_json_safe(summary), indent=1))
+    atomic_write_text(files["json"], json.dumps(json_safe(summary), indent=1))
     return DemoResult(out_dir=out, report=files["report"], scores=ev["scores"],
                       vr_table=ev["vr_table"], table=ev["table"], files=files, seconds=seconds,
                       config=cfg, train_epochs=res.epochs, baseline_scores=baseline,
                       comparison=ev["comparison"], mean_hand_scores=mean_scores)
-
-
-def _json_safe(obj):
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, np.generic):
-        return _json_safe(obj.item())
-    return obj
 
 
 def parse_headline(report: str, row: str = MODEL_ROW) -> dict:

@@ -27,11 +27,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from ._io import atomic_write_with
+from .camera import project  # noqa: F401 - re-exported: FreiHAND's projectPoints
 
 SAMPLE_VERSIONS = ("gs", "hom", "sample", "auto")
 """The sample versions of the training images, in file order (image id = sample + n * version)."""
@@ -51,36 +53,6 @@ def _to_numpy(x) -> np.ndarray:
     if hasattr(x, "detach"):
         x = x.detach().cpu().numpy()
     return np.asarray(x)
-
-
-def project(points, K):
-    """Project 3D camera-frame points to pixels with a pinhole intrinsic matrix.
-
-    ``uv = (K @ p)[:2] / (K @ p)[2]``, the official ``projectPoints``, batched.
-
-    Args:
-        points: (..., P, 3) points in metres, OpenCV camera frame (z forward); numpy or torch.
-        K: (..., 3, 3) intrinsic matrices, broadcastable against ``points``' batch dimensions.
-
-    Returns:
-        (..., P, 2) pixel coordinates (u right, v down), same library (numpy/torch) as
-        ``points``.
-    """
-    if hasattr(points, "detach"):
-        import torch
-
-        k = torch.as_tensor(K, dtype=points.dtype, device=points.device)
-        if points.shape[-1] != 3 or k.shape[-2:] != (3, 3):
-            raise ValueError(f"points must be (...,P,3) and K (...,3,3), got {tuple(points.shape)}"
-                             f" and {tuple(k.shape)}")
-        uvw = points @ k.transpose(-1, -2)
-        return uvw[..., :2] / uvw[..., 2:]
-    p = np.asarray(points, dtype=np.float64)
-    k = np.asarray(K, dtype=np.float64)
-    if p.shape[-1] != 3 or k.shape[-2:] != (3, 3):
-        raise ValueError(f"points must be (...,P,3) and K (...,3,3), got {p.shape} and {k.shape}")
-    uvw = p @ np.swapaxes(k, -1, -2)
-    return uvw[..., :2] / uvw[..., 2:]
 
 
 def _read_json(path: Path):
@@ -325,19 +297,6 @@ def _check_predictions(joints, vertices) -> tuple[np.ndarray, np.ndarray]:
     return j, v
 
 
-def _atomic_write(path: Path, write) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w" if write[0] == "text" else "wb") as fh:
-            write[1](fh)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
-
-
 def write_predictions(path: str | os.PathLike, joints, vertices) -> Path:
     """Write a FreiHAND prediction file ``[xyz_list, verts_list]`` (as the official ``pred.py``).
 
@@ -351,7 +310,7 @@ def write_predictions(path: str | os.PathLike, joints, vertices) -> Path:
     """
     j, v = _check_predictions(joints, vertices)
     payload = [j.tolist(), v.tolist()]  # float64 -> shortest round-trip decimal
-    return _atomic_write(Path(path), ("text", lambda fh: json.dump(payload, fh)))
+    return atomic_write_with(path, lambda fh: json.dump(payload, fh), binary=False)
 
 
 def load_predictions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
@@ -399,7 +358,7 @@ def zip_predictions(json_path: str | os.PathLike, zip_path: str | os.PathLike | 
         with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
             zf.write(json_path, arcname=json_path.name)
 
-    return _atomic_write(zip_path, ("binary", write))
+    return atomic_write_with(zip_path, write)
 
 
 def evaluate_predictions(pred_path: str | os.PathLike, root: str | os.PathLike,

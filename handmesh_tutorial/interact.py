@@ -65,7 +65,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .collision import Cylinders, cylinders_intersect, self_collisions
-from .dataset import SampleRejected
+from .dataset import KINDS, SampleRejected
 
 __all__ = [
     "FRAME_FOCAL",
@@ -93,9 +93,6 @@ __all__ = [
     "signed_distance",
 ]
 
-KINDS: tuple[str, ...] = ("hand-hand", "hand-object", "hand-chain")
-"""Scene kinds of the generator (``"mixed"`` in
-[`make_sample`][handmesh_tutorial.interact.make_sample] draws one per sample)."""
 
 STOP_REASONS: tuple[str, ...] = ("no valid move", "max rounds")
 """Why the joint-move loop (steps 4-5) stopped."""

@@ -36,8 +36,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .camera import project
 from .encoder import ResNet
-from .freihand import project
 
 __all__ = ["KeypointEncoder", "soft_argmax", "normalised_keypoints", "keypoint_loss"]
 

@@ -32,7 +32,7 @@ import numpy as np
 
 # The VR bins are defined once, in visibility.py: [0.40,0.60), [0.60,0.80), [0.80,0.95),
 # [0.95,1.00] (half-open, the last closed). Re-exported here for tables.
-from .visibility import VR_BINS
+from .visibility import VR_BINS, vr_bin_index  # noqa: F401 - vr_bin_index: part of the VR tables
 
 FREIHAND_THRESHOLDS = np.linspace(0.0, 0.05, 100)
 """PCK thresholds of the official FreiHAND AUC: 0 to 50 mm, 100 values (metres)."""
@@ -485,30 +485,6 @@ def scores_from_errors(ps: dict) -> dict:
 
 # --------------------------------------------------------------------------------------------
 # visibility-ratio stratification
-
-
-def vr_bin_index(vr, bins=VR_BINS):
-    """Index of the visibility-ratio bin of each value, -1 when it falls in none (vectorised).
-
-    The array version of
-    [`handmesh_tutorial.visibility.vr_bin`][handmesh_tutorial.visibility.vr_bin]. Bins are half-open
-    ``[lo, hi)`` except the last, which is closed ``[lo, hi]``: with the paper's bins 0.4 -> 0, 0.6
-    -> 1, 0.95 -> 3, 1.0 -> 3, 0.39 -> -1. NaN -> -1.
-
-    Args:
-        vr: a float or an array of visibility ratios in [0, 1].
-        bins: sequence of (lo, hi) pairs, increasing and non-overlapping.
-
-    Returns:
-        An int for a scalar input, else an int64 array of the input's shape.
-    """
-    v = np.asarray(vr, dtype=np.float64)
-    idx = np.full(v.shape, -1, dtype=np.int64)
-    last = len(bins) - 1
-    for k, (lo, hi) in enumerate(bins):
-        inside = (v >= lo) & ((v <= hi) if k == last else (v < hi))
-        idx[inside & (idx < 0)] = k
-    return int(idx) if idx.ndim == 0 else idx
 
 
 def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,

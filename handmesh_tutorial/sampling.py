@@ -33,7 +33,6 @@ import hashlib
 import heapq
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +40,8 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 import trimesh
+
+from ._io import atomic_savez
 
 __all__ = [
     "ALGORITHM_VERSION",
@@ -506,16 +507,7 @@ def _save(path: Path, hier: MeshHierarchy) -> None:
         arrays[f"up_data_{l}"] = u.data
         arrays[f"up_indices_{l}"] = u.indices.astype(np.int64)
         arrays[f"up_indptr_{l}"] = u.indptr.astype(np.int64)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_savez(path, compressed=False, **arrays)
 
 
 def _load(path: Path) -> MeshHierarchy:

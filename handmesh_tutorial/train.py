@@ -45,7 +45,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
-import json
 import math
 import os
 import pickle
@@ -63,7 +62,7 @@ from torch import nn
 from . import augment as A
 from . import metrics as M
 from ._io import atomic_write_bytes as _atomic_write_bytes
-from ._io import leftover_temporaries
+from ._io import leftover_temporaries, write_json
 from ._progress import progress_bar
 from .dataset import KINDS
 from .keypoints import keypoint_loss, normalised_keypoints
@@ -74,7 +73,7 @@ __all__ = [
     "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
     "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
     "constant_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND", "MEAN_HAND",
-    "toy_sample", "existing_run", "remove_stale_temp_files", "changed_settings",
+    "existing_run", "remove_stale_temp_files", "changed_settings",
     "CHECKPOINT_FORMAT", "METRIC_COLUMNS", "RUN_CHECKPOINTS", "RESUMABLE_KEYS",
 ]
 
@@ -547,27 +546,6 @@ def _write_csv(path: Path, rows: Sequence[Mapping], columns: Sequence[str],
                          (repr(v) if isinstance(v, float) else v))
         w.writerow(cells)
     _atomic_write_bytes(path, buf.getvalue().encode(), durable)
-
-
-def _json_safe(obj):
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _json_safe(obj.tolist())
-    if isinstance(obj, np.generic):
-        return _json_safe(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
-
-
-def _write_json(path: Path, obj) -> None:
-    text = json.dumps(_json_safe(obj), indent=1, sort_keys=True, allow_nan=False)
-    _atomic_write_bytes(path, (text + "\n").encode())
 
 
 # --------------------------------------------------------------------------------------------
@@ -1114,7 +1092,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
     if config.skip_bad:
         train_ds, val_ds, skipped = _skip_bad_items(train_ds, val_ds, config.progress and is_main)
         if is_main:
-            _write_json(out / "skipped.json", {"skipped": skipped})
+            write_json(out / "skipped.json", {"skipped": skipped})
     n_vert = int(net.joint_regressor.shape[1])
     got = tuple(train_ds[0]["vertices"].shape)
     if got != (n_vert, 3):
@@ -1129,7 +1107,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
     if rng_to_restore is not None:
         _set_rng_state(rng_to_restore)
     if is_main:
-        _write_json(out / "config.json", {"config": config.to_dict(), "template_hash": t_id,
+        write_json(out / "config.json", {"config": config.to_dict(), "template_hash": t_id,
                                           "world_size": world})
     sampler = EpochBatchSampler(len(train_ds), config.batch_size, config.seed, rank, world,
                                 config.micro_batches)
@@ -1573,7 +1551,7 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
                "predictions_frame": res["predictions"]["frame"],
                "skipped": res.get("skipped", [])}
     files["json"] = out / "eval.json"
-    _write_json(files["json"], summary)
+    write_json(files["json"], summary)
     buf = io.BytesIO()
     p = res["predictions"]
     np.savez(buf, vertices=p["vertices"].astype(np.float32), joints=p["joints"].astype(np.float32),
@@ -1602,118 +1580,3 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
         files["vr"] = viz.save_figure(fig, out / "vr.png", dpi=90)
         plt.close(fig)
     return files
-
-
-# --------------------------------------------------------------------------------------------
-# a toy data source
-
-
-_TOY_HANDS: dict = {}
-
-
-def _toy_hand(side: str):
-    if side not in _TOY_HANDS:
-        from .hand import HandModel
-
-        hm = HandModel(side)
-        _TOY_HANDS[side] = (hm, hm.vertex_colors())
-    return _TOY_HANDS[side]
-
-
-def _splat(points, colors, K, size):
-    """Nearest-point z-buffer of 3D points (P, 3) with colours; returns depth, colour, mask."""
-    uvw = points @ K.T
-    uv = np.round(uvw[:, :2] / uvw[:, 2:]).astype(np.int64)
-    ok = (uv[:, 0] >= 0) & (uv[:, 0] < size) & (uv[:, 1] >= 0) & (uv[:, 1] < size) & \
-        (points[:, 2] > 0)
-    pix = uv[ok, 1] * size + uv[ok, 0]
-    z = points[ok, 2]
-    depth = np.full(size * size, np.inf)
-    np.minimum.at(depth, pix, z)
-    win = z <= depth[pix]
-    col = np.zeros((size * size, 3))
-    col[pix[win]] = colors[ok][win]
-    return depth.reshape(size, size), col.reshape(size, size, 3)
-
-
-def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict:
-    """A fast stand-in INTER-SH ``hand-hand`` sample: two posed hands, point-splatted.
-
-    No OpenGL: the faces of both meshes are sampled at 10 points each, projected and z-buffered
-    (shaded by the face normal), over a random colour gradient. Masks, VR, meshes and joints are
-    mutually consistent, so it trains, evaluates and stratifies by VR like the real data (just
-    simpler images). Use it with [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]
-    for tests and quick demos; the real scenes come from ``interact``.
-
-    Args:
-        seed: sample seed (same seed -> same sample).
-        image_size: image side, pixels.
-        side: side of the target hand (label 1); ``None`` = random. The other hand (label 2)
-            is of the opposite side and a little nearer the camera.
-
-    Returns:
-        A sample dict for [`write_sample`][handmesh_tutorial.dataset.write_sample].
-    """
-    from scipy.spatial.transform import Rotation
-
-    from .hand import random_pose, random_shape
-
-    rng = np.random.default_rng(seed)
-    if side is None:
-        side = "left" if rng.random() < 0.5 else "right"
-    if side not in ("left", "right"):
-        raise ValueError(f"side must be 'left', 'right' or None, got {side!r}")
-    other = "right" if side == "left" else "left"
-    s = int(image_size)
-    f = 1.6 * s
-    c = (s - 1) / 2.0
-    K = np.array([[f, 0.0, c], [0.0, f, c], [0.0, 0.0, 1.0]])
-    centre1 = np.array([*rng.uniform(-0.03, 0.03, 2), rng.uniform(0.45, 0.55)])
-    ang = rng.uniform(0, 2 * np.pi)
-    off = rng.uniform(0.03, 0.14)
-    centre2 = centre1 + np.array([off * np.cos(ang), off * np.sin(ang), -rng.uniform(0.03, 0.1)])
-    bary = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [.5, .5, 0], [0, .5, .5], [.5, 0, .5],
-                     [1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6],
-                     [1 / 6, 1 / 6, 2 / 3]])
-    meshes, joints, poses, layers = {}, {}, {}, {}
-    for lab, sd, centre in ((1, side, centre1), (2, other, centre2)):
-        hm, colors = _toy_hand(sd)
-        pose = random_pose(rng, 1, sd, max_flexion_deg=70.0)
-        orient = Rotation.random(random_state=rng).as_rotvec()[None].astype(np.float32)
-        shape = random_shape(rng, 1, 0.5)
-        with torch.no_grad():
-            o = hm(pose=pose, shape=shape, global_orient=orient)
-        v, j = o.vertices[0].double().numpy(), o.joints[0].double().numpy()
-        shift = centre - v.mean(0)
-        v, j = v + shift, j + shift
-        meshes[lab], joints[lab], poses[lab] = (v, hm.faces), j, pose[0]
-        tri = v[hm.faces]  # (F, 3, 3)
-        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
-        view = tri.mean(1) / np.linalg.norm(tri.mean(1), axis=1, keepdims=True)
-        shade = 0.35 + 0.65 * np.abs((n * view).sum(1))
-        pts = np.einsum("kc,fcd->fkd", bary, tri).reshape(-1, 3)
-        col = (colors[hm.faces].mean(1) * shade[:, None])[:, None].repeat(len(bary), 1)
-        layers[lab] = _splat(pts, col.reshape(-1, 3), K, s)
-    depth = np.stack([layers[1][0], layers[2][0]])
-    alone = np.isfinite(depth)
-    scene = np.where(alone.any(0), depth.argmin(0) + 1, 0).astype(np.int32)
-    yy, xx = np.mgrid[0:s, 0:s] / max(s - 1, 1)
-    c0, c1 = rng.uniform(0.1, 0.9, 3), rng.uniform(0.1, 0.9, 3)
-    t = (0.5 * (xx + yy))[..., None]
-    image = (1 - t) * c0 + t * c1
-    for lab in (1, 2):
-        image = np.where((scene == lab)[..., None], layers[lab][1], image)
-    image = np.clip(255 * image + rng.normal(0, 3, image.shape), 0, 255).astype(np.uint8)
-    vr = {lab: float((scene == lab).sum() / alone[lab - 1].sum()) if alone[lab - 1].any()
-          else 0.0 for lab in (1, 2)}
-    return {
-        "image": image, "scene_mask": scene,
-        "alone_masks": {1: alone[0], 2: alone[1]},
-        "meshes": {lab: (m[0].astype(np.float32), m[1]) for lab, m in meshes.items()},
-        "joints": {lab: jj.astype(np.float32) for lab, jj in joints.items()},
-        "pose": {lab: p.astype(np.float32) for lab, p in poses.items()},
-        "K": K, "vr": vr, "kind": "hand-hand", "target": 1, "sides": {1: side, 2: other},
-        "names": {1: f"{side}_hand", 2: f"{other}_hand"},
-        "stats": {"stop": "toy"},
-    }

@@ -18,7 +18,6 @@ This module is the one place that defines the VR bins of the paper (`VR_BINS`).
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -32,6 +31,7 @@ __all__ = [
     "visibility_ratio",
     "visibility_ratios",
     "vr_bin",
+    "vr_bin_index",
 ]
 
 VR_BINS: tuple[tuple[float, float], ...] = ((0.40, 0.60), (0.60, 0.80), (0.80, 0.95), (0.95, 1.00))
@@ -122,28 +122,35 @@ def visibility_ratios(scene_mask: Any, alone_masks: Mapping[int, Any],
             for lab, m in alone_masks.items()}
 
 
-def vr_bin(vr: float, bins: tuple[tuple[float, float], ...] = VR_BINS) -> int:
-    """Index of the VR bin holding ``vr``, or -1 when it is in none.
+def vr_bin_index(vr, bins=VR_BINS):
+    """Index of the visibility-ratio bin of each value, -1 when it falls in none (vectorised).
 
-    Bins are half open ``[low, high)`` except the last, which is closed ``[low, high]``. Because a
-    VR is a ratio of pixel counts computed in float64, values such as ``3/5`` or ``19/20`` equal
-    the literals ``0.6`` and ``0.95`` exactly and fall in the upper bin.
+    The one definition of the bin rule. Bins are half open ``[low, high)`` except the last, which
+    is closed ``[low, high]``: with the paper's bins 0.4 -> 0, 0.6 -> 1, 0.95 -> 3, 1.0 -> 3,
+    0.39 -> -1, NaN -> -1. Because a VR is a ratio of pixel counts computed in float64, values
+    such as ``3/5`` or ``19/20`` equal the literals ``0.6`` and ``0.95`` exactly and fall in the
+    upper bin.
 
     Args:
-        vr: a visibility ratio.
-        bins: increasing ``(low, high)`` pairs (default `VR_BINS`).
+        vr: a float or an array of visibility ratios in [0, 1].
+        bins: increasing, non-overlapping ``(low, high)`` pairs (default `VR_BINS`).
 
     Returns:
-        The bin index in ``0 .. len(bins)-1``, or -1 (below 0.40, above 1, or NaN).
+        An int for a scalar input, else an int64 array of the input's shape.
     """
-    v = float(vr)
-    if math.isnan(v):
-        return -1
+    v = np.asarray(vr, dtype=np.float64)
+    idx = np.full(v.shape, -1, dtype=np.int64)
     last = len(bins) - 1
-    for i, (lo, hi) in enumerate(bins):
-        if lo <= v < hi or (i == last and v == hi):
-            return i
-    return -1
+    for k, (lo, hi) in enumerate(bins):
+        inside = (v >= lo) & ((v <= hi) if k == last else (v < hi))
+        idx[inside & (idx < 0)] = k
+    return int(idx) if idx.ndim == 0 else idx
+
+
+def vr_bin(vr: float, bins: tuple[tuple[float, float], ...] = VR_BINS) -> int:
+    """Index of the VR bin holding one ``vr``, or -1 when it is in none (below 0.40, above 1,
+    NaN); the scalar form of `vr_bin_index`."""
+    return int(vr_bin_index(float(vr), bins))
 
 
 class BalancedVRSampler:

@@ -7,10 +7,11 @@ viewers (meshcat, ipywidgets) are optional extras that notebooks import lazily.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from ._io import atomic_write_with
 
 # One colour per finger, FreiHAND order: thumb, index, middle, ring, pinky.
 FINGER_COLORS = ("#d62728", "#ff7f0e", "#2ca02c", "#1f77b4", "#9467bd")
@@ -347,18 +348,9 @@ def plot_error_vs_vr(ax, vr, errors, bins=None, label: str = "error", unit: str 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 100) -> Path:
     """Save a matplotlib figure atomically (temp file + rename) and return its path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp" + path.suffix)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; a figure is meant to be shared
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
+    fmt = Path(path).suffix.lstrip(".") or "png"
+    return atomic_write_with(path, lambda fh: fig.savefig(fh, dpi=dpi, bbox_inches="tight",
+                                                          format=fmt))
 
 
 def _to_numpy(x) -> np.ndarray:

@@ -9,8 +9,9 @@ import torch
 from PIL import Image
 
 from handmesh_tutorial import augment as A
+from handmesh_tutorial.camera import project
 from handmesh_tutorial.dataset import InterSHDataset, generate_dataset
-from handmesh_tutorial.train import toy_sample
+from handmesh_tutorial.testing import toy_sample
 
 torch.set_num_threads(1)
 
@@ -59,8 +60,8 @@ def test_flip_intrinsics_reprojects_mirrored_points_with_skew():
     K = np.array([[210.0, 3.5, 61.3], [0.0, 190.0, 47.9], [0.0, 0.0, 1.0]])
     pts = np.c_[rng.uniform(-0.1, 0.1, (30, 2)), rng.uniform(0.3, 0.8, 30)]
     W = 128
-    uv = A.project(pts, K)
-    uv_f = A.project(pts * [-1, 1, 1], A.flip_intrinsics(K, W))
+    uv = project(pts, K)
+    uv_f = project(pts * [-1, 1, 1], A.flip_intrinsics(K, W))
     np.testing.assert_allclose(uv_f[:, 0], W - 1 - uv[:, 0], atol=1e-9)
     np.testing.assert_allclose(uv_f[:, 1], uv[:, 1], atol=1e-9)
     Kf = A.flip_intrinsics(K, W)
@@ -97,7 +98,7 @@ def test_warp_identity_and_integer_shift_are_exact():
 def test_markers_at_projected_joints_stay_at_projection_after_augmentation(side):
     image, K, verts, joints, _, vr = _raw(seed=5, side=side, size=256)
     markers = (0, 9, 20)  # wrist, middle MCP, pinky tip: one colour channel each
-    uv = A.project(joints[list(markers)], K)
+    uv = project(joints[list(markers)], K)
     canvas = np.stack([_disc(256, uv[c]) for c in range(3)], -1)
     img = (255 * canvas).round().astype(np.uint8)
     ds = A.HandCropDataset(image_size=64, augment=A.AugmentConfig.geometric())
@@ -107,7 +108,7 @@ def test_markers_at_projected_joints_stay_at_projection_after_augmentation(side)
         out = A.denormalize_image(item["image"])
         kc = item["K"].double().numpy()
         assert kc[1, 0] == 0 and kc[2, 0] == 0 and kc[2, 1] == 0 and kc[2, 2] == 1
-        proj = A.project((item["joints"] + item["root"]).double().numpy(), kc)
+        proj = project((item["joints"] + item["root"]).double().numpy(), kc)
         for c, j in enumerate(markers):
             if not (4 <= proj[j]).all() or not (proj[j] <= 59).all():
                 continue  # the shift moved this marker off the crop
@@ -228,7 +229,7 @@ def test_freihand_dataset_full_crop(tmp_path):
     for key, val in (("K", K), ("xyz", xyz), ("verts", verts)):
         (tmp_path / f"training_{key}.json").write_text(json.dumps([val.tolist()] * 2))
     (tmp_path / "training" / "rgb").mkdir(parents=True)
-    uv = A.project(xyz[9:10], K)[0]
+    uv = project(xyz[9:10], K)[0]
     img = (255 * np.repeat(_disc(224, uv, 6.0)[..., None], 3, -1)).astype(np.uint8)
     for i in range(2):
         Image.fromarray(img).save(tmp_path / "training" / "rgb" / f"{i:08d}.png", format="PNG")
@@ -240,7 +241,7 @@ def test_freihand_dataset_full_crop(tmp_path):
     item = ds[1]
     assert torch.isnan(item["vr"]) and not bool(item["mirrored"])
     assert item["vertices"].shape == (778, 3)
-    proj = A.project(item["root"][None].double(), item["K"].double())[0].numpy()
+    proj = project(item["root"][None].double(), item["K"].double())[0].numpy()
     np.testing.assert_allclose(_centroid(A.denormalize_image(item["image"])[..., 0]), proj,
                                atol=0.3)
     ev = A.FreiHANDTorchDataset(tmp_path, image_size=56, versions="gs", train=False)[0]

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from handmesh_tutorial import augment as A
 from handmesh_tutorial import keypoints as KP
 from handmesh_tutorial import losses as L
+from handmesh_tutorial.camera import project
 from handmesh_tutorial.encoder import resnet10
 from handmesh_tutorial.metrics import procrustes_align
 
@@ -74,7 +74,7 @@ def test_normalised_keypoints_follow_the_crop_pixel_convention():
     uv = KP.normalised_keypoints(joints, root, K, size)
     np.testing.assert_allclose(uv[0, 0].numpy(), [0.0, 0.0], atol=1e-6)
     np.testing.assert_allclose(uv[0, 1].numpy(), [1 / size - 1] * 2, atol=1e-6)
-    pix = A.project(joints[0] + root[0], K[0])
+    pix = project(joints[0] + root[0], K[0])
     np.testing.assert_allclose(((2 * pix + 1) / size - 1).numpy(), uv[0].numpy(), atol=1e-6)
 
 

@@ -20,7 +20,8 @@ from handmesh_tutorial import augment as A
 from handmesh_tutorial import train as T
 from handmesh_tutorial.budget import budget
 from handmesh_tutorial.cli import main as cli_main
-from handmesh_tutorial.dataset import InterSHDataset, generate_dataset, synthetic_sample
+from handmesh_tutorial.dataset import InterSHDataset, generate_dataset
+from handmesh_tutorial.testing import synthetic_sample, toy_sample
 
 torch.set_num_threads(1)
 
@@ -30,13 +31,13 @@ TINY = {"image_size": 32, "channels": (4, 4, 8, 8, 8), "latent_channels": 8, "th
 
 @pytest.fixture(scope="module")
 def samples():
-    return [T.toy_sample(i, image_size=64) for i in range(8)]
+    return [toy_sample(i, image_size=64) for i in range(8)]
 
 
 @pytest.fixture(scope="module")
 def toy_root(tmp_path_factory):
     root = tmp_path_factory.mktemp("toy_intersh")
-    generate_dataset(root, functools.partial(T.toy_sample, image_size=64), num=8, seed=11,
+    generate_dataset(root, functools.partial(toy_sample, image_size=64), num=8, seed=11,
                      kind="hand-hand", progress=False, durable=False)
     return root
 
