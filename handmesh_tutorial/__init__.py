@@ -16,9 +16,9 @@ __version__ = "0.1.0"
 # One module per concept; see docs/index.md for the data flow between them.
 _SUBMODULES = (
     "augment", "blocks", "budget", "camera", "cli", "collision", "dataset", "decoder", "demo",
-    "encoder", "fit", "freihand", "hand", "interact", "keypoints", "lcs", "losses", "makehuman", "mano",
-    "metrics", "model", "objects", "render", "rotation", "sampling", "skinned", "spiral", "surface",
-    "testing", "train", "visibility", "viz",
+    "encoder", "fit", "freihand", "hand", "interact", "keypoints", "lcs", "losses", "makehuman",
+    "mano", "metrics", "model", "objects", "render", "rotation", "sampling", "skinned", "spiral",
+    "surface", "testing", "train", "visibility", "viz",
 )
 
 __all__ = ["Budget", "budget", "__version__", *_SUBMODULES]

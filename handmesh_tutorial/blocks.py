@@ -19,6 +19,9 @@ backward pass (about 8x faster on a CPU at the demo's sizes, ``benchmarks/train.
 original formulation (a gather and a weighted sum over at most ``K`` non-zeros per row) stays as
 ``method="gather"``, the reference the tests compare against. No ``torch_scatter`` is needed,
 the result is deterministic and the matrices are buffers that follow ``.to(device)``.
+
+Taught in notebook 07 ("The multi-path decoder").
+
 """
 
 from __future__ import annotations

@@ -8,12 +8,17 @@
 
 Nothing else in the library reads the variable: code asks
 [`budget`][handmesh_tutorial.budget.budget] for sizes.
+
+Used by every notebook (``hmt.budget()``); notebook 00 ("Quick start") introduces it.
+
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import asdict, dataclass
+
+__all__ = ["ENV_VAR", "TIERS", "Budget", "budget"]
 
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")

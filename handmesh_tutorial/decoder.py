@@ -36,6 +36,9 @@ field: with the Xavier-initialised spiral head the first output of the default d
 noise (after the model's ``output_scale``), and 300 fit steps left 10 mm of error and a crumpled
 surface; with a zero head 2.1 mm. [`MSMRNet`][handmesh_tutorial.model.MSMRNet] reads the output as a
 deformation of its template, so it starts exactly at the template.
+
+Taught in notebook 07 ("The multi-path decoder").
+
 """
 
 from __future__ import annotations

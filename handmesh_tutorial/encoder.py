@@ -20,6 +20,9 @@ ResNet-10 (ResNet-18 with one basic block per stage instead of two; not a torchv
 so there are no torchvision weights for it) is the CPU choice: without pretrained weights it
 leaves the "mean hand" plateau of from-scratch training in fewer steps than ResNet-18 and each
 step costs less (docs page "Training from scratch on a CPU", ``benchmarks/model.py``).
+
+Taught in notebook 08 ("Training").
+
 """
 
 from __future__ import annotations

@@ -46,6 +46,9 @@ channels ours is 410k parameters, 0.76 of the single-path decoder and 0.61 of th
 Everything topological (hierarchy, spirals, up/down maps, joint regressor) comes from the template
 and is rebuilt by [`build_model`][handmesh_tutorial.model.build_model]; the state dict holds only
 learned weights.
+
+Taught in notebooks 07 ("The multi-path decoder") and 08 ("Training").
+
 """
 
 from __future__ import annotations

@@ -37,6 +37,9 @@ the sequence is the same rotation read from another start, and every later ring 
 deterministically ([`vertex_spiral`][handmesh_tutorial.spiral.vertex_spiral] takes that start
 explicitly). Boundary vertices are exactly equivariant. (Non-manifold vertices, whose neighbours
 form several fans, list the fans ordered by lowest id.)
+
+Taught in notebook 06 ("Mesh hierarchy and spiral convolution").
+
 """
 
 from __future__ import annotations

@@ -51,6 +51,10 @@ class TestNotebook:
         code = "\n".join(_source(c) for c in _cells(nb) if c["cell_type"] == "code")
         assert "import handmesh_tutorial as hmt" in code, f"{nb.name}: import the library as hmt"
         assert "sys.path" not in code, f"{nb.name}: no sys.path hacks"
+        aliases = re.findall(
+            r"^\s*(?:from handmesh_tutorial\S* import .*|import handmesh_tutorial\.\S*.*)$",
+            code, re.M)
+        assert not aliases, f"{nb.name}: use hmt.<module> instead of {aliases}"
         assert "hmt.budget()" in code, f"{nb.name}: sizes must come from hmt.budget()"
         assert "HANDMESH_BUDGET" not in code, f"{nb.name}: only hmt.budget() reads HANDMESH_BUDGET"
 

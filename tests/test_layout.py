@@ -1,0 +1,151 @@
+"""The library's layout: public surface, module sizes, module docstrings, no import cycles.
+
+`fixtures/public_names.json` is the public surface as it stood before the library was split into
+subpackages (issue "Architecture"): every name there must stay importable from the same module
+path, so user code, notebooks and the DESIGN entry points keep working. A name may leave it only
+on purpose (edit the fixture in the same commit and say why).
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import json
+import pkgutil
+from pathlib import Path
+
+import pytest
+
+import handmesh_tutorial as hmt
+
+PACKAGE_DIR = Path(hmt.__file__).parent
+PUBLIC_NAMES = json.loads((Path(__file__).parent / "fixtures" / "public_names.json").read_text())
+MAX_LINES = 500  # DESIGN: "split past ~500 lines"
+SIZE_NOTE = "Why one file"  # a longer module says why in its docstring
+
+
+def _all_modules() -> list[str]:
+    names = []
+    for info in pkgutil.walk_packages([str(PACKAGE_DIR)], prefix="handmesh_tutorial."):
+        names.append(info.name)
+    return sorted(names)
+
+
+def _source(module: str) -> Path:
+    rel = Path(*module.split(".")[1:])
+    pkg = PACKAGE_DIR / rel / "__init__.py"
+    return pkg if pkg.exists() else PACKAGE_DIR / rel.with_suffix(".py")
+
+
+MODULES = _all_modules()
+PUBLIC_MODULES = [m for m in MODULES if not any(p.startswith("_") for p in m.split(".")[1:])]
+
+
+@pytest.mark.parametrize("module", sorted(PUBLIC_NAMES))
+def test_every_public_name_of_before_the_split_is_still_exported(module):
+    mod = importlib.import_module(f"handmesh_tutorial.{module}")
+    exported = set(getattr(mod, "__all__", ()))
+    missing = [n for n in PUBLIC_NAMES[module] if n not in exported or not hasattr(mod, n)]
+    assert not missing, f"handmesh_tutorial.{module} no longer exports {missing}"
+
+
+@pytest.mark.parametrize("module", PUBLIC_MODULES)
+def test_every_public_module_declares_all_and_every_listed_name_exists(module):
+    mod = importlib.import_module(module)
+    assert hasattr(mod, "__all__"), f"{module} has no __all__"
+    assert len(set(mod.__all__)) == len(mod.__all__), f"{module}.__all__ repeats a name"
+    absent = [n for n in mod.__all__ if not hasattr(mod, n)]
+    assert not absent, f"{module}.__all__ lists names it does not define: {absent}"
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_modules_stay_small_or_say_why(module):
+    path = _source(module)
+    text = path.read_text()
+    lines = text.count("\n")
+    doc = ast.get_docstring(ast.parse(text)) or ""
+    assert lines <= MAX_LINES or SIZE_NOTE in doc, (
+        f"{path.relative_to(PACKAGE_DIR.parent)} has {lines} lines (> {MAX_LINES}) and its "
+        f"docstring has no '{SIZE_NOTE}' note")
+
+
+@pytest.mark.parametrize("module", PUBLIC_MODULES)
+def test_every_public_module_has_a_docstring_that_points_to_a_notebook_or_page(module):
+    doc = ast.get_docstring(ast.parse(_source(module).read_text())) or ""
+    assert doc.strip(), f"{module} has no docstring"
+    assert "notebook" in doc.lower() or "docs page" in doc.lower() or "see docs" in doc.lower(), (
+        f"{module}'s docstring names no notebook or docs page that teaches it")
+
+
+def _imports_at_import_time(module: str) -> set[str]:
+    """Library modules that ``module`` imports at module level (not inside functions)."""
+    path = _source(module)
+    tree = ast.parse(path.read_text())
+    is_pkg = path.name == "__init__.py"
+    base = module.split(".") if is_pkg else module.split(".")[:-1]
+    found = set()
+    for node in tree.body:  # top level only: function-local imports are deliberate
+        stmts = [node]
+        if isinstance(node, ast.If | ast.Try):
+            stmts = [n for n in ast.walk(node) if isinstance(n, ast.Import | ast.ImportFrom)]
+        for st in stmts:
+            if isinstance(st, ast.Import):
+                found |= {a.name for a in st.names if a.name.startswith("handmesh_tutorial")}
+            elif isinstance(st, ast.ImportFrom):
+                if st.level:
+                    parent = base[: len(base) - (st.level - 1)]
+                    target = ".".join(parent + ([st.module] if st.module else []))
+                elif st.module and st.module.startswith("handmesh_tutorial"):
+                    target = st.module
+                else:
+                    continue
+                found.add(target)
+                for a in st.names:  # `from . import spiral` imports a submodule
+                    if f"{target}.{a.name}" in MODULES:
+                        found.add(f"{target}.{a.name}")
+    return {m for m in found if m in MODULES and m != module}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one node (Tarjan)."""
+    index, low, stack, on, cycles = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def test_the_cycle_finder_finds_cycles_and_only_cycles():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": set()}) == []
+
+
+def test_the_import_graph_has_no_cycles():
+    graph = {m: _imports_at_import_time(m) for m in MODULES}
+    # a submodule's import of its own package's __init__ is how Python loads it, not a cycle
+    for m, deps in graph.items():
+        graph[m] = {d for d in deps if not m.startswith(d + ".")}
+    assert "handmesh_tutorial.model" in graph and graph["handmesh_tutorial.model"], "graph empty"
+    assert not _cycles(graph), f"import cycles: {_cycles(graph)}"
