@@ -39,6 +39,10 @@ class Cylinders:
         adjacent: (M, 2) int, pairs ``(i, j)`` with ``i < j`` of cylinders of this body that touch
             by design (they share a joint);
             [`self_collisions`][handmesh_tutorial.collision.queries.self_collisions] skips them.
+
+    Shapes:
+        ``p0, p1 (N, 3)``, ``radius (N,)`` (or one value for all), ``parts (N,)``,
+        ``adjacent (M, 2)``; metres.
     """
 
     p0: np.ndarray
@@ -165,6 +169,9 @@ def ring_cylinders(center, normal, major_radius: float, minor_radius: float, n: 
 
     Returns:
         [`Cylinders`][handmesh_tutorial.collision.cylinders.Cylinders] with ``n`` cylinders.
+
+    Shapes:
+        ``center, normal (3,)`` -> ``n`` cylinders.
     """
     c = _check_points(center, "center").reshape(3)
     nrm = _check_points(normal, "normal").reshape(3)
@@ -202,6 +209,9 @@ def box_cylinders(center, rotation, half_extents, cells: int = 2, *, name: str =
     Returns:
         [`Cylinders`][handmesh_tutorial.collision.cylinders.Cylinders]; cylinders in neighbouring
         cells are marked adjacent.
+
+    Shapes:
+        ``center (3,)``, ``rotation (3, 3)``, ``half_extents (3,)`` -> a grid of cylinders.
     """
     c = _check_points(center, "center").reshape(3)
     R = np.asarray(rotation, dtype=np.float64)

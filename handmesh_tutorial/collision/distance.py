@@ -30,6 +30,9 @@ def point_cylinder_distance(points, p0, p1, radius) -> np.ndarray:
 
     Returns:
         (...,) distances, metres.
+
+    Shapes:
+        ``points, p0, p1 (..., 3)``, ``radius (...)`` (broadcast) -> ``(...)`` metres.
     """
     x, p0, p1 = (_check_points(a, n) for a, n in ((points, "points"), (p0, "p0"), (p1, "p1")))
     r = _check_radius(radius, "radius")
@@ -59,6 +62,9 @@ def project_to_cylinder(points, p0, p1, radius) -> np.ndarray:
 
     Returns:
         (..., 3) projected points, metres.
+
+    Shapes:
+        ``points, p0, p1 (..., 3)``, ``radius (...)`` (broadcast) -> ``(..., 3)`` metres.
     """
     d = p1 - p0
     length = np.linalg.norm(d, axis=-1)
@@ -85,6 +91,9 @@ def cylinder_support(directions, p0, p1, radius) -> np.ndarray:
 
     Returns:
         (...,) support values (metres times |n|).
+
+    Shapes:
+        ``directions, p0, p1 (..., 3)``, ``radius (...)`` (broadcast) -> ``(...)``.
     """
     d = p1 - p0
     u = d / np.linalg.norm(d, axis=-1)[..., None]
@@ -106,6 +115,9 @@ def sphere_cylinder_intersect(center, radius, p0, p1, r, *, atol: float = ATOL) 
 
     Returns:
         bool array of the broadcast batch shape.
+
+    Shapes:
+        ``center, p0, p1 (..., 3)``, ``radius, r (...)`` (broadcast) -> ``(...)`` bool.
     """
     radius = _check_radius(radius, "radius")
     return point_cylinder_distance(center, p0, p1, r) <= radius + atol

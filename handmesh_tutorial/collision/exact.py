@@ -63,6 +63,9 @@ def segment_segment_distance(p0, p1, q0, q1, return_params: bool = False):
 
     Raises:
         ValueError: wrong shapes, NaN/inf or a zero-length segment.
+
+    Shapes:
+        ``p0, p1, q0, q1 (..., 3)`` (broadcast) -> ``(...)`` metres.
     """
     p0, p1, _, q0, q1, _, shape = _prepare(p0, p1, 0.0, q0, q1, 0.0, 0.0)
     p0, p1, q0, q1 = _rows(p0), _rows(p1), _rows(q0), _rows(q1)
@@ -341,6 +344,9 @@ def cylinders_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL,
     Raises:
         ValueError: wrong shapes, NaN/inf, negative radius, zero-length axis (names the argument).
 
+    Shapes:
+        ``a0, a1, b0, b1 (..., 3)``, ``ra, rb (...)`` (broadcast) -> ``(...)`` bool.
+
     Example:
         >>> a0, a1, b0, b1 = [0, 0, 0], [0, 0, 0.04], [0.019, 0, 0.02], [0.019, 0.04, 0.02]
         >>> cylinders_intersect(a0, a1, 0.01, b0, b1, 0.01)
@@ -380,6 +386,9 @@ def capsules_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.ndar
     Raises:
         ValueError: as
             [`cylinders_intersect`][handmesh_tutorial.collision.exact.cylinders_intersect].
+
+    Shapes:
+        ``a0, a1, b0, b1 (..., 3)``, ``ra, rb (...)`` (broadcast) -> ``(...)`` bool.
     """
     a0, a1, ra, b0, b1, rb, shape = _prepare(a0, a1, ra, b0, b1, rb, atol)
     a0, a1, b0, b1 = _rows(a0), _rows(a1), _rows(b0), _rows(b1)

@@ -42,6 +42,9 @@ def fit_cylinders(vertices, segments, assignment, *, percentile: float = 95.0, e
 
     Returns:
         [`Cylinders`][handmesh_tutorial.collision.cylinders.Cylinders] with N cylinders.
+
+    Shapes:
+        ``vertices (V, 3)``, ``segments (N, 2, 3)``, ``assignment (V,)`` -> N cylinders.
     """
     v = _pts(vertices, "vertices")
     seg = np.asarray(segments, dtype=np.float64)
@@ -115,6 +118,9 @@ def hand_segments(joints21, palm_spread: float = 0.7) -> np.ndarray:
     Returns:
         (20, 2, 3) end points, in the order of
         [`HAND_CYLINDER_NAMES`][handmesh_tutorial.collision.hand_proxies.HAND_CYLINDER_NAMES].
+
+    Shapes:
+        ``joints21 (21, 3)`` -> ``(20, 2, 3)`` metres.
     """
     j = np.asarray(joints21, dtype=np.float64)
     if j.shape != (21, 3):
@@ -160,6 +166,10 @@ def hand_cylinders(output_or_vertices, joints21=None, model=None, index: int = 0
         [`Cylinders`][handmesh_tutorial.collision.cylinders.Cylinders] with names
         [`HAND_CYLINDER_NAMES`][handmesh_tutorial.collision.hand_proxies.HAND_CYLINDER_NAMES],
         metres.
+
+    Shapes:
+        ``vertices (B, V, 3)`` or ``(V, 3)``, ``joints21 (B, 21, 3)`` or ``(21, 3)`` -> 20
+        cylinders.
     """
     verts = _to_numpy(getattr(output_or_vertices, "vertices", output_or_vertices), "vertices")
     if joints21 is None:
@@ -216,6 +226,9 @@ def coverage(vertices, body: Cylinders, *, tol: float = 1e-6) -> dict:
     Returns:
         dict with ``fraction_outside`` (of the vertices), ``max_outside_mm``, ``mean_outside_mm``
         (over the outside vertices, 0 when none) and ``distance`` ((V,) metres, 0 when covered).
+
+    Shapes:
+        ``vertices (V, 3)`` -> ``distance (V,)`` metres (and scalars).
     """
     v = _pts(_to_numpy(vertices, "vertices"), "vertices")
     d = point_cylinder_distance(v[:, None], body.p0[None], body.p1[None], body.radius[None])

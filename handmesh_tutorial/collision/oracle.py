@@ -51,6 +51,10 @@ def distance_bounds(a0, a1, ra, b0, b1, rb, *, iters: int = 2000, tol: float = 1
     Returns:
         ``(lower, upper)``, two (N,) arrays in metres, ``0 <= lower <= distance <= upper``; with
         ``return_points`` also ``x`` (N, 3) in A and ``y`` (N, 3) in B with ``|x - y| = upper``.
+
+    Shapes:
+        ``a0, a1, b0, b1 (N, 3)``, ``ra, rb (N,)`` -> ``lower, upper (N,)`` metres
+        (and ``x, y (N, 3)``).
     """
     a0, a1, ra, b0, b1, rb, _ = _prepare(a0, a1, ra, b0, b1, rb, 0.0)
     n_pairs = len(a0)

@@ -164,6 +164,10 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
     Raises:
         ValueError: bad shapes, ids out of range, degenerate faces, unused vertices, bad factors.
         RuntimeError: a level cannot be reached without breaking the mesh.
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)`` -> per level ``vertices (V_l, 3)``,
+        ``faces (F_l, 3)``.
     """
     v, f = _check_mesh(vertices, faces)
     factors = tuple(float(x) for x in factors)

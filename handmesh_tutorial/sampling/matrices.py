@@ -23,6 +23,9 @@ def selection_matrix(kept, num_fine: int) -> sp.csr_matrix:
 
     Returns:
         (V_coarse, V_fine) float64 CSR matrix with a single 1 per row, at column ``kept[i]``.
+
+    Shapes:
+        ``kept (V_coarse,)`` -> ``(V_coarse, V_fine)``.
     """
     kept = np.asarray(kept, dtype=np.int64)
     n = len(kept)
@@ -49,6 +52,10 @@ def barycentric_upsampling(fine_vertices, coarse_vertices, coarse_faces, kept=No
 
     Returns:
         (V_fine, V_coarse) float64 CSR matrix with at most 3 non-zeros per row.
+
+    Shapes:
+        ``fine_vertices (V_fine, 3)``, ``coarse_vertices (V_coarse, 3)``,
+        ``coarse_faces (F_coarse, 3)`` -> ``(V_fine, V_coarse)``.
     """
     fine = np.asarray(fine_vertices, dtype=np.float64)
     cv, cf = _check_mesh(coarse_vertices, coarse_faces)
@@ -100,6 +107,9 @@ def to_torch_sparse(matrix: sp.spmatrix, dtype=None):
 
     Returns:
         (M, N) sparse COO tensor; use ``torch.sparse.mm(t, x)`` with ``x`` (N, C).
+
+    Shapes:
+        ``(M, N)`` scipy sparse -> ``(M, N)`` torch sparse COO.
     """
     import torch
 

@@ -33,6 +33,9 @@ def vertex_quadrics(vertices, faces) -> np.ndarray:
 
     Returns:
         (V, 4, 4) float64 symmetric positive semi-definite matrices (squared distance units).
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)`` -> ``(V, 4, 4)``.
     """
     v, f = _check_mesh(vertices, faces)
     tri = v[f]
@@ -240,6 +243,9 @@ def decimate(vertices, faces, num_vertices: int) -> tuple[np.ndarray, np.ndarray
     Raises:
         ValueError: bad shapes, ids out of range, degenerate faces, or a bad ``num_vertices``.
         RuntimeError: no legal contraction is left before reaching ``num_vertices``.
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)`` -> ``kept (V',)``, ``coarse_faces (F', 3)``.
     """
     v, f = _check_mesh(vertices, faces)
     used = len(np.unique(f))
