@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 
 import handmesh_tutorial as hmt
 from handmesh_tutorial import collision as C
+from handmesh_tutorial.collision._common import _kernels
 
 
 def random_pairs(n: int, seed: int = 0, box: float = 0.03):
@@ -95,7 +96,7 @@ def main() -> None:
     n = args.pairs
     pairs = random_pairs(n)
     print(f"# cylinder pairs: {n:,} random finger-sized pairs")
-    backends = ["numba", "numpy"] if C._kernels("auto") is not None else ["numpy"]
+    backends = ["numba", "numpy"] if _kernels("auto") is not None else ["numpy"]
     for b in backends:  # warm-up (loads or compiles the numba kernels)
         C.cylinders_intersect(*(p[:1000] for p in pairs), backend=b)
     res = {b: C.cylinders_intersect(*pairs, backend=b) for b in backends}

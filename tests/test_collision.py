@@ -617,9 +617,9 @@ def _adversarial_pairs(rng, n):
 
 @pytest.mark.skipif("numba" not in BACKENDS, reason="numba not installed")
 def test_numba_kernels_match_numpy_reference():
-    from handmesh_tutorial import _collision_numba as K
-    assert (K._PARALLEL_SIN, K._COPLANAR, K._AXES_PARALLEL_SIN) == (
-        C._PARALLEL_SIN, C._COPLANAR, C._AXES_PARALLEL_SIN)
+    from handmesh_tutorial.collision import _common, _numba
+    assert (_numba._PARALLEL_SIN, _numba._COPLANAR, _numba._AXES_PARALLEL_SIN) == (
+        _common._PARALLEL_SIN, _common._COPLANAR, _common._AXES_PARALLEL_SIN)
     rng = np.random.default_rng(12)
     families = {"uniform": random_pairs(20000, rng), "near contact": near_contact_pairs(500, 13)[0],
                 "adversarial": _adversarial_pairs(rng, 20000)}
@@ -666,3 +666,21 @@ def test_numba_body_queries_match_numpy_reference(hands):
             for r, g in zip(ref, got, strict=True):
                 np.testing.assert_array_equal(g, r)
     assert 10 < n_hit < 3 * 24  # some poses collide, some do not
+
+
+def test_backend_is_read_from_the_package(monkeypatch):
+    """``hmt.collision.BACKEND`` set on the package reaches every submodule's queries."""
+    from handmesh_tutorial.collision import _common
+    a0, a1, ra, b0, b1, rb = random_pairs(5, np.random.default_rng(3))
+    body = C.Cylinders(a0, a1, ra)
+    monkeypatch.setattr(hmt.collision, "BACKEND", "fortran")
+    for call in (lambda: C.cylinders_intersect(a0, a1, ra, b0, b1, rb),
+                 lambda: C.bodies_collide(body, body), lambda: C.colliding_pairs(body, body),
+                 lambda: C.self_collisions(body)):
+        with pytest.raises(ValueError, match="backend"):
+            call()
+    monkeypatch.setattr(hmt.collision, "BACKEND", "numpy")
+    assert _common._kernels(None) is None
+    if "numba" in BACKENDS:
+        monkeypatch.setattr(hmt.collision, "BACKEND", "numba")
+        assert _common._kernels(None) is _common._kernels("numba") is not None

@@ -1,13 +1,14 @@
 """Compiled (numba) kernels of the exact cylinder test: one pair at a time, scalar code.
 
-This is the fast path of `handmesh_tutorial.collision`; the numpy functions there remain the
-reference and the fallback when numba is missing. Each function below mirrors one numpy kernel of
-``collision.py`` operation for operation (same formulas, same order of floating-point operations,
-no ``fastmath``), so both paths compute the same numbers; they differ only in control flow: the
-scalar code stops at the first stage that decides a pair, and the trust-region Newton iteration
-stops per pair rather than when the whole batch has converged (a difference of at most a few
-ulps in a point that is then tested against a tolerance of ``atol``). ``tests/test_collision.py``
-compares the two paths on random, near-contact, near-parallel and degenerate pairs.
+This is the fast path of `handmesh_tutorial.collision`; the numpy functions of ``exact.py`` and
+``queries.py`` remain the reference and the fallback when numba is missing. Each function below
+mirrors one numpy kernel operation for operation (same formulas, same order of floating-point
+operations, no ``fastmath``), so both paths compute the same numbers; they differ only in control
+flow: the scalar code stops at the first stage that decides a pair, and the trust-region Newton
+iteration stops per pair rather than when the whole batch has converged (a difference of at most a
+few ulps in a point that is then tested against a tolerance of ``atol``).
+``tests/test_collision.py`` compares the two paths on random, near-contact, near-parallel and
+degenerate pairs.
 
 Why scalar code: the numpy path is a sequence of whole-array passes, each of which reads and writes
 (K,) temporaries and compacts the survivors of each stage; most pairs are decided by a cheap
@@ -24,11 +25,8 @@ import math
 import numpy as np
 from numba import njit
 
-# the same tolerances as the numpy path (collision.py defines them; repeated here so this module
-# imports without collision.py; a test checks they are equal)
-_PARALLEL_SIN = 1e-10
-_COPLANAR = 1e-12
-_AXES_PARALLEL_SIN = 1e-6
+# the tolerances of the numpy path (one copy, in _common.py; numba freezes them when compiling)
+from ._common import _AXES_PARALLEL_SIN, _COPLANAR, _PARALLEL_SIN
 
 _jit = njit(cache=True, error_model="numpy", nogil=True)
 
@@ -70,7 +68,7 @@ def _clip01(x):
 
 @_jit
 def _segment_closest(p0, d1, q0, d2):
-    """collision._segment_closest for one pair: parameters (s, t) in [0, 1]."""
+    """exact._segment_closest for one pair: parameters (s, t) in [0, 1]."""
     r = _sub(p0, q0)
     a, e = _dot(d1, d1), _dot(d2, d2)
     b, c, f = _dot(d1, d2), _dot(d1, r), _dot(d2, r)
@@ -86,7 +84,7 @@ def _segment_closest(p0, d1, q0, d2):
 
 @_jit
 def _inside(x, p0, v, length, r):
-    """collision._inside: is point x in the solid cylinder (p0, unit v, length, r)?"""
+    """exact._inside: is point x in the solid cylinder (p0, unit v, length, r)?"""
     w = _sub(x, p0)
     tau = _dot(w, v)
     rad = _sub(w, _mul(tau, v))
@@ -104,7 +102,7 @@ def _any_perpendicular(n):
 
 @_jit
 def _disk_closest_to_line(c, n, r, p, v):
-    """collision._disk_closest_to_line for one disk: its point nearest to the line p + t v."""
+    """exact._disk_closest_to_line for one disk: its point nearest to the line p + t v."""
     vn = _dot(v, n)
     kappa = vn * vn
     w = _sub(v, _mul(vn, n))
@@ -148,7 +146,7 @@ def _disk_closest_to_line(c, n, r, p, v):
 
 @_jit
 def _disks_intersect(c1, n1, r1, c2, n2, r2):
-    """collision._disks_intersect for one pair of disks (closed form)."""
+    """exact._disks_intersect for one pair of disks (closed form)."""
     m = _cross(n1, n2)
     sin = math.sqrt(_dot(m, m))
     dc = _sub(c1, c2)
@@ -168,7 +166,7 @@ def _disks_intersect(c1, n1, r1, c2, n2, r2):
 
 @_jit
 def _cap_row_live(c, n, r, o0, ov, ol, orad):
-    """The cheap prefilter of collision._caps_meet: can this cap disk meet the other solid?"""
+    """The cheap prefilter of exact._caps_meet: can this cap disk meet the other solid?"""
     w = _sub(c, o0)
     h0 = -_dot(w, n)
     h1 = h0 + ol * _dot(ov, n)
@@ -181,7 +179,7 @@ def _cap_row_live(c, n, r, o0, ov, ol, orad):
 
 @_jit
 def _caps_meet(A0, U, LA, RA, B0, V, LB, RB):
-    """collision._caps_meet for one pair: does an end-cap disk of one meet the other solid?"""
+    """exact._caps_meet for one pair: does an end-cap disk of one meet the other solid?"""
     A1 = _add(A0, _mul(LA, U))
     B1 = _add(B0, _mul(LB, V))
     live0 = _cap_row_live(A0, U, RA, B0, V, LB, RB)
@@ -216,7 +214,7 @@ def _caps_meet(A0, U, LA, RA, B0, V, LB, RB):
 
 @_jit
 def _core_units(A0, U, LA, RA, B0, V, LB, RB):
-    """collision._core_units for one pair (stages 2-4 on grown cylinders, unit axes)."""
+    """exact._core_units for one pair (stages 2-4 on grown cylinders, unit axes)."""
     s, t = _segment_closest(A0, _mul(LA, U), B0, _mul(LB, V))
     p = _add(A0, _mul(s * LA, U))
     pq = _sub(_add(B0, _mul(t * LB, V)), p)
@@ -236,7 +234,7 @@ def _vec(a, k):
 
 @_jit
 def cylinders_core(a0, a1, ra, b0, b1, rb, grow, out):
-    """collision._cylinders_core over K pairs: (K, 3) end points, (K,) radii -> out (K,) bool.
+    """exact._cylinders_core over K pairs: (K, 3) end points, (K,) radii -> out (K,) bool.
 
     Returns -1, or the first index whose A axis (then B axis) has zero length, times 2 (+1 for B),
     so the caller can raise the numpy path's error; ``out`` is then incomplete.
@@ -269,7 +267,7 @@ def cylinders_core(a0, a1, ra, b0, b1, rb, grow, out):
 
 @_jit
 def units(p0, p1, radius, grow, s0, u, length, rad):
-    """collision._units into preallocated (N, 3), (N, 3), (N,), (N,) arrays; False: zero axis."""
+    """queries._units into preallocated (N, 3), (N, 3), (N,), (N,) arrays; False: zero axis."""
     for k in range(p0.shape[0]):
         d = _sub(_vec(p1, k), _vec(p0, k))
         ln = math.sqrt(_dot(d, d))
@@ -293,7 +291,7 @@ def _pair(s0a, ua, la, ra, i, s0b, ub, lb, rb, j):
 
 @_jit
 def _aabb_apart(p0a, p1a, ra, p0b, p1b, rb, atol):
-    """collision.bodies_collide's whole-body bounding-box rejection."""
+    """queries.bodies_collide's whole-body bounding-box rejection."""
     for c in range(3):
         lo_a, hi_a, lo_b, hi_b = np.inf, -np.inf, np.inf, -np.inf
         for k in range(p0a.shape[0]):
@@ -322,7 +320,7 @@ def _body_units(p0a, p1a, rada, p0b, p1b, radb, atol):
 
 @_jit
 def bodies_collide(p0a, p1a, rada, p0b, p1b, radb, atol):
-    """collision.bodies_collide on raw arrays: 1 hit, 0 none, -1 zero-length axis."""
+    """queries.bodies_collide on raw arrays: 1 hit, 0 none, -1 zero-length axis."""
     if _aabb_apart(p0a, p1a, rada, p0b, p1b, radb, atol):
         return 0
     ok, sa, ua, la, ra, sb, ub, lb, rb = _body_units(p0a, p1a, rada, p0b, p1b, radb, atol)
@@ -338,7 +336,7 @@ def bodies_collide(p0a, p1a, rada, p0b, p1b, radb, atol):
 
 @_jit
 def all_pairs(p0a, p1a, rada, p0b, p1b, radb, atol, hit):
-    """collision.colliding_pairs on raw arrays into hit (NA, NB) bool; False on a zero axis."""
+    """queries.colliding_pairs on raw arrays into hit (NA, NB) bool; False on a zero axis."""
     ok, sa, ua, la, ra, sb, ub, lb, rb = _body_units(p0a, p1a, rada, p0b, p1b, radb, atol)
     if not ok:
         return False
@@ -351,7 +349,7 @@ def all_pairs(p0a, p1a, rada, p0b, p1b, radb, atol, hit):
 
 @_jit
 def listed_pairs(p0, p1, radius, ii, jj, atol, hit):
-    """collision._pairs_test of one body with itself on listed pairs (ii[k], jj[k]) into hit."""
+    """queries._pairs_test of one body with itself on listed pairs (ii[k], jj[k]) into hit."""
     n = p0.shape[0]
     s, u, ln, rad = np.empty((n, 3)), np.empty((n, 3)), np.empty(n), np.empty(n)
     if not units(p0, p1, radius, 0.5 * atol, s, u, ln, rad):

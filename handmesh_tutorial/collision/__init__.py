@@ -1,0 +1,84 @@
+"""Collision detection between finite solid cylinders (Ketchel–Larochelle), capsules and bodies.
+
+The INTER-SH generator (paper, supplementary "Generating Mesh Interactions") approximates hands and
+objects by cylinders and annuli and moves them until two primitives intersect. Taught in notebook 03
+(cylinder collision); the generator that uses it in notebook 04. Submodules (every public name is
+re-exported here, so ``hmt.collision.cylinders_intersect`` and
+``from handmesh_tutorial.collision import Cylinders`` keep working):
+
+* ``cylinders``: [`Cylinders`][handmesh_tutorial.collision.cylinders.Cylinders], a body as a batch
+  of cylinders (metres), and the ring / box builders.
+* ``exact``: [`cylinders_intersect`][handmesh_tutorial.collision.exact.cylinders_intersect], the
+  exact batched test for finite solid cylinders;
+  [`capsules_intersect`][handmesh_tutorial.collision.exact.capsules_intersect], the simple
+  conservative alternative (a cylinder lies in its capsule); the segment-segment distance.
+* ``distance``: point-cylinder distance, projection, support function, sphere-cylinder test.
+* ``oracle``: [`distance_bounds`][handmesh_tutorial.collision.oracle.distance_bounds], an
+  independent oracle that certifies the exact test.
+* ``queries``: scene queries [`bodies_collide`][handmesh_tutorial.collision.queries.bodies_collide],
+  [`colliding_pairs`][handmesh_tutorial.collision.queries.colliding_pairs],
+  [`self_collisions`][handmesh_tutorial.collision.queries.self_collisions].
+* ``hand_proxies``: the hand as cylinders:
+  [`hand_cylinders`][handmesh_tutorial.collision.hand_proxies.hand_cylinders],
+  [`fit_cylinders`][handmesh_tutorial.collision.hand_proxies.fit_cylinders],
+  [`coverage`][handmesh_tutorial.collision.hand_proxies.coverage].
+* ``_numba`` (private, opt-in): compiled mirrors of the exact kernels; ``_common`` (private): input
+  checks, tolerances, vector kernels, the backend switch.
+"""
+
+from __future__ import annotations
+
+from .cylinders import Cylinders, box_cylinders, ring_cylinders
+from .distance import (
+    cylinder_support,
+    point_cylinder_distance,
+    project_to_cylinder,
+    sphere_cylinder_intersect,
+)
+from .exact import ATOL, capsules_intersect, cylinders_intersect, segment_segment_distance
+from .hand_proxies import (
+    HAND_CYLINDER_NAMES,
+    coverage,
+    fit_cylinders,
+    hand_cylinders,
+    hand_segments,
+)
+from .oracle import distance_bounds
+from .queries import (
+    SELF_CONTACT_COMPRESSION,
+    bodies_collide,
+    colliding_pairs,
+    self_collisions,
+)
+
+BACKEND: str = "numpy"
+"""Which implementation the exact tests use: ``"numpy"`` (the vectorised reference, the default),
+``"numba"`` (the compiled kernels of ``handmesh_tutorial.collision._numba``, opt-in: docs page
+"Performance" says why it is not the default) or ``"auto"`` (numba when it imports, else numpy).
+Set it on this package (``hmt.collision.BACKEND = "numba"``); every query reads it at call time.
+Every public test also takes ``backend=``."""
+
+__all__ = [
+    "ATOL",
+    "BACKEND",
+    "HAND_CYLINDER_NAMES",
+    "SELF_CONTACT_COMPRESSION",
+    "Cylinders",
+    "bodies_collide",
+    "box_cylinders",
+    "capsules_intersect",
+    "colliding_pairs",
+    "coverage",
+    "cylinder_support",
+    "cylinders_intersect",
+    "distance_bounds",
+    "fit_cylinders",
+    "hand_cylinders",
+    "hand_segments",
+    "point_cylinder_distance",
+    "project_to_cylinder",
+    "ring_cylinders",
+    "segment_segment_distance",
+    "self_collisions",
+    "sphere_cylinder_intersect",
+]
