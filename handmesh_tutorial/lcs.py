@@ -47,12 +47,12 @@ range-of-motion tables such as the AAOS values). They are plausible defaults for
 measurements.
 
 **Left hands.** If the left mesh is the mirror image of the right by a reflection ``M`` (the
-library's hand negates z,
-[`handmesh_tutorial.hand.mirror_points`][handmesh_tutorial.hand.mirror_points]), the rule gives
-``F_left = M F_right diag(1, -1, 1)``: ``z`` and ``x`` mirror, ``y`` flips to stay right-handed
-(``(Mz) × (Mx) = -M (z × x)``). Then equal flexion angles give mirrored poses, while ``a_x`` and
-``a_z`` change sign ([`mirror_angles`][handmesh_tutorial.lcs.mirror_angles]). All limits on ``x``
-and ``z`` are symmetric, so the same table serves both sides.
+library's hand negates z, [`mirror_points`][handmesh_tutorial.hand.skinning.mirror_points]),
+the rule gives ``F_left = M F_right diag(1, -1, 1)``: ``z`` and ``x`` mirror, ``y`` flips to
+stay right-handed (``(Mz) × (Mx) = -M (z × x)``). Then equal flexion angles give mirrored
+poses, while ``a_x`` and ``a_z`` change sign
+([`mirror_angles`][handmesh_tutorial.lcs.mirror_angles]). All limits on ``x`` and ``z`` are
+symmetric, so the same table serves both sides.
 """
 
 from __future__ import annotations
@@ -511,7 +511,7 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
              slab: float = 0.25) -> Articulation:
     """The LCS of the 15 articulated joints of a hand model, in MANO joint order 1..15.
 
-    Works for [`HandModel`][handmesh_tutorial.hand.HandModel] and
+    Works for [`HandModel`][handmesh_tutorial.hand.model.HandModel] and
     [`ManoModel`][handmesh_tutorial.mano.ManoModel] (anything with ``side``, ``template_vertices``,
     ``skinning_weights``, ``parents`` and a zero-pose call returning ``joints`` (FreiHAND order) and
     ``joints_mano``).

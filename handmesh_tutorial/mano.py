@@ -2,7 +2,7 @@
 
 MANO is licence-gated, so the library ships its own hand (the MakeHuman hand,
 [`handmesh_tutorial.hand`][handmesh_tutorial.hand]). A user who owns the official files can load
-them here and use them anywhere a [`HandModel`][handmesh_tutorial.hand.HandModel] is accepted:
+them here and use them anywhere a [`HandModel`][handmesh_tutorial.hand.model.HandModel] is accepted:
 [`load_mano`][handmesh_tutorial.mano.load_mano] returns a
 [`ManoModel`][handmesh_tutorial.mano.ManoModel] with the same call signature and output (vertices,
 21 FreiHAND-order joints, 16 MANO joints, joint transforms) and the same attributes (``faces``,
@@ -375,7 +375,7 @@ def _infer_side(path: Path) -> str | None:
 
 class ManoModel(torch.nn.Module):
     """MANO (Romero et al. 2017) as a torch module with the
-    [`HandModel`][handmesh_tutorial.hand.HandModel] interface.
+    [`HandModel`][handmesh_tutorial.hand.model.HandModel] interface.
 
     Forward pass (all in metres, float32):
 
@@ -389,7 +389,7 @@ class ManoModel(torch.nn.Module):
        keypoints are these 16 plus the 5 fingertip vertices, in FreiHAND order.
 
     Usually built with [`load_mano`][handmesh_tutorial.mano.load_mano]. Attributes mirror
-    [`HandModel`][handmesh_tutorial.hand.HandModel].
+    [`HandModel`][handmesh_tutorial.hand.model.HandModel].
 
     Args:
         params: dict with the [`MANO_KEYS`][handmesh_tutorial.mano.MANO_KEYS] arrays (as returned by
@@ -566,7 +566,8 @@ class ManoModel(torch.nn.Module):
         return radii.astype(np.float32)
 
     def vertex_colors(self, tone=None, rng=None, variation: float = 0.04) -> np.ndarray:
-        """Per-vertex skin colour (a tone of [`SKIN_TONES`][handmesh_tutorial.hand.SKIN_TONES]).
+        """Per-vertex skin colour
+        (a tone of [`SKIN_TONES`][handmesh_tutorial.hand.appearance.SKIN_TONES]).
 
         MANO files carry no palm or nail labels, so the colour is one tone with a little
         per-vertex brightness noise.
@@ -664,7 +665,8 @@ class ManoModel(torch.nn.Module):
             transl: (B,3) translation in metres, added last.
 
         Returns:
-            The same output type as [`HandModel`][handmesh_tutorial.hand.HandModel]: ``vertices``
+            The same output type as [`HandModel`][handmesh_tutorial.hand.model.HandModel]:
+            ``vertices``
             (B,778,3), ``joints`` (B,21,3) FreiHAND order, ``joints_mano`` (B,16,3), ``transforms``
             (B,16,4,4) global rigid transforms of the joints, all metres, float32.
 
@@ -735,7 +737,7 @@ def load_mano(path: str | Path, side: str | None = None, *, use_pca: bool = Fals
             hands (the official left file needs it), off for right.
 
     Returns:
-        The model; call it like [`HandModel`][handmesh_tutorial.hand.HandModel].
+        The model; call it like [`HandModel`][handmesh_tutorial.hand.model.HandModel].
 
     Raises:
         FileNotFoundError: no such file.
