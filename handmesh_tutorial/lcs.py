@@ -24,7 +24,7 @@ decomposition becomes ambiguous, so flexion ranges beyond 90° (PIP 110°) round
 expressed in rest-pose axes. A rotation about the rest LCS axes is therefore
 ``R_k = F_k R(a) F_k^T``, and its axis-angle is simply ``F_k @ rotvec(R(a))``; that is what
 [`Articulation.to_pose`][handmesh_tutorial.lcs.Articulation.to_pose] returns, ready for
-``HandModel(pose=...)`` (and for [`ManoModel`][handmesh_tutorial.mano.ManoModel]).
+``HandModel(pose=...)`` (and for [`ManoModel`][handmesh_tutorial.mano.model.ManoModel]).
 
 **Which vertex (hand).** [`hand_lcs`][handmesh_tutorial.lcs.hand_lcs] picks ``v_i`` with a
 deterministic rule on the rest mesh: (1) a target direction ``d_i`` = the palmar normal of the hand
@@ -512,9 +512,9 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
     """The LCS of the 15 articulated joints of a hand model, in MANO joint order 1..15.
 
     Works for [`HandModel`][handmesh_tutorial.hand.model.HandModel] and
-    [`ManoModel`][handmesh_tutorial.mano.ManoModel] (anything with ``side``, ``template_vertices``,
-    ``skinning_weights``, ``parents`` and a zero-pose call returning ``joints`` (FreiHAND order) and
-    ``joints_mano``).
+    [`ManoModel`][handmesh_tutorial.mano.model.ManoModel]
+    (anything with ``side``, ``template_vertices``, ``skinning_weights``, ``parents`` and a
+    zero-pose call returning ``joints`` (FreiHAND order) and ``joints_mano``).
 
     Args:
         model: the hand model (its rest pose, zero shape, is used).

