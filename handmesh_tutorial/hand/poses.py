@@ -101,8 +101,8 @@ def random_pose(rng: np.random.Generator | int | None = None, batch: int = 1,
     """Random, loosely plausible poses: flexion in [0, max] per joint, small MCP sideways spread.
 
     Not anatomically limited; meant for figures, tests and the fitting demos. This is a different
-    distribution from [`lcs.random_pose`][handmesh_tutorial.lcs.random_pose], which draws the three
-    LCS angles of every joint uniformly inside per-axis joint limits (the generator's step 4):
+    distribution from [`lcs.random_pose`][handmesh_tutorial.lcs.hands.random_pose], which draws the
+    three LCS angles of every joint uniformly inside per-axis joint limits (the generator's step 4):
     here each joint only curls about its fixed flexion axis
     ([`flexion_axes`][handmesh_tutorial.hand.poses.flexion_axes]) by a uniform angle in
     [0, ``max_flexion_deg``], the MCPs also turn sideways by at most ``max_spread_deg``, and no
