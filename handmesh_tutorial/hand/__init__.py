@@ -50,6 +50,8 @@ Submodules (each name below is re-exported here, so ``hmt.hand.HandModel`` etc. 
   (notebooks 01, 05).
 * [`mesh`][handmesh_tutorial.hand.mesh]: the keypoint regressor, mesh checks, the forearm for
   rendering (notebooks 01, 05).
+
+Taught in notebook 01 (the hand model); every later notebook uses it.
 """
 
 from __future__ import annotations

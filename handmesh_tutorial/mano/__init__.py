@@ -55,6 +55,8 @@ Submodules (each name below is re-exported here, so ``hmt.mano.load_mano`` etc. 
 * [`unpickler`][handmesh_tutorial.mano.unpickler]: the restricted unpickler and
   ``read_mano_pickle`` (notebooks 01, 02).
 * [`model`][handmesh_tutorial.mano.model]: ``ManoModel`` and ``load_mano`` (notebooks 01, 02).
+
+Taught in notebook 01 (the hand model); notebook 02 builds the LCS of a MANO-format hand.
 """
 
 from __future__ import annotations
