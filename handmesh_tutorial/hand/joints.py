@@ -66,5 +66,7 @@ MIRROR_AXIS: int = 2
 """Axis negated to turn the right hand into the left hand (z: the thumb-to-pinky axis)."""
 
 _MANO_INDEX = {name: i for i, name in enumerate(MANO_JOINT_NAMES)}
+# FreiHAND keypoint of each MANO joint (MANO_TO_FREIHAND inverted on the 16 joints).
+_KEYPOINT_OF_MANO: tuple[int, ...] = tuple(MANO_TO_FREIHAND.index(k) for k in range(16))
 # MANO joints of each finger (base -> distal), FreiHAND finger order.
 _FINGER_MANO = {f: tuple(_MANO_INDEX[f"{f}{k}"] for k in (1, 2, 3)) for f in FINGER_NAMES}

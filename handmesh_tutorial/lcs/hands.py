@@ -65,7 +65,7 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
     out = model()
     j21 = _np(out.joints)[0]
     j16 = _np(out.joints_mano)[0]
-    m2f = _mano_to_freihand_16(_hand)
+    m2f = np.asarray(_hand.joints._KEYPOINT_OF_MANO)
     fparents = np.asarray(_hand.FREIHAND_PARENTS)
     child_kp = np.array([int(np.flatnonzero(fparents == m2f[k])[0]) for k in range(1, 16)])
     joints = j16[1:]
@@ -89,20 +89,6 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
                         child_points=child_points, flexion_points=verts[ids],
                         flexion_vertex_ids=ids, joint_ids=np.arange(1, 16), side=side,
                         limits_name=name)
-
-
-def _mano_to_freihand_16(hand_module) -> np.ndarray:
-    """(16,) FreiHAND keypoint index of each MANO joint."""
-    m2f = np.asarray(hand_module.MANO_TO_FREIHAND)
-    if m2f.shape == (16,):
-        return m2f.astype(np.int64)
-    if m2f.shape == (21,):  # FreiHAND i <- row m2f[i] of [16 joints, 5 tips]
-        out = np.empty(16, dtype=np.int64)
-        for i, r in enumerate(m2f):
-            if r < 16:
-                out[r] = i
-        return out
-    raise ValueError(f"hand.MANO_TO_FREIHAND has unexpected shape {m2f.shape}")
 
 
 def random_pose(model_or_lcs, rng=None, n: int | None = None, limits=None,

@@ -31,7 +31,7 @@ from ..hand._common import (
     _translate,
 )
 from ..hand.appearance import plain_skin_colors
-from ..hand.joints import MANO_TO_FREIHAND
+from ..hand.joints import _KEYPOINT_OF_MANO, MANO_TO_FREIHAND
 from ..hand.model import HandOutput
 from ..hand.skinning import axis_angle_to_matrix, lbs
 from .unpickler import read_mano_pickle
@@ -247,8 +247,6 @@ class ManoModel(torch.nn.Module):
         j = self.rest_joints.astype(np.float64)
         kp = self.rest_keypoints.astype(np.float64)
         owner = self.skinning_weights.argmax(1)
-        m2f = np.asarray(MANO_TO_FREIHAND)
-        mano_to_kp = {int(r): i for i, r in enumerate(m2f) if r < 16}
         radii = np.zeros(16)
         for k in range(16):
             children = np.flatnonzero(self.parents == k)
@@ -264,7 +262,7 @@ class ManoModel(torch.nn.Module):
             if len(children):
                 end = j[children[0]]
             else:
-                end = kp[mano_to_kp[k] + 1]                   # the finger's tip keypoint
+                end = kp[_KEYPOINT_OF_MANO[k] + 1]                   # the finger's tip keypoint
             d = end - j[k]
             t = np.clip((pts - j[k]) @ d / (d @ d), 0.0, 1.0)
             radii[k] = np.linalg.norm(pts - (j[k] + t[:, None] * d), axis=1).mean()
