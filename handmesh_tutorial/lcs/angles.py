@@ -1,0 +1,152 @@
+"""LCS angles <-> rotations <-> axis-angle pose vectors, limits checks and forward kinematics.
+
+A joint's articulation is three angles ``(a_x, a_y, a_z)`` (radians) about its LCS axes, composed
+``R_y(a_y) R_x(a_x) R_z(a_z)``; in rest-pose (parent) axes the rotation is ``F R(a) F^T`` and its
+axis-angle is ``F @ rotvec(R(a))`` (MANO's pose convention). Angles are (..., J, 3), frames
+(J,3,3).
+
+Taught in notebook 02 (local coordinate systems); the generator (notebook 04) samples poses with it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "rotation_from_lcs_angles", "lcs_angles_to_pose", "pose_to_lcs_angles", "mirror_angles",
+    "clip_angles", "within_limits", "forward_kinematics",
+]
+
+_EULER = "YXZ"  # intrinsic: flexion (y), then abduction (x), then twist (z)
+
+
+def _check_angles(frames: np.ndarray, angles) -> np.ndarray:
+    angles = np.asarray(angles, dtype=np.float64)
+    if angles.shape[-2:] != (frames.shape[0], 3):
+        raise ValueError(f"angles must have shape (..., {frames.shape[0]}, 3), "
+                         f"got {angles.shape}")
+    return angles
+
+
+def _euler_rotation(angles: np.ndarray) -> Rotation:
+    """scipy Rotation of R_y(a_y) R_x(a_x) R_z(a_z) for angles (N,3) ordered (a_x, a_y, a_z)."""
+    return Rotation.from_euler(_EULER, angles[:, [1, 0, 2]])
+
+
+def rotation_from_lcs_angles(frames, angles) -> np.ndarray:
+    """Rotation matrices of joints turned by LCS angles, in rest-pose (parent) axes.
+
+    Args:
+        frames: (J,3,3) rest LCS, columns ``x, y, z``.
+        angles: (..., J, 3) radians about ``(x, y, z)``, composed ``R_y R_x R_z``.
+
+    Returns:
+        (..., J, 3, 3) ``F_k R(a) F_k^T``.
+    """
+    frames = np.asarray(frames, dtype=np.float64)
+    angles = _check_angles(frames, angles)
+    local = _euler_rotation(angles.reshape(-1, 3)).as_matrix().reshape(*angles.shape, 3)
+    return frames @ local @ np.swapaxes(frames, -1, -2)
+
+
+def lcs_angles_to_pose(frames, angles) -> np.ndarray:
+    """Axis-angle pose vectors (MANO convention) of LCS angles.
+
+    Args:
+        frames: (J,3,3) rest LCS.
+        angles: (..., J, 3) radians.
+
+    Returns:
+        (..., J, 3) float64 axis-angle of ``F_k R(a) F_k^T`` (= ``F_k @ rotvec(R(a))``).
+    """
+    frames = np.asarray(frames, dtype=np.float64)
+    angles = _check_angles(frames, angles)
+    rotvec = _euler_rotation(angles.reshape(-1, 3)).as_rotvec().reshape(angles.shape)
+    return np.einsum("jab,...jb->...ja", frames, rotvec)
+
+
+def pose_to_lcs_angles(frames, pose) -> np.ndarray:
+    """Inverse of [`lcs_angles_to_pose`][handmesh_tutorial.lcs.angles.lcs_angles_to_pose] (exact
+    while ``|a_x| < 90°``).
+
+    Args:
+        frames: (J,3,3) rest LCS.
+        pose: (..., J, 3) axis-angle in rest-pose (parent) axes.
+
+    Returns:
+        (..., J, 3) radians ``(a_x, a_y, a_z)``; ``a_y`` and ``a_z`` in (-π, π].
+    """
+    frames = np.asarray(frames, dtype=np.float64)
+    pose = _check_angles(frames, pose)
+    local = np.einsum("jba,...jb->...ja", frames, pose)  # F^T rotvec
+    eul = Rotation.from_rotvec(local.reshape(-1, 3)).as_euler(_EULER)
+    return eul[:, [1, 0, 2]].reshape(pose.shape)
+
+
+def mirror_angles(angles) -> np.ndarray:
+    """Angles of the mirrored joint motion: ``(a_x, a_y, a_z) -> (-a_x, a_y, -a_z)``.
+
+    With left frames built as mirror images of right ones (see the module text), right-hand
+    angles ``a`` and left-hand angles ``mirror_angles(a)`` give mirror-image poses.
+    """
+    out = np.array(angles, dtype=np.float64, copy=True)
+    out[..., 0] *= -1
+    out[..., 2] *= -1
+    return out
+
+
+def clip_angles(angles, lower, upper) -> np.ndarray:
+    """Clip angles (..., J, 3) to per-joint, per-axis limits ``lower``/``upper`` (J,3), radians."""
+    return np.clip(np.asarray(angles, dtype=np.float64), lower, upper)
+
+
+def within_limits(angles, lower, upper, atol: float = 1e-9) -> np.ndarray:
+    """True where all 3J angles of a pose are inside the limits.
+
+    Args:
+        angles: (..., J, 3) radians.
+        lower: (J,3) radians.
+        upper: (J,3) radians.
+        atol: tolerance in radians.
+
+    Returns:
+        bool array of shape ``angles.shape[:-2]``.
+    """
+    a = np.asarray(angles, dtype=np.float64)
+    ok = (a >= np.asarray(lower) - atol) & (a <= np.asarray(upper) + atol)
+    return ok.all(axis=(-2, -1))
+
+
+def forward_kinematics(rest_joints, parents, rotations, root_rotation=None) -> np.ndarray:
+    """Posed joint positions of a kinematic tree with MANO-convention local rotations.
+
+    ``G_k = G_parent(k) · [R_k | j_k - j_parent(k)]``; the root keeps its position and turns by
+    ``root_rotation``. Use it to predict where a child joint goes for given LCS angles.
+
+    Args:
+        rest_joints: (K,3) rest positions, parents before children.
+        parents: (K,) parent indices, -1 for the root.
+        rotations: (..., K, 3, 3) local rotations in rest axes (the root's entry is ignored when
+            ``root_rotation`` is given).
+        root_rotation: optional (..., 3, 3).
+
+    Returns:
+        (..., K, 3) posed positions.
+    """
+    rest = np.asarray(rest_joints, dtype=np.float64)
+    rots = np.asarray(rotations, dtype=np.float64)
+    if root_rotation is not None:
+        rots = rots.copy()
+        rots[..., 0, :, :] = root_rotation
+    glob_r = [None] * len(rest)
+    glob_t = [None] * len(rest)
+    for k, p in enumerate(parents):
+        if p < 0:
+            glob_r[k] = rots[..., k, :, :]
+            glob_t[k] = np.broadcast_to(rest[k], rots.shape[:-3] + (3,))
+        else:
+            glob_r[k] = glob_r[p] @ rots[..., k, :, :]
+            glob_t[k] = glob_t[p] + np.einsum("...ab,b->...a", glob_r[p], rest[k] - rest[p])
+    return np.stack(glob_t, axis=-2)
+
