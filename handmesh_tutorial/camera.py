@@ -10,7 +10,7 @@ crops of the training pipeline and the 2D keypoint targets all project with `pro
 Cameras: `intrinsics` builds ``K``, `check_intrinsics` validates it, `crop_camera` picks a ``K``
 that frames given points (like cropping a photo) and `framing` measures how points sit in an image.
 
-Taught in notebook 05 ("Rendering and visibility").
+Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
 from __future__ import annotations

@@ -370,11 +370,11 @@ def evaluate_predictions(pred_path: str | os.PathLike, root: str | os.PathLike,
         root: FreiHAND root holding ``<split>_xyz.json`` and ``<split>_verts.json``.
         split: ``"evaluation"`` (needs the v2 annotations) or ``"training"``.
         allow_reflection: see
-            [`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes_align].
+            [`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes.procrustes_align].
 
     Returns:
         The dict of
-        [`handmesh_tutorial.metrics.freihand_scores`][handmesh_tutorial.metrics.freihand_scores].
+        [`handmesh_tutorial.metrics.freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores].
     """
     from . import metrics
 

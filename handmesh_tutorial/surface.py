@@ -172,7 +172,7 @@ def flipped_face_fraction(pred_vertices, gt_vertices, faces, align: bool = True,
         gt_vertices: ``(B, V, 3)`` (or ``(V, 3)``) ground truth, same topology.
         faces: ``(F, 3)`` int triangles.
         align: first align each prediction to its truth with a similarity transform
-            ([`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes_align]).
+            ([`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes.procrustes_align]).
         allow_reflection: let that alignment mirror the prediction. Off by default: a mirrored
             hand is a different (inside-out) surface, so a mirrored copy of the truth has every
             face flipped.

@@ -9,7 +9,7 @@ pinhole intrinsic matrix ``K`` in the OpenCV convention::
 
 where pixel ``(row v, column u)`` has its *centre* at integer coordinates. OpenGL's frame appears
 only inside [`renderer`][handmesh_tutorial.render.renderer]. Taught in notebook 05 ("Rendering and
-visibility"); the conventions are on the docs page ``docs/concepts/rendering.md``.
+the visibility ratio"); the conventions are on the docs page ``docs/concepts/rendering.md``.
 
 Submodules (each name below is also importable from ``handmesh_tutorial.render``):
 

@@ -6,7 +6,7 @@ platform when no display exists (`ensure_egl`) and applies the NumPy 2 fix
 [`Renderer`][handmesh_tutorial.render.renderer.Renderer] close without breaking the others of the
 process, which share one EGL display.
 
-Taught in notebook 05 ("Rendering and visibility").
+Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ Backgrounds are procedural (`random_background`) or cut from natural photographs
 ``docs/concepts/scenes.md``). `scene_background` is the generator's mix of both. Every
 background is an (H, W, 3) uint8 sRGB image; same seed -> same bytes.
 
-Taught in notebook 05 ("Rendering and visibility").
+Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ The library's colours (skin tones, object palettes, backgrounds) are sRGB in [0,
 lights and shades in linear RGB and gamma-encodes its output, so vertex colours pass through
 `srgb_to_linear` and light colours come linear from `color_temperature`.
 
-Taught in notebook 05 ("Rendering and visibility").
+Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ colour temperature). Directions are the way the light *travels*, in the camera f
 y down, z forward); intensities are pyrender's (lux for directional lights, candela for point
 lights).
 
-Taught in notebook 05 ("Rendering and visibility").
+Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
 from __future__ import annotations

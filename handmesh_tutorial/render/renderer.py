@@ -14,7 +14,7 @@ Typical use::
                        alone=True)
     out.image, out.labels, out.depth, out.alone_masks
 
-Taught in notebook 05 ("Rendering and visibility").
+Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
 from __future__ import annotations
