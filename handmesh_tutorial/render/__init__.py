@@ -27,6 +27,7 @@ Submodules (each name below is also importable from ``handmesh_tutorial.render``
 
 from __future__ import annotations
 
+from ..camera import check_intrinsics as _check_K  # noqa: F401 - used by benchmarks/render.py
 from ..camera import crop_camera, framing, intrinsics
 from ..camera import project_checked as project
 from .backend import ensure_egl, import_pyrender, patch_pyrender_numpy2
@@ -41,7 +42,18 @@ from .backgrounds import (
 )
 from .color import color_temperature, srgb_to_linear
 from .lights import Light, default_lights, random_lights, scene_lights
-from .renderer import CV_TO_GL, Renderer, RenderMesh, RenderResult, _vertex_normals  # noqa: F401
+
+# _as_meshes, _label_color, _vertex_normals, _check_K: private names that makehuman.py and
+# benchmarks/render.py import from ``render``
+from .renderer import (  # noqa: F401
+    CV_TO_GL,
+    Renderer,
+    RenderMesh,
+    RenderResult,
+    _as_meshes,
+    _label_color,
+    _vertex_normals,
+)
 
 __all__ = [
     "BACKGROUND_PHOTOS",
