@@ -1,6 +1,6 @@
 """The pinhole camera: intrinsics, projection to pixels, crop cameras and framing.
 
-One convention for the whole library (docs page *Rendering and visibility*): the OpenCV camera
+One convention for the whole library (docs page *Rendering and cameras*): the OpenCV camera
 frame (x right, y down, z forward, metres), intrinsics ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``
 in pixels, pixel centres at integer coordinates: the top-left pixel's centre is ``(0, 0)``, so the
 centre of a ``W``-wide image is ``cx = (W - 1) / 2``. The FreiHAND annotations, the renderer, the
