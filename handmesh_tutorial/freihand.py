@@ -21,6 +21,9 @@ A prediction file ``pred.json`` is ``[xyz_list, verts_list]``: two lists with on
 evaluation sample, each a list of ``[x, y, z]`` in metres (21 keypoints; 778 vertices). The official
 server wants it zipped at the top level of ``pred.zip``
 ([`zip_predictions`][handmesh_tutorial.freihand.zip_predictions]).
+
+No notebook reads FreiHAND (it cannot be downloaded here); notebook 09 ("Evaluation") scores
+with the same metrics ([`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores]).
 """
 
 from __future__ import annotations
@@ -370,11 +373,11 @@ def evaluate_predictions(pred_path: str | os.PathLike, root: str | os.PathLike,
         root: FreiHAND root holding ``<split>_xyz.json`` and ``<split>_verts.json``.
         split: ``"evaluation"`` (needs the v2 annotations) or ``"training"``.
         allow_reflection: see
-            [`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes_align].
+            [`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes.procrustes_align].
 
     Returns:
         The dict of
-        [`handmesh_tutorial.metrics.freihand_scores`][handmesh_tutorial.metrics.freihand_scores].
+        [`handmesh_tutorial.metrics.freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores].
     """
     from . import metrics
 

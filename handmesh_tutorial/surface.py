@@ -20,6 +20,9 @@ is wrapped to ``[0, 180]`` degrees.
 
 Both functions take numpy arrays or torch tensors (detached, computed in float64 numpy) and
 return numpy arrays ``(B,)``.
+
+Taught in notebook 07 ("Multi-path mesh decoder", roughness of the decoders' meshes); used in the
+tables of notebook 10 (ablation).
 """
 
 from __future__ import annotations
@@ -172,7 +175,7 @@ def flipped_face_fraction(pred_vertices, gt_vertices, faces, align: bool = True,
         gt_vertices: ``(B, V, 3)`` (or ``(V, 3)``) ground truth, same topology.
         faces: ``(F, 3)`` int triangles.
         align: first align each prediction to its truth with a similarity transform
-            ([`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes_align]).
+            ([`handmesh_tutorial.metrics.procrustes_align`][handmesh_tutorial.metrics.procrustes.procrustes_align]).
         allow_reflection: let that alignment mirror the prediction. Off by default: a mirrored
             hand is a different (inside-out) surface, so a mirrored copy of the truth has every
             face flipped.

@@ -14,6 +14,8 @@ bodies. The masks come from `handmesh_tutorial.render.Renderer` (``labels`` and
 alone mask and ``VR`` lies in ``[0, 1]``.
 
 This module is the one place that defines the VR bins of the paper (`VR_BINS`).
+
+Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
 from __future__ import annotations

@@ -208,6 +208,27 @@ def test_crop_camera_frames_points():
         R.crop_camera(pts[:, :2], 224)
 
 
+def test_project_is_the_checked_camera_projection():
+    """``render.project`` is ``camera.project`` (same numbers) plus the renderer's checks."""
+    from handmesh_tutorial import camera
+
+    assert R.project is camera.project_checked
+    assert R.intrinsics is camera.intrinsics and R.crop_camera is camera.crop_camera
+    pts = np.array([[0.01, -0.02, 0.5], [-0.03, 0.04, 0.7]])
+    K = _K()
+    assert R.project(pts, K).tobytes() == camera.project(pts, K).tobytes()
+    with pytest.raises(ValueError, match="Z > 0"):
+        R.project(pts * [1, 1, -1], K)
+    with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
+        R.project(pts[None], K)
+    with pytest.raises(ValueError, match=r"K must have shape \(3, 3\)"):
+        R.project(pts, np.eye(4))
+    for bad in ([[100, 1, 30], [0, 100, 30], [0, 0, 1]], [[-1, 0, 30], [0, 100, 30], [0, 0, 1]],
+                [[100, 0, 30], [0, 100, 30], [0, 0, 2]]):
+        with pytest.raises(ValueError, match="fx, fy > 0"):
+            camera.check_intrinsics(bad)
+
+
 def test_crop_camera_render_keeps_body_inside(renderer):
     body = _sphere((0.07, 0.05, 0.45), 0.03, 1)
     K = R.crop_camera(body[0], S, margin=0.1)
@@ -270,6 +291,20 @@ def test_color_temperature_warm_to_cool():
     assert blue_share == sorted(blue_share)          # bluer as the temperature rises
 
 
+def test_scene_lights_vary_colour_and_direction():
+    sets = [R.scene_lights(s, 0.5) for s in range(60)]
+    assert R.scene_lights(7, 0.5) == sets[7]
+    keys = np.array([ls[0].color for ls in sets])
+    assert (keys[:, 0] > keys[:, 2] + 0.05).any() and (keys[:, 2] > keys[:, 0] + 0.05).any()
+    assert (keys.min(1) > 0.4).all()  # white-balanced: casts stay mild
+    inten = [ls[0].intensity for ls in sets]
+    assert max(inten) > 2 * min(inten)
+    rims = [lt for ls in sets for lt in ls if lt.kind == "directional" and lt.direction[2] < 0]
+    assert 5 <= len(rims) <= 35  # a light from behind the bodies in about 30 % of the scenes
+    for ls in sets:
+        assert ls[0].kind == "directional" and ls[0].direction[2] > 0  # the key faces the scene
+
+
 def test_background_photos_are_bundled_in_the_wheel_and_free():
     """Only photographs the installed scikit-image ships (no pooch download), CC0 or public
     domain, each with its credit."""
@@ -290,7 +325,7 @@ def test_a_changed_photograph_is_reported(monkeypatch):
 
     changed = tuple(dataclasses.replace(ph, sha256="0" * 64) if ph.name == "coffee" else ph
                     for ph in R.BACKGROUND_PHOTOS)
-    monkeypatch.setattr(R, "BACKGROUND_PHOTOS", changed)
+    monkeypatch.setattr(R.backgrounds, "BACKGROUND_PHOTOS", changed)
     R.photo_pixels.cache_clear()
     try:
         with pytest.warns(UserWarning, match="coffee.png differs .* same seed will differ"):

@@ -1,0 +1,133 @@
+"""The FreiHAND evaluation: per-sample errors and the official summary scores.
+
+Inputs (N, 21, 3) joints and (N, V, 3) vertices in metres; reports in millimetres.
+
+Taught in notebook 09 ("Evaluation").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import _pair
+from .fscore import FSCORE_THRESHOLDS, f_score
+from .pck import FREIHAND_THRESHOLDS, PAPER_THRESHOLDS, _pck_sorted, auc, point_errors
+from .procrustes import procrustes_align
+
+__all__ = ["ROOT_INDEX", "freihand_scores", "per_sample_scores", "scores_from_errors"]
+
+
+ROOT_INDEX = 9
+"""Root keypoint (middle-finger MCP, FreiHAND order) for root-relative errors."""
+
+
+def per_sample_scores(*, pred_joints, gt_joints, pred_verts=None, gt_verts=None,
+                      allow_reflection: bool = True, fscore_thresholds=FSCORE_THRESHOLDS,
+                      root_index: int = ROOT_INDEX) -> dict:
+    """Per-sample errors behind
+    [`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores] (for tables stratified
+    by VR, plots...).
+
+    Args:
+        pred_joints: (N,21,3) predicted keypoints, metres (FreiHAND order).
+        gt_joints: (N,21,3) ground-truth keypoints, metres.
+        pred_verts: (N,V,3) predicted vertices, metres, or ``None`` (joints only).
+        gt_verts: (N,V,3) ground-truth vertices (same V, same topology), or ``None``.
+        allow_reflection: Procrustes may mirror (official); ``False`` = proper rotations only.
+        fscore_thresholds: F-score distances in metres.
+        root_index: keypoint subtracted for root-relative errors (9 = middle MCP).
+
+    Returns:
+        dict of float64 arrays, distances in metres:
+        ``joint_err`` (N,21) raw, ``joint_err_rr`` (N,21) root-relative, ``joint_err_pa``
+        (N,21) after Procrustes; with vertices also ``vert_err`` (N,V), ``vert_err_pa`` (N,V),
+        ``fscore`` (N,T) on aligned vertices and ``fscore_thresholds`` (T,).
+    """
+    pj, gj = _pair(pred_joints, gt_joints, "pred_joints", "gt_joints")
+    out = {
+        "joint_err": point_errors(pj, gj),
+        "joint_err_rr": point_errors(pj - pj[:, root_index:root_index + 1],
+                                     gj - gj[:, root_index:root_index + 1]),
+        "joint_err_pa": point_errors(procrustes_align(pj, gj, allow_reflection), gj),
+    }
+    if (pred_verts is None) != (gt_verts is None):
+        raise ValueError("give both pred_verts and gt_verts, or neither")
+    if pred_verts is not None:
+        pv, gv = _pair(pred_verts, gt_verts, "pred_verts", "gt_verts")
+        if pv.shape[0] != pj.shape[0]:
+            raise ValueError(f"pred_verts has {pv.shape[0]} samples, pred_joints {pj.shape[0]}")
+        # vertices get their own Procrustes, as in the official eval (same topology case)
+        pv_al = procrustes_align(pv, gv, allow_reflection)
+        ths = np.atleast_1d(np.asarray(fscore_thresholds, dtype=np.float64))
+        out["vert_err"] = point_errors(pv, gv)
+        out["vert_err_pa"] = point_errors(pv_al, gv)
+        out["fscore"] = f_score(pv_al, gv, ths)["f"]
+        out["fscore_thresholds"] = ths
+    return out
+
+
+def freihand_scores(*, pred_joints, gt_joints, pred_verts, gt_verts,
+                    allow_reflection: bool = True, unaligned_fscore: bool = False) -> dict:
+    """The official FreiHAND evaluation, batched: errors in mm, AUCs and F-scores.
+
+    Equals ``eval.py`` of ``lmb-freiburg/freihand`` to 1e-6 (same predictions and ground truth
+    as its ``pred.json`` and ``evaluation_xyz.json``/``evaluation_verts.json``), with
+    ``allow_reflection=True``.
+
+    Args:
+        pred_joints: (N,21,3) predicted keypoints, metres, numpy or torch.
+        gt_joints: (N,21,3) ground-truth keypoints, metres.
+        pred_verts: (N,V,3) predicted mesh vertices, metres (V = 778 for MANO).
+        gt_verts: (N,V,3) ground-truth vertices, same topology.
+        allow_reflection: official Procrustes (may mirror); ``False`` = proper rotations only.
+        unaligned_fscore: also compute the official unaligned F-scores (doubles the F-score time).
+
+    Returns:
+        dict of floats: ``mpjpe``, ``mpvpe``, ``pa_mpjpe``, ``pa_mpvpe`` (mm); ``f_at_5mm``,
+        ``f_at_15mm`` (aligned vertices); ``auc_joints``, ``auc_verts`` (aligned, 0-50 mm, 100
+        thresholds); ``auc_joints_unaligned``, ``auc_verts_unaligned`` (raw, 0-50 mm);
+        ``auc_joints_20mm``, ``auc_verts_20mm`` (aligned, 0-20 mm, 20 thresholds, as the paper's
+        Table 2); ``num_samples``; with ``unaligned_fscore`` also ``f_at_5mm_unaligned``,
+        ``f_at_15mm_unaligned``.
+    """
+    ps = per_sample_scores(pred_joints=pred_joints, gt_joints=gt_joints, pred_verts=pred_verts,
+                           gt_verts=gt_verts, allow_reflection=allow_reflection)
+    scores = scores_from_errors(ps)
+    if unaligned_fscore:
+        fu = f_score(pred_verts, gt_verts, FSCORE_THRESHOLDS)["f"]
+        scores["f_at_5mm_unaligned"] = float(fu[:, 0].mean())
+        scores["f_at_15mm_unaligned"] = float(fu[:, 1].mean())
+    return scores
+
+
+def scores_from_errors(ps: dict) -> dict:
+    """The scores of [`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores] from
+    already computed per-sample errors.
+
+    Args:
+        ps: [`per_sample_scores`][handmesh_tutorial.metrics.scores.per_sample_scores] output with
+            vertices (the F-scores at the default thresholds, 5 and 15 mm).
+
+    Returns:
+        The dict of [`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores] without
+        the unaligned F-scores.
+    """
+    je, jpa, ve, vpa = ps["joint_err"], ps["joint_err_pa"], ps["vert_err"], ps["vert_err_pa"]
+    ft, pt = FREIHAND_THRESHOLDS, PAPER_THRESHOLDS
+    s_je, s_jpa, s_ve, s_vpa = (np.sort(e, axis=None) for e in (je, jpa, ve, vpa))  # sort once
+    scores = {
+        "mpjpe": 1000.0 * float(je.mean()),
+        "mpvpe": 1000.0 * float(ve.mean()),
+        "pa_mpjpe": 1000.0 * float(jpa.mean()),
+        "pa_mpvpe": 1000.0 * float(vpa.mean()),
+        "f_at_5mm": float(ps["fscore"][:, 0].mean()),
+        "f_at_15mm": float(ps["fscore"][:, 1].mean()),
+        "auc_joints": auc(_pck_sorted(s_jpa, ft), ft),
+        "auc_verts": auc(_pck_sorted(s_vpa, ft), ft),
+        "auc_joints_unaligned": auc(_pck_sorted(s_je, ft), ft),
+        "auc_verts_unaligned": auc(_pck_sorted(s_ve, ft), ft),
+        "auc_joints_20mm": auc(_pck_sorted(s_jpa, pt), pt),
+        "auc_verts_20mm": auc(_pck_sorted(s_vpa, pt), pt),
+        "num_samples": int(je.shape[0]),
+    }
+    return scores

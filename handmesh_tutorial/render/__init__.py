@@ -1,0 +1,83 @@
+"""Headless rendering of INTER-SH scenes with pyrender: image, label mask, depth, bodies alone.
+
+Everything public here is in the **OpenCV camera frame** (x right, y down, z forward, metres) with a
+pinhole intrinsic matrix ``K`` in the OpenCV convention::
+
+    K = [[fx, 0, cx],
+         [0, fy, cy],
+         [0,  0,  1]]      u = fx * X / Z + cx,   v = fy * Y / Z + cy   (pixels)
+
+where pixel ``(row v, column u)`` has its *centre* at integer coordinates. OpenGL's frame appears
+only inside [`renderer`][handmesh_tutorial.render.renderer]. Taught in notebook 05 ("Rendering and
+the visibility ratio"); the conventions are on the docs page ``docs/concepts/rendering.md``.
+
+Submodules (each name below is also importable from ``handmesh_tutorial.render``):
+
+* `renderer`: the offscreen `Renderer`, `RenderMesh`, `RenderResult`, `CV_TO_GL`.
+* `backend`: pyrender's import (`import_pyrender`), EGL when headless (`ensure_egl`), the NumPy 2
+  fix (`patch_pyrender_numpy2`).
+* `lights`: `Light`, `default_lights`, `random_lights`, and the generator's `scene_lights`.
+* `color`: `srgb_to_linear` and black-body light colours (`color_temperature`).
+* `backgrounds`: procedural (`random_background`) and photograph (`photo_background`,
+  `BACKGROUND_PHOTOS`) backgrounds, the generator's mix (`scene_background`).
+* the camera (`intrinsics`, `crop_camera`, `framing`, `project`) lives in
+  [`handmesh_tutorial.camera`][handmesh_tutorial.camera] and is re-exported here; ``project`` is
+  `camera.project_checked` (one camera, (N, 3) points, ``Z > 0`` checked).
+"""
+
+from __future__ import annotations
+
+from ..camera import check_intrinsics as _check_K  # noqa: F401 - used by benchmarks/render.py
+from ..camera import crop_camera, framing, intrinsics
+from ..camera import project_checked as project
+from .backend import ensure_egl, import_pyrender, patch_pyrender_numpy2
+from .backgrounds import (
+    BACKGROUND_PHOTOS,
+    BackgroundPhoto,
+    photo_background,
+    photo_pixels,
+    random_background,
+    scene_background,
+    skimage_data_dir,
+)
+from .color import color_temperature, srgb_to_linear
+from .lights import Light, default_lights, random_lights, scene_lights
+
+# _as_meshes, _label_color, _vertex_normals, _check_K: private names that makehuman.py and
+# benchmarks/render.py import from ``render``
+from .renderer import (  # noqa: F401
+    CV_TO_GL,
+    Renderer,
+    RenderMesh,
+    RenderResult,
+    _as_meshes,
+    _label_color,
+    _vertex_normals,
+)
+
+__all__ = [
+    "BACKGROUND_PHOTOS",
+    "CV_TO_GL",
+    "BackgroundPhoto",
+    "Light",
+    "RenderMesh",
+    "RenderResult",
+    "Renderer",
+    "color_temperature",
+    "crop_camera",
+    "default_lights",
+    "ensure_egl",
+    "framing",
+    "import_pyrender",
+    "intrinsics",
+    "patch_pyrender_numpy2",
+    "photo_background",
+    "photo_pixels",
+    "project",
+    "random_background",
+    "random_lights",
+    "scene_background",
+    "scene_lights",
+    "skimage_data_dir",
+    "srgb_to_linear",
+]
