@@ -29,9 +29,9 @@ off their bin after ``max_attempts`` candidates each.
 class SampleRejected(Exception):
     """Raised by a ``make_sample`` callable for a seed that yields no valid sample.
 
-    [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] treats it as a rejected
-    candidate (like ``accept`` returning ``False``): it tries the next attempt's seed instead of
-    stopping. Any other exception stops generation.
+    [`generate_dataset`][handmesh_tutorial.dataset.generate.generate_dataset] treats it as a
+    rejected candidate (like ``accept`` returning ``False``): it tries the next attempt's seed
+    instead of stopping. Any other exception stops generation.
     [`handmesh_tutorial.interact.InteractionError`][handmesh_tutorial.interact.InteractionError] (a
     scene the generator cannot build within its bounded retries) is one.
     """
@@ -131,9 +131,9 @@ def _make_and_write(task: _Task, index: int) -> dict:
 
 def _probe(task: _Task, num: int) -> dict:
     """VR probe of a balanced set: ``num`` candidates (seeds
-    [`probe_seed`][handmesh_tutorial.dataset.probe_seed]), their target-VR counts per bin, and the
-    bins balancing fills (those with at least
-    [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.PROBE_MIN_HITS] hits)."""
+    [`probe_seed`][handmesh_tutorial.dataset.seeds.probe_seed]), their target-VR counts per bin, and
+    the bins balancing fills (those with at least
+    [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.candidates.PROBE_MIN_HITS] hits)."""
     hits = [0] * len(task.bins)
     rejected = outside = 0
     for k in range(num):

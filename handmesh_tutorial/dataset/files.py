@@ -84,10 +84,11 @@ def encode_sample(sample: Mapping) -> dict[str, bytes]:
     """Validate a sample and encode it as the files of its folder (name -> bytes).
 
     Args:
-        sample: a sample dict (see [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset]);
-            ``index``, ``seed``, ``attempt``, ``names``, ``pose``, ``alone_images``, ``stats`` are
-            optional. Extra keys are kept: numpy arrays go to ``annotation.npz`` as ``extra_<key>``,
-            other values (JSON-able) to ``annotation.json`` under ``extra``.
+        sample: a sample dict (see
+            [`InterSHDataset`][handmesh_tutorial.dataset.reader.InterSHDataset]); ``index``,
+            ``seed``, ``attempt``, ``names``, ``pose``, ``alone_images``, ``stats`` are optional.
+            Extra keys are kept: numpy arrays go to ``annotation.npz`` as ``extra_<key>``, other
+            values (JSON-able) to ``annotation.json`` under ``extra``.
 
     Returns:
         ``{"image.png": ..., "scene_mask.png": ..., "alone_<l>.png": ..., "annotation.npz": ...,
@@ -186,8 +187,9 @@ def write_sample(directory: str | os.PathLike, sample: Mapping, *, overwrite: bo
 
     Args:
         directory: the sample folder to create, e.g. ``root/samples/000123``.
-        sample: the sample dict (see [`encode_sample`][handmesh_tutorial.dataset.encode_sample] and
-            [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset]).
+        sample: the sample dict (see
+            [`encode_sample`][handmesh_tutorial.dataset.files.encode_sample] and
+            [`InterSHDataset`][handmesh_tutorial.dataset.reader.InterSHDataset]).
         overwrite: replace an existing folder (the swap is then not atomic).
         durable: fsync files and folders, so a power cut cannot leave a renamed but empty file.
 
@@ -285,11 +287,12 @@ def read_sample(directory: str | os.PathLike) -> dict:
     """Read and validate one sample folder.
 
     Args:
-        directory: a folder written by [`write_sample`][handmesh_tutorial.dataset.write_sample].
+        directory: a folder written by
+            [`write_sample`][handmesh_tutorial.dataset.files.write_sample].
 
     Returns:
-        The sample dict (see [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset]), numpy
-        arrays with the documented dtypes.
+        The sample dict (see [`InterSHDataset`][handmesh_tutorial.dataset.reader.InterSHDataset]),
+        numpy arrays with the documented dtypes.
 
     Raises:
         FileNotFoundError: a file is missing (the message names it).

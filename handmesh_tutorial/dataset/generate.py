@@ -32,8 +32,8 @@ def _fmt_bin(b: Sequence[float]) -> str:
 
 @dataclass
 class GenerationSummary:
-    """What [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] did (``str(summary)``
-    is a short report).
+    """What [`generate_dataset`][handmesh_tutorial.dataset.generate.generate_dataset] did
+    (``str(summary)`` is a short report).
 
     Attributes:
         root: dataset folder.
@@ -125,7 +125,7 @@ def generate_dataset(
     Args:
         root: output folder (created).
         make_sample: ``make_sample(sample_seed) -> dict``, a sample as described in
-            [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset] (without
+            [`InterSHDataset`][handmesh_tutorial.dataset.reader.InterSHDataset] (without
             ``index``/``seed``). Must be deterministic in its seed and, for ``workers > 1``,
             importable by the worker processes (a function of a module, or a ``functools.partial``
             of one; not one defined in a notebook cell).
@@ -133,8 +133,9 @@ def generate_dataset(
         seed: base seed, non-negative.
         kind: the kind(s) of scene ``make_sample`` produces (see ``KINDS``).
         shard: ``(shard_index, num_shards)``: make only
-            [`shard_range`][handmesh_tutorial.dataset.shard_range] of it (one machine's part; join
-            parts with [`merge_shards`][handmesh_tutorial.dataset.merge_shards]). ``None`` = all.
+            [`shard_range`][handmesh_tutorial.dataset.seeds.shard_range] of it (one machine's part;
+            join parts with [`merge_shards`][handmesh_tutorial.dataset.root.merge_shards]). ``None``
+            = all.
         workers: processes; each makes and writes its own samples.
         progress: show a tqdm bar.
         params: free-form JSON-able creation parameters (renderer, light, object set...),
@@ -142,20 +143,20 @@ def generate_dataset(
         image_size: expected image size (int side or (H, W)); checked per sample if given.
         accept: optional filter ``accept(sample) -> bool``; a rejected candidate is replaced by the
             next attempt's seed. A ``make_sample`` that raises
-            [`SampleRejected`][handmesh_tutorial.dataset.SampleRejected] rejects its seed the same
-            way.
-        balance_vr: ``True`` (bins from [`vr_bins`][handmesh_tutorial.dataset.vr_bins]) or a list of
-            bins: the target VRs are spread evenly over the bins that ``make_sample`` can reach.
-            First a *probe* makes ``vr_probe`` candidates (seeds
-            [`probe_seed`][handmesh_tutorial.dataset.probe_seed], not samples) and counts their
-            target VRs per bin; bins it hits fewer than
-            [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.PROBE_MIN_HITS] times (e.g. [0.40, 0.60)
-            for hand-chain scenes, whose thin rings rarely hide half a hand) are reported at once (a
-            ``UserWarning``) and left out. Sample ``i`` then wants bin ``filled[i % len(filled)]``;
-            if none of its ``max_attempts`` candidates lands there, the accepted candidate nearest
-            to the bin is written (counted in ``off_bin``): balancing never stops a run. The probe
-            is stored in ``meta.json`` (``vr_probe``) and reused on resume; it is deterministic in
-            ``seed``, so shards agree.
+            [`SampleRejected`][handmesh_tutorial.dataset.candidates.SampleRejected] rejects its seed
+            the same way.
+        balance_vr: ``True`` (bins from [`vr_bins`][handmesh_tutorial.dataset.seeds.vr_bins]) or a
+            list of bins: the target VRs are spread evenly over the bins that ``make_sample`` can
+            reach. First a *probe* makes ``vr_probe`` candidates (seeds
+            [`probe_seed`][handmesh_tutorial.dataset.seeds.probe_seed], not samples) and counts
+            their target VRs per bin; bins it hits fewer than
+            [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.candidates.PROBE_MIN_HITS] times (e.g.
+            [0.40, 0.60) for hand-chain scenes, whose thin rings rarely hide half a hand) are
+            reported at once (a ``UserWarning``) and left out. Sample ``i`` then wants bin
+            ``filled[i % len(filled)]``; if none of its ``max_attempts`` candidates lands there, the
+            accepted candidate nearest to the bin is written (counted in ``off_bin``): balancing
+            never stops a run. The probe is stored in ``meta.json`` (``vr_probe``) and reused on
+            resume; it is deterministic in ``seed``, so shards agree.
         max_attempts: candidates per sample; RuntimeError when none is accepted (every seed
             rejected by ``make_sample`` or ``accept``).
         vr_probe: candidates of the VR probe (only with ``balance_vr``), >= 1.
@@ -166,7 +167,7 @@ def generate_dataset(
             OpenGL and torch).
 
     Returns:
-        A [`GenerationSummary`][handmesh_tutorial.dataset.GenerationSummary].
+        A [`GenerationSummary`][handmesh_tutorial.dataset.generate.GenerationSummary].
 
     Raises:
         ValueError: bad arguments, or ``root`` holds a dataset made with different parameters

@@ -156,7 +156,7 @@ class InterSHDataset:
 
 @dataclass
 class VerifyReport:
-    """Outcome of [`verify_dataset`][handmesh_tutorial.dataset.verify_dataset].
+    """Outcome of [`verify_dataset`][handmesh_tutorial.dataset.reader.verify_dataset].
 
     Attributes:
         root: the dataset folder.
@@ -182,11 +182,11 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                    progress: bool = True) -> VerifyReport:
     """Re-read every sample of an INTER-SH root and list the ones that are unreadable or foreign.
 
-    Each sample folder must read back ([`read_sample`][handmesh_tutorial.dataset.read_sample]: every
-    file, key, shape, dtype) and agree with ``meta.json`` (kind, image size) and with its own name
-    (index; the seed of the sample-seed rule,
-    [`sample_seed`][handmesh_tutorial.dataset.sample_seed]). A file where a sample folder belongs is
-    bad too.
+    Each sample folder must read back ([`read_sample`][handmesh_tutorial.dataset.files.read_sample]:
+    every file, key, shape, dtype) and agree with ``meta.json`` (kind, image size) and with its own
+    name (index; the seed of the sample-seed rule,
+    [`sample_seed`][handmesh_tutorial.dataset.seeds.sample_seed]). A file where a sample folder
+    belongs is bad too.
 
     Args:
         root: the dataset folder (with ``meta.json``).
@@ -194,7 +194,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
         progress: tqdm progress bar.
 
     Returns:
-        A [`VerifyReport`][handmesh_tutorial.dataset.VerifyReport].
+        A [`VerifyReport`][handmesh_tutorial.dataset.reader.VerifyReport].
     """
     from .._progress import progress_bar
 

@@ -42,7 +42,7 @@ def sample_seed(seed: int, index: int, attempt: int = 0) -> int:
 
 def probe_seed(seed: int, k: int) -> int:
     """The seed of the ``k``-th candidate of the VR probe of a balanced set (see
-    [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]):
+    [`generate_dataset`][handmesh_tutorial.dataset.generate.generate_dataset]):
     ``SeedSequence(seed, spawn_key=(k, 0, 1))``, independent of every sample seed (whose spawn keys
     have two entries).
     """

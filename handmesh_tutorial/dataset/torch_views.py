@@ -346,7 +346,7 @@ class InterSHTorchDataset(HandCropDataset):
 
     Args:
         root_or_dataset: an INTER-SH root folder, an
-            [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset], or any sequence of
+            [`InterSHDataset`][handmesh_tutorial.dataset.reader.InterSHDataset], or any sequence of
             INTER-SH sample dicts (e.g. a list of
             [`synthetic_sample`][handmesh_tutorial.testing.synthetic_sample] outputs, for in-memory
             experiments).
