@@ -80,6 +80,9 @@ def normalize_image(image) -> torch.Tensor:
 
     Returns:
         ``(3, H, W)`` or ``(B, 3, H, W)`` float32 tensor in ``[-0.5, 0.5]``.
+
+    Shapes:
+        ``image (H, W, 3)`` -> ``(3, H, W)``; ``(B, H, W, 3)`` -> ``(B, 3, H, W)``.
     """
     t = torch.as_tensor(np.asarray(image) if not isinstance(image, torch.Tensor) else image)
     if t.dim() not in (3, 4) or t.shape[-1] != 3:
@@ -96,6 +99,9 @@ def denormalize_image(image: torch.Tensor) -> np.ndarray:
 
     Returns:
         ``(H, W, 3)`` or ``(B, H, W, 3)`` uint8 numpy array.
+
+    Shapes:
+        ``image (3, H, W)`` -> ``(H, W, 3)``; ``(B, 3, H, W)`` -> ``(B, H, W, 3)``.
     """
     t = image.detach().cpu().float().mul(IMAGE_STD).add(IMAGE_MEAN).mul(255.0)
     return t.round().clamp(0, 255).to(torch.uint8).movedim(-3, -1).numpy()
@@ -123,6 +129,9 @@ def flip_intrinsics(K, width: int) -> np.ndarray:
 
     Returns:
         ``(3, 3)`` float64 intrinsics of the flipped image.
+
+    Shapes:
+        ``K (3, 3)`` -> ``(3, 3)``, pixels.
     """
     k = np.asarray(K, dtype=np.float64)
     if k.shape != (3, 3):
@@ -154,6 +163,9 @@ def crop_transform(center, size: float, out_size: int) -> np.ndarray:
     Returns:
         ``(3, 3)`` float64 ``A`` with ``[u', v', 1] = A [u, v, 1]``; the crop's intrinsics are
         ``A K``.
+
+    Shapes:
+        ``center (2,)`` pixels -> ``(3, 3)``.
     """
     if not size > 0:
         raise ValueError(f"crop size must be positive, got {size}")
@@ -183,6 +195,9 @@ def warp_image(image: torch.Tensor, transform, out_size: int, supersample: int |
 
     Returns:
         ``(C, S, S)`` float tensor.
+
+    Shapes:
+        ``image (C, H, W)``, ``transform (3, 3)`` -> ``(C, S, S)``.
     """
     m = np.asarray(transform, dtype=np.float64)
     if m.shape != (3, 3) or not np.allclose(m[2], [0.0, 0.0, 1.0], atol=1e-9):
@@ -239,6 +254,9 @@ def color_jitter(image: torch.Tensor, brightness: float = 1.0, contrast: float =
 
     Returns:
         ``(3, H, W)`` float tensor in ``[0, 1]``.
+
+    Shapes:
+        ``image (3, H, W)`` -> ``(3, H, W)``.
     """
     x = image * brightness
     luma_w = torch.tensor([0.299, 0.587, 0.114], dtype=x.dtype, device=x.device)[:, None, None]
@@ -270,6 +288,9 @@ def unmirror(points, mirrored):
 
     Returns:
         Same type and shape; mirrored samples have ``x`` negated. Its own inverse.
+
+    Shapes:
+        ``points (..., P, 3)``, ``mirrored ()`` or ``(B,)`` -> same as ``points``.
     """
     is_t = isinstance(points, torch.Tensor)
     p = points if is_t else np.asarray(points, dtype=np.float64)
@@ -302,6 +323,9 @@ def to_camera(points, batch: Mapping) -> torch.Tensor:
 
     Returns:
         ``(B, P, 3)`` tensor in the camera frame of the source image, metres.
+
+    Shapes:
+        ``points (B, P, 3)`` (or ``(P, 3)`` with a single item) -> same, metres.
     """
     p = torch.as_tensor(points)
     root = torch.as_tensor(batch["root"], dtype=p.dtype, device=p.device)

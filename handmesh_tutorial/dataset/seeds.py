@@ -89,6 +89,10 @@ def vr_bins(bins: Sequence | None = None) -> tuple[tuple[float, float], ...]:
 
 
 def vr_histogram(values: Sequence[float], bins: Sequence[tuple[float, float]]) -> list[int]:
-    """Counts of ``values`` per bin (a value in no bin is not counted)."""
+    """Counts of ``values`` per bin (a value in no bin is not counted).
+
+    Shapes:
+        ``values (N,)``, ``bins (K, 2)`` -> ``K`` counts.
+    """
     idx = [vr_bin(v, bins) for v in values]
     return [idx.count(k) for k in range(len(bins))]

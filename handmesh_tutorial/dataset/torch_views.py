@@ -169,6 +169,10 @@ class HandCropDataset(torch.utils.data.Dataset):
 
         Returns:
             The item dict (see the class docstring).
+
+        Shapes:
+            ``image (H, W, 3)``, ``K (3, 3)``, ``vertices (V, 3)``, ``joints (21, 3)`` -> item
+            ``image (3, S, S)``, ``vertices (V, 3)``, ``joints (21, 3)``, ``K (3, 3)``.
         """
         img = np.asarray(image)
         if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
