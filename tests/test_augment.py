@@ -11,6 +11,7 @@ from PIL import Image
 from handmesh_tutorial import augment as A
 from handmesh_tutorial.camera import project
 from handmesh_tutorial.dataset import InterSHDataset, generate_dataset
+from handmesh_tutorial.dataset import torch_views as TV
 from handmesh_tutorial.testing import toy_sample
 
 torch.set_num_threads(1)
@@ -101,7 +102,7 @@ def test_markers_at_projected_joints_stay_at_projection_after_augmentation(side)
     uv = project(joints[list(markers)], K)
     canvas = np.stack([_disc(256, uv[c]) for c in range(3)], -1)
     img = (255 * canvas).round().astype(np.uint8)
-    ds = A.HandCropDataset(image_size=64, augment=A.AugmentConfig.geometric())
+    ds = TV.HandCropDataset(image_size=64, augment=A.AugmentConfig.geometric())
     checked = 0
     for seed in range(6):
         item = ds.make_item(img, K, verts, joints, side, vr, np.random.default_rng(seed))
@@ -120,7 +121,7 @@ def test_markers_at_projected_joints_stay_at_projection_after_augmentation(side)
 
 def test_3d_targets_are_a_rotation_about_the_optical_axis_and_round_trip():
     image, K, verts, joints, side, vr = _raw(seed=2, side="left")
-    ds = A.HandCropDataset(image_size=48)
+    ds = TV.HandCropDataset(image_size=48)
     item = ds.make_item(image, K, verts, joints, side, vr, np.random.default_rng(7))
     R = item["R"].double()
     torch.testing.assert_close(R @ R.T, torch.eye(3, dtype=torch.float64), atol=1e-6, rtol=0)
@@ -141,7 +142,7 @@ def test_left_target_equals_independently_flipped_right_target():
     W = image.shape[1]
     K_flip = K.copy()
     K_flip[0, 2] = W - 1 - K[0, 2]  # independent: fx, fy, cy unchanged, no skew here
-    ds = A.HandCropDataset(image_size=40, train=False)
+    ds = TV.HandCropDataset(image_size=40, train=False)
     left = ds.make_item(image, K, verts, joints, "left", vr, None)
     right = ds.make_item(image[:, ::-1], K_flip, verts * [-1, 1, 1], joints * [-1, 1, 1],
                          "right", vr, None)
@@ -179,9 +180,9 @@ def test_color_jitter_identity_grey_and_luma():
 
 def test_dataset_on_disk_items_determinism_and_collate(toy_root):
     raw = InterSHDataset(toy_root)
-    ds = A.InterSHTorchDataset(toy_root, image_size=32, seed=1)
+    ds = TV.InterSHTorchDataset(toy_root, image_size=32, seed=1)
     assert len(ds) == 4
-    a, b = ds[2], A.InterSHTorchDataset(toy_root, image_size=32, seed=1)[2]
+    a, b = ds[2], TV.InterSHTorchDataset(toy_root, image_size=32, seed=1)[2]
     for k in a:
         assert torch.equal(a[k], b[k]), k
     ds.set_epoch(1)
@@ -189,9 +190,9 @@ def test_dataset_on_disk_items_determinism_and_collate(toy_root):
     assert not torch.equal(a["image"], c["image"]) and not torch.equal(a["R"], c["R"])
     ds.set_epoch(0)
     assert torch.equal(ds[2]["image"], a["image"])
-    other = A.InterSHTorchDataset(toy_root, image_size=32, seed=2)[2]
+    other = TV.InterSHTorchDataset(toy_root, image_size=32, seed=2)[2]
     assert not torch.equal(other["image"], a["image"])
-    ev = A.InterSHTorchDataset(toy_root, image_size=32, train=False)
+    ev = TV.InterSHTorchDataset(toy_root, image_size=32, train=False)
     e0, e1 = ev[1], ev[1]
     assert torch.equal(e0["image"], e1["image"]) and torch.equal(e0["R"], torch.eye(3))
     s = raw[1]
@@ -200,7 +201,7 @@ def test_dataset_on_disk_items_determinism_and_collate(toy_root):
     np.testing.assert_allclose(ev.vr_values(), raw.vr_table())
     batch = next(iter(torch.utils.data.DataLoader(ds, batch_size=3)))
     assert batch["image"].shape == (3, 3, 32, 32) and batch["vertices"].shape == (3, 779, 3)
-    sub = A.InterSHTorchDataset(toy_root, image_size=32, indices=[3, 1], train=False)
+    sub = TV.InterSHTorchDataset(toy_root, image_size=32, indices=[3, 1], train=False)
     assert len(sub) == 2 and int(sub[0]["index"]) == 3
     np.testing.assert_allclose(sub.vr_values(), raw.vr_table()[[3, 1]])
     with pytest.raises(IndexError):
@@ -209,16 +210,16 @@ def test_dataset_on_disk_items_determinism_and_collate(toy_root):
 
 def test_in_memory_samples_and_bad_input():
     samples = [toy_sample(i, image_size=48) for i in range(2)]
-    ds = A.InterSHTorchDataset(samples, image_size=24, train=False)
+    ds = TV.InterSHTorchDataset(samples, image_size=24, train=False)
     assert ds[1]["image"].shape == (3, 24, 24)
-    base = A.HandCropDataset(image_size=8)
+    base = TV.HandCropDataset(image_size=8)
     image, K, verts, joints, _, vr = _raw(seed=0)
     with pytest.raises(ValueError, match="side"):
         base.make_item(image, K, verts, joints, "middle", vr, None)
     with pytest.raises(ValueError, match="uint8"):
         base.make_item(image.astype(np.float32), K, verts, joints, "left", vr, None)
     with pytest.raises(ValueError, match="crop"):
-        A.HandCropDataset(crop="square")
+        TV.HandCropDataset(crop="square")
 
 
 def test_freihand_dataset_full_crop(tmp_path):
@@ -235,7 +236,7 @@ def test_freihand_dataset_full_crop(tmp_path):
         Image.fromarray(img).save(tmp_path / "training" / "rgb" / f"{i:08d}.png", format="PNG")
         (tmp_path / "training" / "rgb" / f"{i:08d}.png").rename(
             tmp_path / "training" / "rgb" / f"{i:08d}.jpg")  # lossless content, .jpg name
-    ds = A.FreiHANDTorchDataset(tmp_path, image_size=56, versions="gs",
+    ds = TV.FreiHANDTorchDataset(tmp_path, image_size=56, versions="gs",
                                 augment=A.AugmentConfig.geometric(), seed=3)
     assert len(ds) == 2
     item = ds[1]
@@ -244,10 +245,26 @@ def test_freihand_dataset_full_crop(tmp_path):
     proj = project(item["root"][None].double(), item["K"].double())[0].numpy()
     np.testing.assert_allclose(_centroid(A.denormalize_image(item["image"])[..., 0]), proj,
                                atol=0.3)
-    ev = A.FreiHANDTorchDataset(tmp_path, image_size=56, versions="gs", train=False)[0]
+    ev = TV.FreiHANDTorchDataset(tmp_path, image_size=56, versions="gs", train=False)[0]
     # full crop, no augmentation: the 224 image scaled by 56/224 exactly
     np.testing.assert_allclose(ev["K"][:2].numpy(), (A.crop_transform((111.5, 111.5), 224, 56)
                                                      @ K)[:2], rtol=1e-6)
     (tmp_path / "training_verts.json").unlink()
     with pytest.raises(ValueError, match="no vertices"):
-        A.FreiHANDTorchDataset(tmp_path, versions="gs")
+        TV.FreiHANDTorchDataset(tmp_path, versions="gs")
+
+
+def test_torch_views_are_reexported_lazily_and_dataset_stays_torch_free():
+    import subprocess
+    import sys
+
+    from handmesh_tutorial import dataset as D
+
+    for name in ("HandCropDataset", "InterSHTorchDataset", "FreiHANDTorchDataset", "BadSampleError",
+                 "BAD_SAMPLE_ERRORS", "find_bad_items", "without_items", "drop_bad_items"):
+        assert getattr(A, name) is getattr(D, name) is getattr(TV, name), name
+    with pytest.raises(AttributeError):
+        A.NoSuchName  # noqa: B018
+    code = ("import sys, handmesh_tutorial.dataset as D; assert 'torch' not in sys.modules; "
+            "D.InterSHTorchDataset; assert 'torch' in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)

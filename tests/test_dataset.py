@@ -260,7 +260,7 @@ def test_ctrl_c_then_resume_gives_the_same_bytes(tmp_path, monkeypatch):
 def test_interrupt_during_a_write_leaves_no_partial_sample(tmp_path, monkeypatch):
     gen(tmp_path / "ref", num=4)
     calls = []
-    write_file = D._write_file
+    write_file = D.files._write_file  # called there: patch the submodule
 
     def failing_write(path, data, durable):
         calls.append(path)
@@ -268,12 +268,12 @@ def test_interrupt_during_a_write_leaves_no_partial_sample(tmp_path, monkeypatch
             raise KeyboardInterrupt
         write_file(path, data, durable)
 
-    monkeypatch.setattr(D, "_write_file", failing_write)
+    monkeypatch.setattr(D.files, "_write_file", failing_write)
     with pytest.raises(KeyboardInterrupt):
         gen(tmp_path / "run", num=4)
     assert ".tmp-000002" in str(calls[-1])  # files go to a temporary folder first
     assert sample_dirs(tmp_path / "run") == ["000000", "000001"]  # no partial 000002, no temp
-    monkeypatch.setattr(D, "_write_file", write_file)
+    monkeypatch.setattr(D.files, "_write_file", write_file)
     gen(tmp_path / "run", num=4)
     assert tree(tmp_path / "run") == tree(tmp_path / "ref")
 
@@ -287,13 +287,13 @@ KILL_SCRIPT = textwrap.dedent("""
         return synthetic_sample(seed, image_size=32, resolution=4)
 
     if os.environ.get("SLOW"):  # slow writes, so that the kill most likely lands mid-sample
-        _write_file = D._write_file
+        _write_file = D.files._write_file  # called in dataset.files: patch it there
 
         def slow_write(path, data, durable):
             _write_file(path, data, durable)
             time.sleep(0.04)
 
-        D._write_file = slow_write
+        D.files._write_file = slow_write
 
     if __name__ == "__main__":
         s = D.generate_dataset(sys.argv[1], make, 10, 3, "hand-hand", progress=False)
@@ -506,7 +506,7 @@ def test_vr_balancing_leaves_out_unreachable_bins_up_front(tmp_path):
 
 def test_vr_balancing_never_stops_on_a_hard_bin(tmp_path, monkeypatch):
     """A bin the probe kept but a sample cannot reach: the nearest candidate is written."""
-    monkeypatch.setattr(D, "PROBE_MIN_HITS", 0)  # keep even the bin nobody reaches
+    monkeypatch.setattr(D.candidates, "PROBE_MIN_HITS", 0)  # keep even the bin nobody reaches
     bins = ((0.0, 0.3), (0.5, 1.0))
     s = gen(tmp_path / "h", num=4, fn=_never_below_half, balance_vr=bins, vr_probe=4,
             max_attempts=5)
@@ -662,12 +662,12 @@ def test_a_sample_finished_by_another_writer_is_kept(tmp_path):
     target = tmp_path / "samples" / "000004"
     target.mkdir(parents=True)
     (target / "image.png").write_bytes(b"first writer")
-    D._write_folder(target, {"image.png": b"second writer"}, durable=False)
+    D.files._write_folder(target, {"image.png": b"second writer"}, durable=False)
     assert (target / "image.png").read_bytes() == b"first writer"
     assert sorted(p.name for p in (tmp_path / "samples").iterdir()) == ["000004"]
     (tmp_path / "plain").write_text("x")  # a file in the way is still an error
     with pytest.raises(OSError):
-        D._write_folder(tmp_path / "plain", {"image.png": b"y"}, durable=False)
+        D.files._write_folder(tmp_path / "plain", {"image.png": b"y"}, durable=False)
 
 
 ORPHAN_SCRIPT = textwrap.dedent("""

@@ -1,0 +1,229 @@
+"""Reading an INTER-SH root: ``meta.json``, the lazy map-style reader, and verification.
+
+[`InterSHDataset`][handmesh_tutorial.dataset.reader.InterSHDataset] is numpy-only; the torch
+training crops built on it are in [`torch_views`][handmesh_tutorial.dataset.torch_views]. Taught
+in notebook 05 ("Rendering and the visibility ratio"), used from notebook 08 ("Training") on.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .files import _read_json, read_annotation, read_sample
+from .schema import (
+    FORMAT_NAME,
+    MAX_SAMPLES,
+    META_FILE,
+    MIN_INDEX_WIDTH,
+    READABLE_FORMAT_VERSIONS,
+    SAMPLES_DIR,
+)
+from .seeds import sample_seed
+
+
+def read_meta(root: str | os.PathLike) -> dict:
+    """Read ``root/meta.json`` (raises FileNotFoundError / ValueError naming the file)."""
+    path = Path(root) / META_FILE
+    meta = _read_json(path)
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+        raise ValueError(f"{path}: not an {FORMAT_NAME} meta file")
+    if meta.get("format_version") not in READABLE_FORMAT_VERSIONS:
+        raise ValueError(f"{path}: format_version {meta.get('format_version')}, this library "
+                         f"reads {list(READABLE_FORMAT_VERSIONS)}")
+    width = meta.get("index_width", MIN_INDEX_WIDTH)
+    if isinstance(width, bool) or not isinstance(width, int) or not 1 <= width <= 18:
+        raise ValueError(f"{path}: 'index_width' must be an integer in [1, 18], got {width!r}")
+    num = meta.get("num_samples")
+    if isinstance(num, bool) or not isinstance(num, int) or not 1 <= num <= MAX_SAMPLES:
+        raise ValueError(f"{path}: 'num_samples' must be an integer in [1, {MAX_SAMPLES:,}], "
+                         f"got {num!r}")
+    ranges = meta.get("ranges")
+    if not isinstance(ranges, list) or not all(
+            isinstance(r, list) and len(r) == 2 and all(type(x) is int for x in r)
+            and 0 <= r[0] <= r[1] <= num for r in ranges):
+        raise ValueError(f"{path}: 'ranges' must be [[start, stop], ...] integer pairs within "
+                         f"[0, num_samples={num}], got {str(ranges)[:80]}")
+    return meta
+
+
+def _present(samples_dir: Path) -> list[int]:
+    if not samples_dir.is_dir():
+        return []
+    return sorted(int(p.name) for p in samples_dir.iterdir() if p.name.isdigit() and p.is_dir())
+
+
+def _planned(meta: Mapping) -> list[int]:
+    return [i for a, b in meta["ranges"] for i in range(a, b)]
+
+
+class InterSHDataset:
+    """An INTER-SH root read lazily: ``len(ds)``, ``ds[i]`` -> sample dict (numpy).
+
+    A map-style dataset (``__len__``/``__getitem__``): ``torch.utils.data.DataLoader`` accepts it
+    directly, with a ``transform`` turning the dict into tensors. Position ``i`` is the i-th sample
+    folder present in sorted order; ``ds.indices[i]`` is its global index.
+
+    ``ds[i]`` returns a dict with:
+
+    * ``image`` (H, W, 3) uint8 RGB;
+    * ``scene_mask`` (H, W) int32 labels, 0 = background;
+    * ``alone_masks`` {label: (H, W) bool} each body rendered alone;
+    * ``meshes`` {label: (vertices (V, 3) float32 metres camera frame, faces (F, 3) int32)};
+    * ``joints`` {hand label: (21, 3) float32 metres camera frame, FreiHAND order};
+    * ``pose`` {hand label: (15, 3) float32 axis-angle} (may be empty);
+    * ``K`` (3, 3) float64 intrinsics (OpenCV, pixels);
+    * ``vr`` {label: float in [0, 1]} visibility ratio;
+    * ``kind`` "hand-hand" | "hand-object" | "hand-chain";
+    * ``target`` the hand label to predict;
+    * ``sides`` {hand label: "left" | "right"};
+    * ``names`` {label: body name};
+    * ``stats`` {str: generator numbers};
+    * ``index``, ``seed``, ``attempt`` (ints; ``None`` for samples written without them);
+    * ``alone_images`` {label: (H, W, 3) uint8} only if stored;
+    * extra keys as written.
+
+    Args:
+        root: the dataset folder (with ``meta.json``).
+        transform: optional callable applied to each sample dict.
+
+    Raises:
+        FileNotFoundError: ``meta.json`` is missing.
+    """
+
+    def __init__(self, root: str | os.PathLike, transform: Callable[[dict], Any] | None = None):
+        self.root = Path(root)
+        self.meta = read_meta(self.root)
+        self.transform = transform
+        self.indices = np.asarray(_present(self.root / SAMPLES_DIR), dtype=np.int64)
+        self._vr: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __repr__(self) -> str:
+        planned = sum(b - a for a, b in self.meta["ranges"])  # no list of every index
+        present = sum(int(((self.indices >= a) & (self.indices < b)).sum())
+                      for a, b in self.meta["ranges"])
+        return (f"InterSHDataset({str(self.root)!r}: {len(self)} samples, kinds "
+                f"{self.meta['kinds']}, {planned - present} missing)")
+
+    @property
+    def missing(self) -> list[int]:
+        """Global indices planned by ``meta.json`` (its ranges) but not on disk."""
+        present = set(self.indices.tolist())
+        return [i for i in _planned(self.meta) if i not in present]
+
+    def sample_dir(self, i: int) -> Path:
+        """Folder of the sample at position ``i`` (negative positions count from the end)."""
+        n = len(self)
+        if not -n <= i < n:
+            raise IndexError(f"sample position {i} out of range for {n} samples in {self.root}")
+        width = self.meta.get("index_width", MIN_INDEX_WIDTH)
+        return self.root / SAMPLES_DIR / f"{int(self.indices[i]):0{width}d}"
+
+    def annotation(self, i: int) -> dict:
+        """Only ``annotation.json`` of sample ``i`` (kind, target, vr, seed, stats...): fast."""
+        return read_annotation(self.sample_dir(i))
+
+    def __getitem__(self, i: int) -> Any:
+        d = self.sample_dir(i)
+        s = read_sample(d)
+        if s["index"] is not None and s["index"] != int(self.indices[i]):
+            raise ValueError(f"{d / 'annotation.json'}: index {s['index']} but folder is {d.name}")
+        if s["kind"] not in self.meta["kinds"]:
+            raise ValueError(f"{d / 'annotation.json'}: kind {s['kind']!r} not in meta.json "
+                             f"kinds {self.meta['kinds']}")
+        size = self.meta.get("image_size")
+        if size is not None and list(s["image"].shape[:2]) != list(size):
+            raise ValueError(f"{d / 'image.png'}: size {list(s['image'].shape[:2])}, meta.json "
+                             f"image_size {size}")
+        return self.transform(s) if self.transform is not None else s
+
+    def vr_table(self) -> np.ndarray:
+        """VR of the target hand of every sample, (N,) float64 (reads only the JSON files)."""
+        if self._vr is None:
+            anns = (self.annotation(i) for i in range(len(self)))
+            self._vr = np.array([a["vr"][a["target"]] for a in anns], dtype=np.float64)
+        return self._vr
+
+
+@dataclass
+class VerifyReport:
+    """Outcome of [`verify_dataset`][handmesh_tutorial.dataset.reader.verify_dataset].
+
+    Attributes:
+        root: the dataset folder.
+        checked: sample entries read.
+        bad: ``[(folder name, reason)]`` of the samples that failed, sorted by name.
+        removed: the bad entries deleted (``remove=True``); rerunning the same ``generate``
+            call then writes exactly these again, with the same bytes as before.
+    """
+
+    root: Path
+    checked: int
+    bad: list[tuple[str, str]]
+    removed: list[str]
+
+    def __str__(self) -> str:
+        lines = [f"{self.root}: {self.checked} samples read, {len(self.bad)} bad"
+                 + (f", {len(self.removed)} removed" if self.removed else "")]
+        lines += [f"  {name}: {why}" for name, why in self.bad]
+        return "\n".join(lines)
+
+
+def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
+                   progress: bool = True) -> VerifyReport:
+    """Re-read every sample of an INTER-SH root and list the ones that are unreadable or foreign.
+
+    Each sample folder must read back ([`read_sample`][handmesh_tutorial.dataset.files.read_sample]:
+    every file, key, shape, dtype) and agree with ``meta.json`` (kind, image size) and with its own
+    name (index; the seed of the sample-seed rule,
+    [`sample_seed`][handmesh_tutorial.dataset.seeds.sample_seed]). A file where a sample folder
+    belongs is bad too.
+
+    Args:
+        root: the dataset folder (with ``meta.json``).
+        remove: delete the bad entries, so that rerunning the same ``generate`` regenerates them.
+        progress: tqdm progress bar.
+
+    Returns:
+        A [`VerifyReport`][handmesh_tutorial.dataset.reader.VerifyReport].
+    """
+    from .._progress import progress_bar
+
+    root = Path(root)
+    ds = InterSHDataset(root)
+    samples = root / SAMPLES_DIR
+    bad: list[tuple[str, str]] = []
+    entries = sorted(p for p in samples.iterdir() if p.name.isdigit()) if samples.is_dir() \
+        else []
+    position = {int(i): k for k, i in enumerate(ds.indices.tolist())}
+    for p in progress_bar(entries, disable=not progress, desc="verify", unit="sample"):
+        if not p.is_dir() or p.is_symlink():
+            bad.append((p.name, "not a sample folder (a file or link)"))
+            continue
+        try:
+            s = ds[position[int(p.name)]]
+            if s["seed"] is not None and s["attempt"] is not None and "seed" in ds.meta:
+                want = sample_seed(ds.meta["seed"], int(p.name), int(s["attempt"]))
+                if int(s["seed"]) != want:
+                    raise ValueError(f"{p / 'annotation.json'}: seed {s['seed']}, the seed rule "
+                                     f"of meta.json gives {want} (a sample of another run?)")
+        except (ValueError, KeyError, OSError, TypeError) as err:
+            bad.append((p.name, str(err).splitlines()[0] if str(err) else type(err).__name__))
+    removed = []
+    if remove:
+        for name, _ in bad:
+            target = samples / name
+            shutil.rmtree(target) if target.is_dir() and not target.is_symlink() \
+                else target.unlink()
+            removed.append(name)
+    return VerifyReport(root=root, checked=len(entries), bad=bad, removed=removed)
+

@@ -1,0 +1,181 @@
+"""A root being written: its ``meta.json`` check, the writer lock, stale temporaries, and
+merging shard roots into one.
+
+Taught in notebook 05 ("Rendering and the visibility ratio"; the ``handmesh generate`` command
+line and ``docs/concepts/reliability.md`` show resuming and sharding).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+from .._io import fsync_dir
+from .files import _is_own_temporary, _temporary, _write_atomic
+from .reader import _planned, _present, read_meta
+from .schema import LOCK_FILE, META_FILE, SAMPLES_DIR, TMP_PREFIX
+
+
+def _coalesce(ranges: Sequence[Sequence[int]]) -> list[list[int]]:
+    out: list[list[int]] = []
+    for a, b in sorted((int(a), int(b)) for a, b in ranges if b > a):
+        if out and a < out[-1][1]:
+            raise ValueError(f"index ranges overlap: [{out[-1][0]}, {out[-1][1]}) and [{a}, {b})")
+        if out and a == out[-1][1]:
+            out[-1][1] = b
+        else:
+            out.append([a, b])
+    return out
+
+
+def _diff(a: Any, b: Any, prefix: str = "") -> list[str]:
+    """Dotted names of the keys where two JSON values differ."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        out = []
+        for k in sorted(set(a) | set(b)):
+            out += _diff(a.get(k, "<absent>"), b.get(k, "<absent>"), f"{prefix}{k}.")
+        return out
+    return [] if a == b else [prefix.rstrip(".")]
+
+
+def _diff_message(path: Path, old: dict, new: dict, keys: Sequence[str]) -> str:
+    def get(d: Any, dotted: str) -> Any:
+        for part in dotted.split("."):
+            d = d.get(part, "<absent>") if isinstance(d, dict) else "<absent>"
+        return d
+
+    lines = [f"  {k}: {get(old, k)!r} on disk, {get(new, k)!r} now" for k in keys]
+    return (f"{path} was written with different parameters; differing keys: {', '.join(keys)}\n"
+            + "\n".join(lines))
+
+
+@contextlib.contextmanager
+def _lock(root: Path) -> Iterator[None]:
+    """One writer per root (an flock the OS drops if the process dies, even on SIGKILL)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no protection against two writers
+        yield
+        return
+    with open(root / LOCK_FILE, "a+b") as fh:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RuntimeError(f"{root} is being written by another process "
+                               f"({root / LOCK_FILE} is locked)") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
+
+def _clean_stale(folder: Path) -> int:
+    """Remove the temporaries a killed writer left in ``folder``; returns how many.
+
+    Only this module's own temporaries (`_is_own_temporary`) are removed.
+    """
+    n = 0
+    if folder.is_dir():
+        for p in folder.iterdir():
+            if p.name.startswith(TMP_PREFIX) and _is_own_temporary(p):
+                shutil.rmtree(p) if p.is_dir() else p.unlink()
+                n += 1
+    return n
+
+
+def _open_root(root: Path, meta: dict) -> int:
+    """Create or check ``root/meta.json``; clean stale temporaries. Returns their count."""
+    path = root / META_FILE
+    if path.exists():
+        old = read_meta(root)
+        keys = _diff(old, meta)
+        if keys:
+            raise ValueError(_diff_message(path, old, meta, keys))
+    else:
+        _write_atomic(path, (json.dumps(meta, indent=2, sort_keys=True) + "\n").encode())
+    (root / SAMPLES_DIR).mkdir(exist_ok=True)
+    return _clean_stale(root / SAMPLES_DIR) + _clean_stale(root)
+
+
+
+def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.PathLike, *,
+                 link: bool = False, progress: bool = True, durable: bool = True) -> dict:
+    """Merge shard roots (made with ``generate_dataset(..., shard=(k, n))``) into one root.
+
+    Samples keep their global indices, so merging all shards gives the same files as one
+    unsharded run (``meta.json`` included). Resumable: samples already in ``out_root`` are kept.
+
+    Args:
+        shard_roots: the shard folders; their ``meta.json`` must agree on everything except the
+            shards, and their index ranges must not overlap.
+        out_root: the merged dataset folder (created).
+        link: hard-link files instead of copying (same filesystem only).
+        progress: show a tqdm bar.
+        durable: fsync copied files and folders.
+
+    Returns:
+        ``{"copied": int, "skipped": int, "ranges": [[start, stop], ...], "complete": bool}``.
+
+    Raises:
+        ValueError: incompatible metas (differing keys named), overlapping shards, a shard with
+            missing samples, or an ``out_root`` made from other shards.
+    """
+    from .._progress import progress_bar
+
+    if not shard_roots:
+        raise ValueError("merge_shards needs at least one shard root")
+    roots = [Path(r) for r in shard_roots]
+    metas = [read_meta(r) for r in roots]
+    ignore = ("shards", "ranges")
+    base = {k: v for k, v in metas[0].items() if k not in ignore}
+    for r, m in zip(roots[1:], metas[1:], strict=True):
+        keys = _diff(base, {k: v for k, v in m.items() if k not in ignore})
+        if keys:
+            raise ValueError(f"cannot merge {roots[0]} and {r}: " +
+                             _diff_message(r / META_FILE, base, m, keys))
+    for r, m in zip(roots, metas, strict=True):
+        present = set(_present(r / SAMPLES_DIR))
+        absent = [i for i in _planned(m) if i not in present]
+        if absent:
+            raise ValueError(f"shard {r} is incomplete: {len(absent)} samples missing (first "
+                             f"{absent[:5]}); finish it by re-running its generate command")
+    ranges = _coalesce([rg for m in metas for rg in m["ranges"]])
+    complete = ranges == [[0, base["num_samples"]]]
+    # A root holding every index is recorded as shard 0 of 1: identical to an unsharded run.
+    shards = [[0, 1]] if complete else sorted({tuple(s) for m in metas for s in m["shards"]})
+    meta = {**base, "shards": [list(s) for s in shards], "ranges": ranges}
+    out = Path(out_root)
+    out.mkdir(parents=True, exist_ok=True)
+    width = base["index_width"]
+    copied = skipped = 0
+    with _lock(out):
+        _open_root(out, meta)
+        jobs = [(r, i) for r, m in zip(roots, metas, strict=True) for i in _planned(m)]
+        for r, i in progress_bar(jobs, disable=not progress, desc="merge", unit="sample"):
+            name = f"{i:0{width}d}"
+            dst = out / SAMPLES_DIR / name
+            if dst.exists():
+                skipped += 1
+                continue
+            tmp = _temporary(dst)
+            try:
+                shutil.copytree(r / SAMPLES_DIR / name, tmp,
+                                copy_function=os.link if link else shutil.copyfile)
+                if durable and not link:
+                    for p in tmp.iterdir():
+                        with open(p, "rb+") as fh:
+                            os.fsync(fh.fileno())
+                os.replace(tmp, dst)
+            except BaseException:
+                shutil.rmtree(tmp, ignore_errors=True)
+                raise
+            copied += 1
+        if durable:
+            fsync_dir(out / SAMPLES_DIR)
+    return {"copied": copied, "skipped": skipped, "ranges": ranges, "complete": complete}

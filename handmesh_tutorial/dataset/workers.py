@@ -1,0 +1,149 @@
+"""Worker processes of the generation driver: start-up, the per-process task, the run loop.
+
+Functions sent to worker processes must be importable by their module path
+(``handmesh_tutorial.dataset.workers._init_worker`` / ``_worker_make``); the task a worker runs is
+the module global ``_WORKER_TASK`` of this module. Taught in notebook 05 ("Rendering and the
+visibility ratio").
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from .candidates import _make_and_write, _Task
+
+
+def _callable_name(fn: Callable | None) -> str | None:
+    if fn is None:
+        return None
+    base = getattr(fn, "func", fn)  # functools.partial: its function (put its args in params)
+    name = getattr(base, "__qualname__", type(base).__name__)
+    return f"{getattr(base, '__module__', '?')}.{name}"
+
+
+
+_WORKER_TASK: _Task | None = None
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Make this worker process exit when the process that started it dies.
+
+    Without it, ``kill -9`` of ``generate``'s main process leaves its workers running (and
+    writing queued samples) for seconds. On Linux the kernel delivers ``SIGKILL`` to the worker
+    when its parent dies (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread polls the
+    parent's pid once a second.
+    """
+    import signal
+    import threading
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig = 1
+        if libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0:
+            if os.getppid() != parent_pid:  # the parent died before prctl took effect
+                os._exit(1)
+            return
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="die-with-parent").start()
+
+
+def _init_worker(task: _Task, worker_init: Callable[[], Any] | None,
+                 parent_pid: int | None = None) -> None:
+    global _WORKER_TASK
+    if parent_pid is not None:
+        _die_with_parent(parent_pid)
+    _WORKER_TASK = task
+    if worker_init is not None:
+        worker_init()  # e.g. one OffscreenRenderer per process, kept in a module global
+
+
+def _worker_make(index: int) -> dict:
+    assert _WORKER_TASK is not None, "worker not initialised"
+    return _make_and_write(_WORKER_TASK, index)
+
+
+
+def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
+    """Fail early, with a hint, on callables that worker processes could not receive."""
+    try:
+        pickle.dumps(tuple(fns))
+    except Exception as e:
+        raise ValueError("make_sample, accept and worker_init must be picklable for workers > 1 "
+                         f"(module-level functions or functools.partial of them): {e}") from e
+    main = sys.modules.get("__main__")
+    interactive = main is not None and not getattr(main, "__file__", None)
+    for fn in fns:
+        base = getattr(fn, "func", fn)
+        if fn is not None and interactive and mp_context != "fork" \
+                and getattr(base, "__module__", None) == "__main__":
+            raise ValueError(f"{_callable_name(fn)} is defined in an interactive session "
+                             f"(notebook/REPL); {mp_context!r} worker processes cannot import it. "
+                             "Move it to a module, or use workers=1")
+
+
+def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | None,
+         progress: bool, total: int, initial: int, mp_context: str, desc: str,
+         initialised: bool = False) -> list[dict]:
+    from .._progress import progress_bar
+
+    results: list[dict] = []
+    bar = progress_bar(total=total, initial=initial, disable=not progress, desc=desc,
+                       unit="sample")
+    try:
+        if workers == 1 or len(todo) <= 1:
+            if worker_init is not None and todo and not initialised:
+                worker_init()
+            for i in todo:
+                results.append(_make_and_write(task, i))
+                bar.update(1)
+            return results
+        import multiprocessing
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+        from concurrent.futures.process import BrokenProcessPool
+
+        ex = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
+                                 mp_context=multiprocessing.get_context(mp_context),
+                                 initializer=_init_worker,
+                                 initargs=(task, worker_init, os.getpid()))
+        it, pending = iter(todo), set()
+        try:
+            # A bounded window of submissions keeps Ctrl-C responsive and memory flat.
+            for i in it:
+                pending.add(ex.submit(_worker_make, i))
+                if len(pending) >= 2 * workers:
+                    break
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    try:
+                        results.append(fut.result())  # re-raises a worker's error here
+                    except BrokenProcessPool as e:
+                        note = getattr(e, "add_note", lambda _: None)  # Python >= 3.11
+                        note("a worker process died: out of memory, killed, or it could not "
+                             "start (a script using workers needs an "
+                             "`if __name__ == '__main__':` guard)")
+                        raise
+                    bar.update(1)
+                    nxt = next(it, None)
+                    if nxt is not None:
+                        pending.add(ex.submit(_worker_make, nxt))
+        except BaseException:
+            ex.shutdown(wait=False, cancel_futures=True)
+            raise
+        ex.shutdown(wait=True)
+        return results
+    finally:
+        bar.close()
+
