@@ -20,11 +20,12 @@
 5. **Repeat.** Joints move in turn, at most ``sweep_deg`` per round, until no joint can make a
    valid move (stop reason ``"no valid move"``) or ``max_rounds`` rounds have run
    (``"max rounds"``).
-6. **Render** ([`make_sample`][handmesh_tutorial.interact.sample.make_sample]): a camera framed on the
-   target hand like a FreiHAND crop ([`frame_camera`][handmesh_tutorial.interact.framing.frame_camera]: the
-   hand wholly inside, 45-75 % of the image side), random lights of random colour temperature
-   ([`scene_lights`][handmesh_tutorial.interact.sample.scene_lights]), a natural photograph or a procedural
-   texture behind
+6. **Render** ([`make_sample`][handmesh_tutorial.interact.sample.make_sample]): a camera framed on
+   the target hand like a FreiHAND crop
+   ([`frame_camera`][handmesh_tutorial.interact.framing.frame_camera]: the hand wholly inside,
+   45-75 % of the image side), random lights of random colour temperature
+   ([`scene_lights`][handmesh_tutorial.interact.sample.scene_lights]), a natural photograph or a
+   procedural texture behind
    ([`handmesh_tutorial.render.scene_background`][handmesh_tutorial.render.scene_background]); scene
    image, label mask, every body alone, visibility ratios.
 
@@ -38,19 +39,19 @@ Ketchel-Larochelle test on the survivors).
 few millimetres (radii are the 95th percentile of the vertex distances, see
 [`collision.hand_cylinders`][handmesh_tutorial.collision.hand_cylinders]; round palm cylinders stick
 out of the flat palm), so after step 5 the generator measures the *meshes*
-([`mesh_contact`][handmesh_tutorial.interact.contact.mesh_contact]: vertex-to-surface distances with exact
-inside/outside signs) and translates the second body along ``u`` until the meshes touch (gap <=
-``contact_tol``) without interpenetrating by more than ``penetration_tol``. Both numbers end up in
-the scene ``stats`` (mm). (b) *Re-approach* (``reapproach``): after every round of joint moves the
-second hand is pushed towards the centre again until its cylinders touch (step 3 repeated), so
+([`mesh_contact`][handmesh_tutorial.interact.contact.mesh_contact]: vertex-to-surface distances with
+exact inside/outside signs) and translates the second body along ``u`` until the meshes touch (gap
+<= ``contact_tol``) without interpenetrating by more than ``penetration_tol``. Both numbers end up
+in the scene ``stats`` (mm). (b) *Re-approach* (``reapproach``): after every round of joint moves
+the second hand is pushed towards the centre again until its cylinders touch (step 3 repeated), so
 contacts lost by joint moves are restored.
 
 Further choices the paper leaves open, all in
-[`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig]: a joint's random direction has
-per-axis weights ``axis_weights`` (abduction, flexion, twist) and flexes rather than extends with
-probability ``flexion_bias``; the centre hand's random pose uses ``init_pose_scale`` of the range; a
-joint stops for good once it is blocked (by contact or limit), which is what makes "no valid move"
-reachable.
+[`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig]: a joint's random
+direction has per-axis weights ``axis_weights`` (abduction, flexion, twist) and flexes rather than
+extends with probability ``flexion_bias``; the centre hand's random pose uses ``init_pose_scale`` of
+the range; a joint stops for good once it is blocked (by contact or limit), which is what makes "no
+valid move" reachable.
 
 Everything is seeded: the same seed gives the same scene, to the byte.
 

@@ -15,6 +15,8 @@ from ..collision import Cylinders, hand_cylinders
 from ..lcs import DIP_FOLLOWS_PIP, DIP_PIP_RATIO, hand_lcs, palm_normal
 from .rig import _Rig
 
+__all__ = ["FOREARM_LENGTH"]
+
 
 @functools.lru_cache(maxsize=2)
 def _hand_assets(side: str):

@@ -172,10 +172,10 @@ def mesh_contact(a_vertices, a_faces, b_vertices, b_faces, *, a_cylinders: Cylin
     """Contact and penetration between two closed meshes, measured on their vertices.
 
     Each mesh's vertices are tested against the other mesh's surface (signed distance with an exact
-    sign, see [`signed_distance`][handmesh_tutorial.interact.contact.signed_distance]). With cylinders
-    given, only vertices within ``near`` of the other body's cylinders are tested (a prefilter: the
-    cylinders cover their mesh to within a few millimetres, so farther vertices cannot set the
-    contact); when no vertex passes it, every vertex is tested.
+    sign, see [`signed_distance`][handmesh_tutorial.interact.contact.signed_distance]). With
+    cylinders given, only vertices within ``near`` of the other body's cylinders are tested (a
+    prefilter: the cylinders cover their mesh to within a few millimetres, so farther vertices
+    cannot set the contact); when no vertex passes it, every vertex is tested.
 
     Args:
         a_vertices: (V, 3) vertices of the first mesh (closed), metres.

@@ -22,8 +22,8 @@ __all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
 
 MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, 4096
 """Range of ``image_size`` that
-[`generate_interactions`][handmesh_tutorial.interact.generate.generate_interactions] accepts, pixels: below
-32 a hand is a few pixels; above 4096 one image needs gigabytes of render buffers.
+[`generate_interactions`][handmesh_tutorial.interact.generate.generate_interactions] accepts,
+pixels: below 32 a hand is a few pixels; above 4096 one image needs gigabytes of render buffers.
 """
 
 
@@ -37,8 +37,8 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
     A thin wrapper of
     [`handmesh_tutorial.dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset] with
     ``make_sample = functools.partial(make_sample, kind=..., image_size=..., limits=...)`` and one
-    renderer per worker process ([`init_worker`][handmesh_tutorial.interact.sample.init_worker]). Rerunning
-    the same call skips the samples already written (resume).
+    renderer per worker process ([`init_worker`][handmesh_tutorial.interact.sample.init_worker]).
+    Rerunning the same call skips the samples already written (resume).
 
     Args:
         root: output folder.

@@ -18,7 +18,7 @@ from ._common import _random_direction, _random_rotation, _unit
 from .bodies import FOREARM_LENGTH, _ChainBody, _Hand, _hand_assets, _Static
 from .config import InteractionConfig, InteractionError
 from .contact import _MeshSDF, mesh_contact
-from .rig import _collides, _pair_stages, _Rig
+from .rig import _pair_stages, _Rig
 from .scene import Scene, SceneBody
 
 __all__ = ["build_scene"]
@@ -176,7 +176,7 @@ class _Generator:
         travelled = 0.0
         while travelled < max_travel:
             mover.rig.translate(-step * u)
-            if _collides(mover.rig, centre.rig):
+            if mover.rig.collides(centre.rig):
                 mover.rig.translate(step * u)  # back to the last valid place
                 return travelled
             travelled += step
@@ -404,11 +404,12 @@ def build_scene(kind: str, seed: int | np.random.Generator, config: InteractionC
     Args:
         kind: ``"hand-hand"``, ``"hand-object"`` or ``"hand-chain"``.
         seed: an integer seed or a ``numpy.random.Generator``; same seed -> same scene.
-        config: an [`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig] (defaults
-            when ``None``).
+        config: an [`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig]
+            (defaults when ``None``).
         record: keep a snapshot of every step in ``Scene.history`` (for figures).
-        **overrides: fields of [`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig]
-            to change, e.g. ``limits="anatomical"``.
+        **overrides: fields of
+            [`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig] to change,
+            e.g. ``limits="anatomical"``.
 
     Returns:
         A [`Scene`][handmesh_tutorial.interact.scene.Scene] in the world frame (centre body near the

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..collision import Cylinders, cylinders_intersect, self_collisions
+from ..collision import Cylinders, bodies_collide, self_collisions
 from ..lcs import rotation_from_lcs_angles
+
+__all__: list[str] = []  # the rig is internal to the generator
 
 
 def _segment_closest(p0, p1, q0, q1):
@@ -56,17 +58,6 @@ def _pair_stages(a0, a1, ra, b0, b1, rb):
     ok = cap & (s > 0) & (s < 1) & (t > 0) & (t < 1) & (d2 <= rs * rs)
     sure[idx[ok]] = True
     return sure, idx[cap & ~ok]
-
-
-def _pair_hits(a0, a1, ra, b0, b1, rb) -> np.ndarray:
-    """(N,) exact cylinder test of aligned pairs: `_pair_stages`, then
-    [`collision.cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect]
-    (Ketchel-Larochelle) on the undecided pairs."""
-    hit, maybe = _pair_stages(a0, a1, ra, b0, b1, rb)
-    if maybe.size:
-        hit[maybe] = cylinders_intersect(a0[maybe], a1[maybe], ra[maybe], b0[maybe], b1[maybe],
-                                         rb[maybe])
-    return hit
 
 
 class _Rig:
@@ -218,15 +209,6 @@ class _Rig:
     def self_collides(self) -> bool:
         return len(self_collisions(self.cylinders())[0]) > 0
 
-
-def _collides(a: _Rig, b: _Rig) -> bool:
-    """Does any cylinder of rig ``a`` meet any cylinder of rig ``b``?"""
-    lo_a = np.minimum(a.p0, a.p1) - a.radius[:, None]
-    hi_a = np.maximum(a.p0, a.p1) + a.radius[:, None]
-    lo_b = np.minimum(b.p0, b.p1) - b.radius[:, None]
-    hi_b = np.maximum(b.p0, b.p1) + b.radius[:, None]
-    if (lo_a.min(0) > hi_b.max(0)).any() or (lo_b.min(0) > hi_a.max(0)).any():
-        return False
-    i, j = np.divmod(np.arange(len(a.radius) * len(b.radius)), len(b.radius))
-    return bool(_pair_hits(a.p0[i], a.p1[i], a.radius[i], b.p0[j], b.p1[j], b.radius[j]).any())
-
+    def collides(self, other: _Rig) -> bool:
+        """Does any cylinder of this rig meet any cylinder of ``other``?"""
+        return bodies_collide(self.cylinders(), other.cylinders())

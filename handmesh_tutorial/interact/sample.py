@@ -168,15 +168,15 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
                  photo_prob: float = 0.75) -> dict:
     """Step 6: place a camera, render a scene and measure visibility; the dataset sample dict.
 
-    **Camera** ([`frame_camera`][handmesh_tutorial.interact.framing.frame_camera]): it looks at the target
-    hand from a uniformly random direction (or, with probability ``occluder_view``, from around the
-    other body's side), with a random roll, at the distance where the hand covers a random share
-    (``share``, 45-75 %) of the image side with a focal length of 1.8-3.6 times the side; the whole
-    target hand stays at least ``margin`` (8 %) of the side inside the border, like a FreiHAND
-    224-px crop. The other body may leave the frame.
-    **Light** ([`scene_lights`][handmesh_tutorial.interact.sample.scene_lights]): key, fill, sometimes rim
-    and point lights of random colour temperature and exposure, plus an ambient term tinted by the
-    background. **Background**
+    **Camera** ([`frame_camera`][handmesh_tutorial.interact.framing.frame_camera]): it looks at the
+    target hand from a uniformly random direction (or, with probability ``occluder_view``, from
+    around the other body's side), with a random roll, at the distance where the hand covers a
+    random share (``share``, 45-75 %) of the image side with a focal length of 1.8-3.6 times the
+    side; the whole target hand stays at least ``margin`` (8 %) of the side inside the border, like
+    a FreiHAND 224-px crop. The other body may leave the frame.
+    **Light** ([`scene_lights`][handmesh_tutorial.interact.sample.scene_lights]): key, fill,
+    sometimes rim and point lights of random colour temperature and exposure, plus an ambient term
+    tinted by the background. **Background**
     ([`handmesh_tutorial.render.scene_background`][handmesh_tutorial.render.scene_background]): a
     natural photograph (random crop, flip, defocus, colour jitter; ``photo_prob``) or a procedural
     texture. The renderer draws the scene (image, label mask) and each body alone (the VR

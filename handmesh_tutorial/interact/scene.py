@@ -68,8 +68,8 @@ class Scene:
         approach: (3,) unit direction from the centre body towards the second hand (step 2).
         stats: ``contact_mm`` (mesh-to-mesh distance, 0 when touching), ``penetration_mm`` (deepest
             vertex of one mesh inside the other), ``rounds``, ``stop`` (one of
-            [`STOP_REASONS`][handmesh_tutorial.interact.config.STOP_REASONS]), ``moves`` (accepted joint
-            moves), ``blocked_contact`` / ``blocked_limit`` (joints stopped by a collision / a
+            [`STOP_REASONS`][handmesh_tutorial.interact.config.STOP_REASONS]), ``moves`` (accepted
+            joint moves), ``blocked_contact`` / ``blocked_limit`` (joints stopped by a collision / a
             limit), ``approach_mm`` (distance travelled in step 3), ``settle_mm`` (signed shift of
             the settle step, positive towards the centre), ``attempts`` (candidates tried).
         history: with ``record=True``, a list of snapshots ``{"step", "text", "bodies"}`` where
