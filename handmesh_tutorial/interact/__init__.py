@@ -32,8 +32,10 @@
 Validity is decided on the collision cylinders
 ([`handmesh_tutorial.collision`][handmesh_tutorial.collision]), as in the paper; each body is a rig
 of rigid cylinders attached to the nodes of its kinematic tree, and all candidate angles of one
-joint are tested in one vectorised call (bounding spheres, then capsules, then the exact
-Ketchel-Larochelle test on the survivors).
+joint are tested in one vectorised call of
+[`collision.cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect] (infinite
+cylinders, then capsules, then the exact Ketchel-Larochelle test on the survivors); the approach
+uses [`collision.bodies_collide`][handmesh_tutorial.collision.bodies_collide].
 
 **Deviations from the paper.** (a) *Settle (step 5b)*: cylinders approximate the meshes only to a
 few millimetres (radii are the 95th percentile of the vertex distances, see

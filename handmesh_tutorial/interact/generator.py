@@ -18,7 +18,7 @@ from ._common import _random_direction, _random_rotation, _unit
 from .bodies import FOREARM_LENGTH, _ChainBody, _Hand, _hand_assets, _Static
 from .config import InteractionConfig, InteractionError
 from .contact import _MeshSDF, mesh_contact
-from .rig import _pair_stages, _Rig
+from .rig import _Rig
 from .scene import Scene, SceneBody
 
 __all__ = ["build_scene"]
@@ -199,8 +199,9 @@ class _Generator:
     def _blocked(self, body, others, node, cand, limit=None) -> np.ndarray:
         """(K,) bool: candidate angles of ``node`` that collide (other bodies or itself).
 
-        Only candidates before the first colliding one are decided exactly (and none after
-        ``limit``, the first candidate out of the joint limits); the rest may be False.
+        Every (moved cylinder, fixed cylinder) pair of every candidate goes through one call of
+        [`collision.cylinders_intersect`][handmesh_tutorial.collision.cylinders_intersect];
+        candidates after ``limit`` (the first one out of the joint limits) are not tested (False).
         """
         rig = body.rig
         q0, q1 = rig.candidates(node, cand)  # (K,Cm,3)
@@ -233,14 +234,7 @@ class _Generator:
             q0, q1 = q0[:K], q1[:K]
         a0, a1, ra = q0[:, i].reshape(-1, 3), q1[:, i].reshape(-1, 3), np.tile(r[i], K)
         b0, b1, rb = np.tile(b0, (K, 1)), np.tile(b1, (K, 1)), np.tile(rb, K)
-        # certain hits first; exact tests only for candidates before the first certain hit
-        hit, maybe = _pair_stages(a0, a1, ra, b0, b1, rb)
-        sure_k = hit.reshape(K, P).any(1)
-        first = int(np.argmax(sure_k)) if sure_k.any() else K
-        maybe = maybe[maybe // P < first]
-        if maybe.size:
-            hit[maybe] = cylinders_intersect(a0[maybe], a1[maybe], ra[maybe], b0[maybe],
-                                             b1[maybe], rb[maybe])
+        hit = cylinders_intersect(a0, a1, ra, b0, b1, rb)
         out = np.zeros(len(cand), bool)
         out[:K] = hit.reshape(K, P).any(1)
         return out

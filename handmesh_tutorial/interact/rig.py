@@ -17,49 +17,6 @@ from ..lcs import rotation_from_lcs_angles
 __all__: list[str] = []  # the rig is internal to the generator
 
 
-def _segment_closest(p0, p1, q0, q1):
-    """Squared distances and closest parameters ``(d2, s, t)`` of segments ``p0p1``, ``q0q1``
-    (N,3), none degenerate (Ericson, *Real-Time Collision Detection*, 5.1.9)."""
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a, e = (d1 * d1).sum(1), (d2 * d2).sum(1)
-    b, c, f = (d1 * d2).sum(1), (d1 * r).sum(1), (d2 * r).sum(1)
-    denom = a * e - b * b
-    s = np.where(denom > 1e-12 * a * e, np.clip((b * f - c * e) / np.maximum(denom, 1e-300), 0, 1),
-                 0.0)
-    t = (b * s + f) / e
-    s = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), s))
-    t = np.clip(t, 0, 1)
-    w = r + d1 * s[:, None] - d2 * t[:, None]
-    return (w * w).sum(1), s, t
-
-
-def _pair_stages(a0, a1, ra, b0, b1, rb):
-    """Cheap stages of the cylinder test for aligned pairs (N,3),(N,3),(N,).
-
-    1. bounding spheres; 2. capsules (a capsule contains its cylinder: a capsule miss is a
-    cylinder miss); 3. a *certain hit*: when the closest points of the two axes are interior to
-    both segments and closer than ``ra + rb``, the point of the common normal at ``ra`` from axis
-    A lies inside both solids.
-
-    Returns:
-        ``(sure, maybe)``: (N,) bool certain hits, and the indices of the capsule hits that
-        still need the exact test.
-    """
-    sure = np.zeros(len(a0), bool)
-    da, db = a1 - a0, b1 - b0
-    reach = 0.5 * (np.sqrt((da * da).sum(1)) + np.sqrt((db * db).sum(1))) + ra + rb
-    dc = 0.5 * (a0 + a1 - b0 - b1)
-    idx = np.flatnonzero((dc * dc).sum(1) <= reach * reach)
-    if idx.size == 0:
-        return sure, idx
-    d2, s, t = _segment_closest(a0[idx], a1[idx], b0[idx], b1[idx])
-    rs = ra[idx] + rb[idx]
-    cap = d2 <= (rs + 1e-9) ** 2
-    ok = cap & (s > 0) & (s < 1) & (t > 0) & (t < 1) & (d2 <= rs * rs)
-    sure[idx[ok]] = True
-    return sure, idx[cap & ~ok]
-
-
 class _Rig:
     """A body as a kinematic tree of nodes carrying rigid cylinders (numpy, fast).
 
