@@ -3,8 +3,9 @@
 
 1. **Centre body.** A hand at a random valid pose (LCS angles inside the limits, no self-collision)
    and random rotation, a static object
-   ([`objects.make_object`][handmesh_tutorial.objects.make_object]) or an articulated chain of rings
-   ([`objects.make_chain`][handmesh_tutorial.objects.make_chain]), at the scene centre.
+   ([`objects.make_object`][handmesh_tutorial.objects.static.make_object]) or an articulated
+   chain of rings ([`objects.make_chain`][handmesh_tutorial.objects.chain.make_chain]), at the
+   scene centre.
 2. **Second hand.** A hand in the neutral (flat) pose whose palm faces the centre body, far
    enough along a random approach direction ``u`` that the two cannot collide.
 3. **Approach.** The second hand moves towards the centre in steps of ``approach_step``

@@ -69,7 +69,7 @@ class InteractionConfig:
         max_attempts: scene candidates (approach directions, initial poses) before giving up.
         chain_links: inclusive range of the number of chain links.
         object_kinds: static object kinds to draw from (``None``: all of
-            [`handmesh_tutorial.objects.OBJECT_KINDS`][handmesh_tutorial.objects.OBJECT_KINDS]).
+            [`objects.OBJECT_KINDS`][handmesh_tutorial.objects.static.OBJECT_KINDS]).
     """
 
     limits: str = "anatomical"
