@@ -17,4 +17,3 @@ def _random_rotation(rng) -> np.ndarray:
 
 def _random_direction(rng) -> np.ndarray:
     return _unit(rng.normal(size=3))
-

@@ -212,6 +212,3 @@ def mesh_contact(a_vertices, a_faces, b_vertices, b_faces, *, a_cylinders: Cylin
     pen = float(-d[inside].min()) if inside.any() else 0.0
     return {"contact_mm": 0.0 if inside.any() else 1e3 * gap, "gap_mm": 1e3 * gap,
             "penetration_mm": 1e3 * pen, "inside": int(inside.sum()), "tested": int(d.size)}
-
-
-# ---------------------------------------------------------------------------------------------
