@@ -1,4 +1,4 @@
-"""Tests of the interaction generator (handmesh_tutorial.interact)."""
+"""Tests of the interaction generator (handmesh_tutorial.interact and its submodules)."""
 
 from __future__ import annotations
 
@@ -290,9 +290,9 @@ def test_scene_lights_vary_colour_and_direction():
 
 
 def test_mixed_kind_is_drawn_from_the_seed():
-    kinds = {interact._choose_kind(s) for s in range(40)}
+    kinds = {interact.sample._choose_kind(s) for s in range(40)}
     assert kinds == set(interact.KINDS)
-    assert interact._choose_kind(123) == interact._choose_kind(123)
+    assert interact.sample._choose_kind(123) == interact.sample._choose_kind(123)
 
 
 def test_make_sample_rejects_bad_arguments():

@@ -1,0 +1,85 @@
+"""The dataset driver of the generator: `generate_interactions` (``handmesh generate``), a thin
+wrapper of [`dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset].
+
+Taught in notebook 05 ("Rendering and visibility").
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import asdict
+
+import numpy as np
+
+from ..dataset import KINDS, generate_dataset
+from .config import InteractionConfig
+from .sample import init_worker, make_sample
+
+__all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
+
+
+
+
+MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, 4096
+"""Range of ``image_size`` that
+[`generate_interactions`][handmesh_tutorial.interact.generate.generate_interactions] accepts,
+pixels: below 32 a hand is a few pixels; above 4096 one image needs gigabytes of render buffers.
+"""
+
+
+def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: int = 224,
+                          workers: int = 1, balance_vr: bool = False,
+                          shard: tuple[int, int] | None = None, limits: str = "anatomical",
+                          durable: bool = True, progress: bool = True, max_attempts: int = 100,
+                          vr_probe: int = 64):
+    """Generate (or resume) an INTER-SH dataset of rendered interactions on disk.
+
+    A thin wrapper of
+    [`handmesh_tutorial.dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset] with
+    ``make_sample = functools.partial(make_sample, kind=..., image_size=..., limits=...)`` and one
+    renderer per worker process ([`init_worker`][handmesh_tutorial.interact.sample.init_worker]).
+    Rerunning the same call skips the samples already written (resume).
+
+    Args:
+        root: output folder.
+        kind: ``"hand-hand"``, ``"hand-object"``, ``"hand-chain"`` or ``"mixed"``.
+        num: samples of the whole dataset (all shards).
+        seed: base seed.
+        image_size: square image side, pixels.
+        workers: processes.
+        balance_vr: spread the target VRs evenly over the paper's VR bins: bins that a probe of
+            candidates never reaches (e.g. [0.4, 0.6) for hand-chain scenes) are reported up front
+            and left out (see
+            [`handmesh_tutorial.dataset.generate_dataset`][handmesh_tutorial.dataset.generate_dataset]).
+        shard: ``(k, n)``: only the k-th of n equal index ranges.
+        limits: ``"anatomical"`` joint limits (default: natural poses) or ``"paper"`` (±60°
+            about every LCS axis, as in the paper).
+        durable: fsync every file (slower, safe against power cuts).
+        progress: tqdm progress bar.
+        max_attempts: candidates per sample (VR balancing rejects some).
+        vr_probe: candidates of the VR probe that finds the reachable bins (``balance_vr``).
+
+    Returns:
+        The
+        [`handmesh_tutorial.dataset.GenerationSummary`][handmesh_tutorial.dataset.GenerationSummary].
+    """
+    # every argument is checked before anything is written (a bad one never leaves a
+    # meta.json behind that blocks the corrected rerun); generate_dataset checks the rest
+    if kind not in KINDS + ("mixed",):
+        raise ValueError(f"kind must be one of {KINDS + ('mixed',)}, got {kind!r}")
+    if isinstance(image_size, bool) or not isinstance(image_size, int | np.integer) \
+            or not MIN_IMAGE_SIZE <= image_size <= MAX_IMAGE_SIZE:
+        raise ValueError(f"image_size must be an integer in [{MIN_IMAGE_SIZE}, "
+                         f"{MAX_IMAGE_SIZE}] pixels, got {image_size!r}")
+    InteractionConfig(limits=limits)  # validates
+    fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits)
+    kinds = list(KINDS) if kind == "mixed" else kind
+    params = {"generator": "handmesh_tutorial.interact", "kind": kind, "limits": limits,
+              "config": {k: (list(v) if isinstance(v, tuple) else v)
+                         for k, v in asdict(InteractionConfig(limits=limits)).items()}}
+    return generate_dataset(root, fn, int(num), int(seed), kinds, shard=shard, workers=workers,
+                            progress=progress, params=params, image_size=int(image_size),
+                            balance_vr=balance_vr, max_attempts=max_attempts,
+                            vr_probe=vr_probe,
+                            worker_init=functools.partial(init_worker, int(image_size)),
+                            durable=durable)

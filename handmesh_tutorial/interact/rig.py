@@ -1,0 +1,171 @@
+"""Articulated rigs: rigid collision cylinders attached to the nodes of a kinematic tree.
+
+A rig is the generator's view of a body (a hand, a static object, the chain): it poses its
+cylinders from LCS joint angles (numpy, fast) and answers the collision queries of the steps
+(world cylinders of many candidate angles of one joint at once, self-collision, contact with
+another rig). Lengths in metres, angles in radians. Taught in notebook 04 ("Generating
+interactions").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..collision import Cylinders, bodies_collide, self_collisions
+from ..lcs import rotation_from_lcs_angles
+
+__all__: list[str] = []  # the rig is internal to the generator
+
+
+class _Rig:
+    """A body as a kinematic tree of nodes carrying rigid cylinders (numpy, fast).
+
+    Node 0 is the root, placed by ``(root_R, root_P)`` (its world rotation and position).
+    Articulated node ``k >= 1`` turns by ``F R(a) F^T`` about its rest position relative to its
+    parent (the convention of [`handmesh_tutorial.lcs`][handmesh_tutorial.lcs]), so for node ``k``:
+    ``G_k = G_parent L_k`` and ``P_k = P_parent + G_parent (rest_k - rest_parent)``; a rest point
+    ``x`` attached to node ``k`` is at ``G_k (x - rest_k) + P_k``.
+    """
+
+    def __init__(self, rest, parents, frames, lower, upper, cylinders: Cylinders, attach,
+                 root_R=None, root_P=None, followers: dict | None = None):
+        # followers {node: (leader node, ratio)}: the node's flexion (y) angle is ``ratio`` times
+        # its leader's and it has no freedom of its own (a finger's DIP following its PIP)
+        self.followers = dict(followers or {})
+        self.leads = {lead: (node, ratio) for node, (lead, ratio) in self.followers.items()}
+        self.rest = np.asarray(rest, float)
+        self.parents = np.asarray(parents, int)
+        n = len(self.rest)
+        self.frames = np.asarray(frames, float).reshape(n - 1, 3, 3)
+        self.lower = np.asarray(lower, float).reshape(n - 1, 3)
+        self.upper = np.asarray(upper, float).reshape(n - 1, 3)
+        self.angles = np.zeros((n - 1, 3))
+        self.local = np.tile(np.eye(3), (n, 1, 1))
+        self.rest_cyl = cylinders
+        self.attach = np.asarray(attach, int)
+        self.radius = cylinders.radius.copy()
+        self.off0 = cylinders.p0 - self.rest[self.attach]
+        self.off1 = cylinders.p1 - self.rest[self.attach]
+        children = [[] for _ in range(n)]
+        for k in range(1, n):
+            children[self.parents[k]].append(k)
+        self.subtree = []
+        for k in range(n):
+            order, stack = [], [k]
+            while stack:
+                m = stack.pop(0)
+                order.append(m)
+                stack.extend(children[m])
+            self.subtree.append(np.array(order))
+        # per node: the cylinders that move with it, and the non-adjacent (moved, static) pairs
+        # whose intersection is a self-collision
+        adj = {(int(i), int(j)) for i, j in cylinders.adjacent}
+        self.moved = []
+        self.self_pairs = []
+        for k in range(n):
+            mv = np.flatnonzero(np.isin(self.attach, self.subtree[k]))
+            st = np.setdiff1d(np.arange(len(self.attach)), mv)
+            pairs = [(a, b) for a in mv for b in st if (min(a, b), max(a, b)) not in adj]
+            p = np.array(pairs, int).reshape(-1, 2)
+            pos = {int(c): i for i, c in enumerate(mv)}
+            self.moved.append(mv)
+            self.self_pairs.append((np.array([pos[a] for a in p[:, 0]], int), p[:, 1]))
+        self.root_R = np.eye(3) if root_R is None else np.asarray(root_R, float)
+        self.root_P = self.rest[0].copy() if root_P is None else np.asarray(root_P, float)
+        self.update()
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.rest) - 1
+
+    def place(self, R, P) -> None:
+        self.root_R, self.root_P = np.asarray(R, float), np.asarray(P, float)
+        self.update()
+
+    def set_angles(self, angles) -> None:
+        self.angles = np.array(angles, float).reshape(self.num_joints, 3)
+        for node, (lead, ratio) in self.followers.items():
+            self.angles[node - 1] = [0.0, ratio * self.angles[lead - 1, 1], 0.0]
+        if self.num_joints:
+            self.local[1:] = rotation_from_lcs_angles(self.frames, self.angles)
+        self.update()
+
+    def set_joint(self, node: int, angles) -> None:
+        """Set the LCS angles (3,) of one articulated node (1..J) and update the pose."""
+        a = np.asarray(angles, float).reshape(1, 3)
+        self.angles[node - 1] = a[0]
+        self.local[node] = rotation_from_lcs_angles(self.frames[node - 1:node], a)[0]
+        if node in self.leads:
+            f, ratio = self.leads[node]
+            fa = np.array([[0.0, ratio * a[0, 1], 0.0]])
+            self.angles[f - 1] = fa[0]
+            self.local[f] = rotation_from_lcs_angles(self.frames[f - 1:f], fa)[0]
+        self.update()
+
+    def update(self) -> None:
+        n = len(self.rest)
+        G = np.empty((n, 3, 3))
+        P = np.empty((n, 3))
+        G[0], P[0] = self.root_R @ self.local[0], self.root_P
+        for k in range(1, n):
+            p = self.parents[k]
+            G[k] = G[p] @ self.local[k]
+            P[k] = P[p] + G[p] @ (self.rest[k] - self.rest[p])
+        self.G, self.P = G, P
+        Ga = G[self.attach]
+        self.p0 = np.einsum("cab,cb->ca", Ga, self.off0) + P[self.attach]
+        self.p1 = np.einsum("cab,cb->ca", Ga, self.off1) + P[self.attach]
+
+    def translate(self, d) -> None:
+        d = np.asarray(d, float)
+        self.root_P = self.root_P + d
+        self.P = self.P + d
+        self.p0 = self.p0 + d
+        self.p1 = self.p1 + d
+
+    def cylinders(self) -> Cylinders:
+        c = self.rest_cyl
+        return Cylinders(self.p0.copy(), self.p1.copy(), self.radius.copy(), c.names, c.parts,
+                         c.adjacent)
+
+    def to_world(self, points, node: int = 0) -> np.ndarray:
+        """Rest points attached to ``node`` -> world."""
+        return (np.asarray(points) - self.rest[node]) @ self.G[node].T + self.P[node]
+
+    def candidates(self, node: int, angles) -> tuple[np.ndarray, np.ndarray]:
+        """World end points (K, Cm, 3) of the cylinders moving with ``node`` for K angle sets."""
+        A = np.asarray(angles, float).reshape(-1, 1, 3)
+        K = len(A)
+        Lk = rotation_from_lcs_angles(self.frames[node - 1:node], A)[:, 0]  # (K,3,3)
+        follower = self.leads.get(node)
+        if follower is not None:
+            f, ratio = follower
+            Af = np.zeros_like(A)
+            Af[..., 1] = ratio * A[..., 1]
+            Lf = rotation_from_lcs_angles(self.frames[f - 1:f], Af)[:, 0]
+        G = {}
+        P = {}
+        for m in self.subtree[node]:
+            p = self.parents[m]
+            if m == node:
+                G[m] = self.G[p] @ Lk
+                P[m] = np.broadcast_to(self.P[m], (K, 3))
+            elif follower is not None and m == follower[0]:
+                G[m] = G[p] @ Lf
+                P[m] = P[p] + G[p] @ (self.rest[m] - self.rest[p])
+            else:
+                G[m] = G[p] @ self.local[m]
+                P[m] = P[p] + G[p] @ (self.rest[m] - self.rest[p])
+        mv = self.moved[node]
+        Gs = np.stack([G[a] for a in self.attach[mv]], 1)  # (K,Cm,3,3)
+        Ps = np.stack([P[a] for a in self.attach[mv]], 1)  # (K,Cm,3)
+        q0 = np.einsum("kcab,cb->kca", Gs, self.off0[mv]) + Ps
+        q1 = np.einsum("kcab,cb->kca", Gs, self.off1[mv]) + Ps
+        return q0, q1
+
+    def self_collides(self) -> bool:
+        return len(self_collisions(self.cylinders())[0]) > 0
+
+    def collides(self, other: _Rig) -> bool:
+        """Does any cylinder of this rig meet any cylinder of ``other``?"""
+        return bodies_collide(self.cylinders(), other.cylinders())
