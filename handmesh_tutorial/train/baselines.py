@@ -37,6 +37,10 @@ def constant_hand_predictions(template_vertices, joint_regressor, num: int):
 
     Returns:
         ``(vertices (num, V, 3), joints (num, 21, 3))`` float32 tensors, metres.
+
+    Shapes:
+        ``template_vertices (V, 3)``, ``joint_regressor (21, V)`` -> ``(num, V, 3)``,
+        ``(num, 21, 3)``.
     """
     tv = torch.as_tensor(template_vertices, dtype=torch.float32).detach().cpu()
     jr = torch.as_tensor(joint_regressor, dtype=torch.float32).detach().cpu()
@@ -67,6 +71,9 @@ def mean_hand(dataset, template=None, iterations: int = 5) -> np.ndarray:
     Returns:
         ``(V, 3)`` float64 vertices in the network frame (aligned to the root-centred rest hand,
         then joint 9 moved to the origin), metres.
+
+    Shapes:
+        items' ``vertices (V, 3)`` -> ``(V, 3)``.
     """
     tmpl = resolve_template(template)
     if len(dataset) == 0:
@@ -104,6 +111,9 @@ def constant_hand_scores(dataset, vertices=None, template=None) -> dict:
 
     Returns:
         [`freihand_scores`][handmesh_tutorial.metrics.freihand_scores] (mm, AUC, F-scores).
+
+    Shapes:
+        ``vertices (V, 3)``; items' ``vertices (V, 3)`` and ``joints (21, 3)``.
     """
     tmpl = resolve_template(template)
     if len(dataset) == 0:

@@ -50,6 +50,10 @@ def predict(model: nn.Module, images, batch_size: int = 32,
         dict with ``vertices`` ``(B, V, 3)`` and ``joints`` ``(B, 21, 3)`` CPU float32 tensors:
         right-hand, root-relative network frame (see
         [`to_camera`][handmesh_tutorial.augment.to_camera] to go back to the camera).
+
+    Shapes:
+        ``images (B, 3, S, S)`` float or ``(B, S, S, 3)`` / ``(S, S, 3)`` uint8 -> ``vertices
+        (B, V, 3)``, ``joints (B, 21, 3)``.
     """
     if not isinstance(images, torch.Tensor) or images.dtype == torch.uint8:
         arr = images if isinstance(images, torch.Tensor) else np.asarray(images)
@@ -237,6 +241,10 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
         ``skipped`` (``[{"index": reader index, "error": message}, ...]``, the items ``skip_bad``
         left out; also in ``eval.json``).
+
+    Shapes:
+        ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
+        ``per_sample`` entries ``(N,)``.
     """
     if threads is not None:
         torch.set_num_threads(int(threads))

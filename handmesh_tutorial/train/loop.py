@@ -143,6 +143,10 @@ def training_loss(out: dict, batch: Mapping, config: TrainConfig,
 
     Raises:
         ValueError: a keypoint weight without a ``uv`` output, or a mesh term without faces.
+
+    Shapes:
+        ``out["vertices"] (B, V, 3)``, ``out["joints"] (B, 21, 3)``, ``out["uv"] (B, 21, 2)``;
+        ``batch`` alike plus ``root (B, 3)``, ``K (B, 3, 3)``; ``faces (F, 3)``.
     """
     loss = vertex_loss(out["vertices"], batch["vertices"])
     parts = {"vertex": float(loss.detach())}

@@ -31,6 +31,9 @@ def plot_pck_curves(ax, curves: dict, thresholds=None, unit: str = "mm", show_au
             when ``None``.
         unit: x-axis unit, ``"mm"`` or ``"m"``.
         show_auc: append the normalised AUC to each legend label.
+
+    Shapes:
+        ``curves[label]``: errors of any shape (metres), or ``((T,), (T,))``; ``thresholds (T,)``.
     """
     thr_default = metrics.FREIHAND_THRESHOLDS if thresholds is None else np.asarray(thresholds)
     factor = 1000.0 if unit == "mm" else 1.0
@@ -95,6 +98,9 @@ def plot_error_vs_vr(ax, vr, errors, bins=None, label: str = "error", unit: str 
 
     Returns:
         The scatter ``PathCollection``.
+
+    Shapes:
+        ``vr (N,)``, ``errors (N,)``; ``bins`` a list of ``(lo, hi)``.
     """
     bins = VR_BINS if bins is None else bins
     v, e = np.asarray(_to_numpy(vr), float).ravel(), np.asarray(_to_numpy(errors), float).ravel()
@@ -133,6 +139,9 @@ def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = 
 
     Returns:
         The matplotlib figure.
+
+    Shapes:
+        ``step_losses (S,)`` (S optimiser steps); ``history`` one dict per epoch.
     """
     import matplotlib.pyplot as plt
 

@@ -41,6 +41,9 @@ def plot_mesh_on_image(ax, image, vertices, faces, K, color=(0.35, 0.6, 1.0), al
 
     Returns:
         The ``PolyCollection`` drawn.
+
+    Shapes:
+        ``image (H, W, 3)``, ``vertices (V, 3)``, ``faces (F, 3)``, ``K (3, 3)``.
     """
     from matplotlib.collections import PolyCollection
 
@@ -102,6 +105,9 @@ def plot_overlays(samples: list, pred_vertices, faces, titles: list | None = Non
 
     Returns:
         The matplotlib figure (rows of 3 panels, two samples per row).
+
+    Shapes:
+        ``pred_vertices (N, V, 3)``, ``faces (F, 3)``; ``samples`` and ``titles`` of length N.
     """
     import matplotlib.pyplot as plt
 

@@ -30,6 +30,9 @@ def set_axes_equal(ax, points: np.ndarray | None = None, pad: float = 0.05) -> N
         ax: a matplotlib ``Axes3D``.
         points: (N,3) points to frame; when ``None`` the current axis limits are used.
         pad: extra margin as a fraction of the largest extent.
+
+    Shapes:
+        ``points (N, 3)``.
     """
     if points is None:
         lims = np.array([ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d()])
@@ -56,6 +59,9 @@ def shade_faces(vertices: np.ndarray, faces: np.ndarray, base_colors: np.ndarray
 
     Returns:
         (F,4) RGBA in [0,1].
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)``, ``base_colors (V, 3)`` or ``(F, 3)`` -> ``(F, 4)``.
     """
     v = np.asarray(vertices, dtype=float)
     f = np.asarray(faces)
@@ -92,6 +98,9 @@ def plot_mesh(ax, vertices, faces, colors=None, alpha: float = 1.0, edgecolor=No
 
     Returns:
         The added ``Poly3DCollection``.
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)``, ``colors (V, 3)`` or ``(F, 3)``.
     """
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
@@ -118,6 +127,9 @@ def plot_skeleton(ax, joints, parents=None, colors=FINGER_COLORS, linewidth: flo
         colors: five colours, thumb to pinky.
         linewidth: bone line width.
         marker_size: joint marker size.
+
+    Shapes:
+        ``joints (21, 3)``, ``parents (21,)``.
     """
     j = _to_numpy(joints).reshape(-1, 3)
     if parents is None:
@@ -144,6 +156,9 @@ def plot_frames(ax, origins, frames, length: float = 0.012,
         colors: colours of the x, y and z arrows.
         linewidth: arrow line width.
         labels: write "x", "y", "z" at the arrow tips of the first frame (for a legend).
+
+    Shapes:
+        ``origins (J, 3)``, ``frames (J, 3, 3)``.
     """
     o = _to_numpy(origins).reshape(-1, 3)
     f = _to_numpy(frames).reshape(-1, 3, 3)
@@ -181,6 +196,9 @@ def plot_hand(ax, vertices, faces, colors=None, joints=None, view: dict | None =
         light: light direction for the shading (flipped to the palm side for views from below).
         edgecolor: triangle edge colour (``None``: no edges).
         linewidth: triangle edge width.
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)``, ``colors (V, 3)``, ``joints (21, 3)``.
     """
     view = HAND_VIEW if view is None else view
     if light is HAND_LIGHT and view.get("elev", 0) < 0:
