@@ -9,7 +9,6 @@ Taught in notebook 00 ("Quickstart"); notebooks 08-10 share its data through
 from __future__ import annotations
 
 import functools
-import json
 import os
 import time
 from dataclasses import asdict, dataclass
@@ -17,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import atomic_write_text, json_safe
+from .._io import write_json
 from ..viz import plot_loss_curves, plot_overlays, save_figure
 from .config import DemoConfig, train_config
 from .report import BASELINE_ROW, MEAN_ROW, write_report
@@ -229,7 +228,7 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
                "counts": counts,
                "train": train_info, "files": {k: str(v) for k, v in files.items()}}
     files["json"] = out / "demo.json"
-    atomic_write_text(files["json"], json.dumps(json_safe(summary), indent=1))
+    write_json(files["json"], summary, sort_keys=False)  # keys in the order above
     return DemoResult(out_dir=out, report=files["report"], scores=ev["scores"],
                       vr_table=ev["vr_table"], table=ev["table"], files=files, seconds=seconds,
                       config=cfg, train_epochs=res.epochs, baseline_scores=baseline,

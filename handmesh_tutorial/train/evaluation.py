@@ -10,7 +10,6 @@ Taught in notebook 09 ("Evaluation").
 
 from __future__ import annotations
 
-import io
 import os
 from pathlib import Path
 
@@ -21,8 +20,7 @@ from torch import nn
 from .. import augment as A
 from .. import metrics as M
 from .. import viz
-from .._io import atomic_write_bytes as _atomic_write_bytes
-from .._io import write_json
+from .._io import atomic_savez, write_json
 from .._progress import progress_bar
 from ..dataset import KINDS
 from ..losses import vertex_loss
@@ -358,13 +356,12 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
                "skipped": res.get("skipped", [])}
     files["json"] = out / "eval.json"
     write_json(files["json"], summary)
-    buf = io.BytesIO()
     p = res["predictions"]
-    np.savez(buf, vertices=p["vertices"].astype(np.float32), joints=p["joints"].astype(np.float32),
-             index=res["per_sample"]["index"], vr=res["per_sample"]["vr"],
-             mirrored=res["per_sample"]["mirrored"])
     files["predictions"] = out / "predictions.npz"
-    _atomic_write_bytes(files["predictions"], buf.getvalue())
+    atomic_savez(files["predictions"], compressed=False,
+                 vertices=p["vertices"].astype(np.float32), joints=p["joints"].astype(np.float32),
+                 index=res["per_sample"]["index"], vr=res["per_sample"]["vr"],
+                 mirrored=res["per_sample"]["mirrored"])
 
     fig, ax = plt.subplots(figsize=(5, 3.6))
     curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors["vert_err_pa"],

@@ -11,14 +11,13 @@ Taught in notebook 08 ("Training").
 from __future__ import annotations
 
 import hashlib
-import io
 import os
 from pathlib import Path
 
 import numpy as np
 from torch import nn
 
-from .._io import atomic_write_bytes as _atomic_write_bytes
+from .._io import atomic_savez
 from ..model import as_template, build_model
 from .config import TrainConfig
 
@@ -67,9 +66,8 @@ def save_template(path: str | os.PathLike, template) -> Path:
     """
     t = resolve_template(template)
     path = Path(path)
-    buf = io.BytesIO()
-    np.savez(buf, vertices=t.vertices, faces=t.faces, joint_regressor=t.joint_regressor)
-    _atomic_write_bytes(path, buf.getvalue())
+    atomic_savez(path, compressed=False, vertices=t.vertices, faces=t.faces,
+                 joint_regressor=t.joint_regressor)
     return path
 
 
