@@ -70,7 +70,7 @@ def random_batch(net, cfg, seed: int = 1) -> dict:
 def step_fn(net, opt, cfg, batch):
     def step():
         opt.zero_grad(set_to_none=True)
-        train._train_step(net, batch, 1, torch.device("cpu"), False, cfg, None)
+        train.loop._train_step(net, batch, 1, torch.device("cpu"), False, cfg, None)
         opt.step()
     return step
 
@@ -102,7 +102,7 @@ def accuracy(cfg32, steps: int, n_train: int = 32, n_test: int = 16) -> dict:
         for k in range(steps):
             batch = torch.utils.data.default_collate([ds_tr[int(i)] for i in order[k]])
             opt.zero_grad(set_to_none=True)
-            train._train_step(net, batch, 1, torch.device("cpu"), False, cfg, None)
+            train.loop._train_step(net, batch, 1, torch.device("cpu"), False, cfg, None)
             opt.step()
         net.eval()
         with torch.no_grad():

@@ -6,7 +6,10 @@ the concept, so everything the command does can also be called from Python or a 
 Errors: a library error prints one line on stderr (``handmesh COMMAND: error: ...``, naming the
 file, key or shape and what to do) and exits with a code that says what kind of problem it was
 ([`EXIT_CODES`][handmesh_tutorial.cli.EXIT_CODES]); ``handmesh --debug COMMAND ...`` shows the full
-traceback instead.
+traceback instead. The sub-commands import their library modules when they run, so ``handmesh
+--help`` starts fast without torch or OpenGL.
+
+Taught in notebook 00 ("Quickstart") and notebook 08 ("Training").
 """
 
 from __future__ import annotations
@@ -16,6 +19,9 @@ import pickle
 import sys
 import traceback
 import zipfile
+from pathlib import Path
+
+from .budget import budget
 
 EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4,
               "exists": 5, "interrupted": 130}
@@ -24,7 +30,6 @@ EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found":
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from . import demo
-    from .budget import budget
 
     cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe)
     res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress)
@@ -63,8 +68,6 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from . import interact
     from .dataset import META_FILE, verify_dataset
 
@@ -109,7 +112,6 @@ _TRAIN_OPTIONS = ("data", "dataset", "val_data", "val_fraction", "epochs", "batc
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from . import train
-    from .budget import budget
 
     overrides = {k: getattr(args, k) for k in _TRAIN_OPTIONS if getattr(args, k) is not None}
     overrides.update(out_dir=args.out, attention=not args.no_attention,

@@ -186,10 +186,10 @@ def test_a_kill_between_checkpoint_writes_leaves_a_consistent_run(samples, tmp_p
             saved.append(Path(path).name)
         return real_save(path, **k)
 
-    monkeypatch.setattr(T, "save_checkpoint", killed_between_the_two_writes)
+    monkeypatch.setattr(T.loop, "save_checkpoint", killed_between_the_two_writes)
     with pytest.raises(KeyboardInterrupt):
         T.train(cfg, dataset=tr, val_dataset=va, resume=True)
-    monkeypatch.setattr(T, "save_checkpoint", real_save)
+    monkeypatch.setattr(T.loop, "save_checkpoint", real_save)
     (tmp_path / "run" / "metrics.csv").write_text("garbage from a killed run\n")
     res = T.train(cfg, dataset=tr, val_dataset=va, resume=True)
     for name in ("checkpoint_last.pt", "checkpoint_best.pt"):

@@ -1,7 +1,9 @@
-"""Matplotlib figures shared by the notebooks, the docs and the demo report.
+"""3D figures of hands and bodies: shaded meshes, skeletons, joint frames, cylinders, hand views.
 
-Everything here draws on plain matplotlib (static figures render in the docs and in CI). Interactive
-viewers (meshcat, ipywidgets) are optional extras that notebooks import lazily.
+Everything draws on a matplotlib ``Axes3D`` with plain matplotlib (static figures render in the
+docs and in CI). Positions in metres; meshes (V, 3) vertices and (F, 3) faces; keypoints (21, 3)
+in FreiHAND order. Taught in notebook 01 ("Hand model"); the cylinders in notebook 03 ("Cylinder
+collision").
 """
 
 from __future__ import annotations
@@ -11,7 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import atomic_write_with
+from ._common import _to_numpy
+from .files import save_figure
+
+__all__ = ["FINGER_COLORS", "HAND_VIEW", "HAND_LIGHT", "set_axes_equal", "shade_faces", "plot_mesh",
+           "plot_skeleton", "plot_frames", "plot_hand", "save_hand_gallery", "plot_cylinders"]
 
 # One colour per finger, FreiHAND order: thumb, index, middle, ring, pinky.
 FINGER_COLORS = ("#d62728", "#ff7f0e", "#2ca02c", "#1f77b4", "#9467bd")
@@ -24,6 +30,9 @@ def set_axes_equal(ax, points: np.ndarray | None = None, pad: float = 0.05) -> N
         ax: a matplotlib ``Axes3D``.
         points: (N,3) points to frame; when ``None`` the current axis limits are used.
         pad: extra margin as a fraction of the largest extent.
+
+    Shapes:
+        ``points (N, 3)``.
     """
     if points is None:
         lims = np.array([ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d()])
@@ -50,6 +59,9 @@ def shade_faces(vertices: np.ndarray, faces: np.ndarray, base_colors: np.ndarray
 
     Returns:
         (F,4) RGBA in [0,1].
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)``, ``base_colors (V, 3)`` or ``(F, 3)`` -> ``(F, 4)``.
     """
     v = np.asarray(vertices, dtype=float)
     f = np.asarray(faces)
@@ -86,6 +98,9 @@ def plot_mesh(ax, vertices, faces, colors=None, alpha: float = 1.0, edgecolor=No
 
     Returns:
         The added ``Poly3DCollection``.
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)``, ``colors (V, 3)`` or ``(F, 3)``.
     """
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
@@ -112,6 +127,9 @@ def plot_skeleton(ax, joints, parents=None, colors=FINGER_COLORS, linewidth: flo
         colors: five colours, thumb to pinky.
         linewidth: bone line width.
         marker_size: joint marker size.
+
+    Shapes:
+        ``joints (21, 3)``, ``parents (21,)``.
     """
     j = _to_numpy(joints).reshape(-1, 3)
     if parents is None:
@@ -138,6 +156,9 @@ def plot_frames(ax, origins, frames, length: float = 0.012,
         colors: colours of the x, y and z arrows.
         linewidth: arrow line width.
         labels: write "x", "y", "z" at the arrow tips of the first frame (for a legend).
+
+    Shapes:
+        ``origins (J, 3)``, ``frames (J, 3, 3)``.
     """
     o = _to_numpy(origins).reshape(-1, 3)
     f = _to_numpy(frames).reshape(-1, 3, 3)
@@ -169,12 +190,15 @@ def plot_hand(ax, vertices, faces, colors=None, joints=None, view: dict | None =
         faces: (F,3) int.
         colors: (V,3) RGB in [0,1], e.g. ``HandModel.vertex_colors()``.
         joints: optional (21,3) keypoints, FreiHAND order, drawn on top.
-        view: ``ax.view_init`` keywords; [`HAND_VIEW`][handmesh_tutorial.viz.HAND_VIEW] when
+        view: ``ax.view_init`` keywords; [`HAND_VIEW`][handmesh_tutorial.viz.mesh3d.HAND_VIEW] when
             ``None``.
         title: axes title.
         light: light direction for the shading (flipped to the palm side for views from below).
         edgecolor: triangle edge colour (``None``: no edges).
         linewidth: triangle edge width.
+
+    Shapes:
+        ``vertices (V, 3)``, ``faces (F, 3)``, ``colors (V, 3)``, ``joints (21, 3)``.
     """
     view = HAND_VIEW if view is None else view
     if light is HAND_LIGHT and view.get("elev", 0) < 0:
@@ -212,7 +236,7 @@ def save_hand_gallery(path: str | os.PathLike, seed: int = 0, dpi: int = 90) -> 
     import matplotlib.pyplot as plt
     import torch
 
-    from . import hand
+    from .. import hand
 
     rng = np.random.default_rng(seed)
     tones = rng.choice(4, size=2, replace=False)   # the lighter tones read best in print
@@ -239,124 +263,6 @@ def save_hand_gallery(path: str | os.PathLike, seed: int = 0, dpi: int = 90) -> 
         return save_figure(fig, path, dpi=dpi)
     finally:
         plt.close(fig)
-
-
-def plot_pck_curves(ax, curves: dict, thresholds=None, unit: str = "mm", show_auc: bool = True):
-    """Draw 3D PCK curves (fraction of points with error <= threshold), one line per entry.
-
-    Args:
-        ax: a matplotlib ``Axes``.
-        curves: {label: errors or (thresholds, pck)}: either an array of point errors in metres (any
-            shape; the curve is computed with
-            [`handmesh_tutorial.metrics.pck_curve`][handmesh_tutorial.metrics.pck_curve]) or a
-            precomputed pair of (T,) thresholds in metres and (T,) PCK values.
-        thresholds: (T,) thresholds in metres for error arrays; FreiHAND's 0-50 mm, 100 values
-            when ``None``.
-        unit: x-axis unit, ``"mm"`` or ``"m"``.
-        show_auc: append the normalised AUC to each legend label.
-    """
-    from . import metrics
-
-    thr_default = metrics.FREIHAND_THRESHOLDS if thresholds is None else np.asarray(thresholds)
-    factor = 1000.0 if unit == "mm" else 1.0
-    for label, data in curves.items():
-        if isinstance(data, tuple) and len(data) == 2:
-            thr, pck = np.asarray(data[0], dtype=float), np.asarray(data[1], dtype=float)
-        else:
-            thr, pck = thr_default, metrics.pck_curve(_to_numpy(data), thr_default)
-        text = f"{label} (AUC {metrics.auc(pck, thr):.3f})" if show_auc else str(label)
-        ax.plot(thr * factor, pck, label=text)
-    ax.set_xlabel(f"error threshold ({unit})")
-    ax.set_ylabel("3D PCK")
-    ax.set_ylim(0, 1.02)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize="small")
-
-
-def plot_vr_table(ax, rows: list, metric: str = "auc", label: str | None = None,
-                  color=None, offset: float = 0.0, width: float = 0.8):
-    """Bar chart of one score per visibility-ratio bin (rows of ``metrics.scores_by_vr_bin``).
-
-    Call it once per model with different ``offset``/``width`` to get grouped bars.
-
-    Args:
-        ax: a matplotlib ``Axes``.
-        rows: list of per-bin dicts with ``bin``, ``count`` and the ``metric`` key.
-        metric: the score to draw, e.g. ``"auc"``, ``"pa_mpjpe"``, ``"f_at_5mm"``.
-        label: legend label (e.g. the model name).
-        color: bar colour.
-        offset: horizontal shift of the bars (for grouped bars).
-        width: bar width.
-
-    Returns:
-        The matplotlib ``BarContainer``.
-    """
-    x = np.arange(len(rows)) + offset
-    values = [float(r.get(metric, np.nan)) for r in rows]
-    bars = ax.bar(x, values, width=width, label=label, color=color)
-    for xi, v, r in zip(x, values, rows, strict=True):
-        if np.isfinite(v):
-            ax.annotate(f"n={r.get('count', '?')}", (xi, v), ha="center", va="bottom",
-                        fontsize="x-small")
-    ax.set_xticks(np.arange(len(rows)), [str(r.get("bin", "")) for r in rows])
-    ax.set_xlabel("visibility ratio (VR) bin")
-    ax.set_ylabel(metric)
-    return bars
-
-
-def plot_error_vs_vr(ax, vr, errors, bins=None, label: str = "error", unit: str = "mm",
-                     color=None):
-    """Scatter of a per-sample error against the target hand's visibility ratio, with bin means.
-
-    Args:
-        ax: a matplotlib ``Axes``.
-        vr: (N,) visibility ratios in [0, 1] (NaN samples are skipped).
-        errors: (N,) per-sample errors (e.g. PA-MPJPE in mm).
-        bins: VR bins drawn as shaded bands with their mean error (default the paper's
-            ``visibility.VR_BINS``).
-        label: legend / y-axis label of the error.
-        unit: unit shown on the y axis.
-        color: point colour.
-
-    Returns:
-        The scatter ``PathCollection``.
-    """
-    from .visibility import VR_BINS
-
-    bins = VR_BINS if bins is None else bins
-    v, e = np.asarray(_to_numpy(vr), float).ravel(), np.asarray(_to_numpy(errors), float).ravel()
-    ok = np.isfinite(v) & np.isfinite(e)
-    pts = ax.scatter(v[ok], e[ok], s=10, alpha=0.6, color=color, label=f"{label} per sample")
-    labelled = False
-    for k, (lo, hi) in enumerate(bins):
-        last = k == len(bins) - 1
-        sel = ok & (v >= lo) & ((v <= hi) if last else (v < hi))
-        ax.axvspan(lo, hi, color="0.5" if k % 2 else "0.8", alpha=0.15, lw=0)
-        if sel.any():
-            m = float(e[sel].mean())
-            ax.hlines(m, lo, hi, colors="k", lw=2, label=None if labelled else "bin mean")
-            labelled = True
-            ax.annotate(f"n={int(sel.sum())}", ((lo + hi) / 2, m), ha="center", va="bottom",
-                        fontsize="x-small")
-    ax.set_xlabel("visibility ratio of the target hand")
-    ax.set_ylabel(f"{label} ({unit})")
-    low = min(bins[0][0], float(v[ok].min()) if ok.any() else 1.0) - 0.05
-    ax.set_xlim(max(low, 0.0), 1.02)
-    ax.legend(fontsize="small")
-    return pts
-
-
-def save_figure(fig, path: str | os.PathLike, dpi: int = 100) -> Path:
-    """Save a matplotlib figure atomically (temp file + rename) and return its path."""
-    fmt = Path(path).suffix.lstrip(".") or "png"
-    return atomic_write_with(path, lambda fh: fig.savefig(fh, dpi=dpi, bbox_inches="tight",
-                                                          format=fmt))
-
-
-def _to_numpy(x) -> np.ndarray:
-    if hasattr(x, "detach"):
-        x = x.detach().cpu().numpy()
-    return np.asarray(x)
 
 
 def _cylinder_polygons(p0, p1, r, n: int = 24):
@@ -435,73 +341,3 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
             if names:
                 ax.text(*(0.5 * (p0[k] + p1[k])), names[k], fontsize="x-small")
     return artists
-
-
-def plot_mesh_on_image(ax, image, vertices, faces, K, color=(0.35, 0.6, 1.0), alpha: float = 0.6,
-                       wireframe: bool = False, linewidth: float = 0.3, zoom: float | None = 1.4,
-                       title: str | None = None):
-    """Draw a camera-frame mesh over an image: projected with ``K``, depth-sorted, shaded.
-
-    Faces are drawn back to front (painter's algorithm, no z-buffer), shaded by how directly they
-    face the camera, so a hand reads as a 3D surface; ``wireframe=True`` draws only the edges.
-
-    Args:
-        ax: a matplotlib 2D ``Axes``.
-        image: (H, W, 3) uint8 image (shown as the background); ``None`` draws on a blank axes.
-        vertices: (V, 3) mesh in the camera frame (OpenCV: x right, y down, z forward), metres.
-        faces: (F, 3) vertex indices.
-        K: (3, 3) intrinsics of ``image``.
-        color: RGB in [0, 1] of the mesh.
-        alpha: face opacity.
-        wireframe: edges only (no filled faces).
-        linewidth: edge width.
-        zoom: frame the view on the projected mesh, this many times its bounding box (``None``
-            keeps the whole image).
-        title: axes title.
-
-    Returns:
-        The ``PolyCollection`` drawn.
-    """
-    from matplotlib.collections import PolyCollection
-
-    v = np.asarray(_to_numpy(vertices), dtype=np.float64)
-    f = np.asarray(_to_numpy(faces), dtype=np.int64)
-    k = np.asarray(_to_numpy(K), dtype=np.float64)
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise ValueError(f"vertices must be (V, 3), got {v.shape}")
-    if k.shape != (3, 3):
-        raise ValueError(f"K must be (3, 3), got {k.shape}")
-    z = np.clip(v[:, 2], 1e-6, None)
-    uv = (v @ k.T)[:, :2] / z[:, None]
-    if image is not None:
-        ax.imshow(image)
-    tri = v[f]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True) + 1e-12
-    view = tri.mean(1)
-    view /= np.linalg.norm(view, axis=1, keepdims=True) + 1e-12
-    shade = 0.35 + 0.65 * np.abs((normals * view).sum(1))
-    order = np.argsort(-tri[:, :, 2].mean(1))  # far faces first
-    rgba = np.zeros((len(f), 4))
-    rgba[:, :3] = np.clip(np.asarray(color, dtype=float)[None] * shade[:, None], 0, 1)
-    rgba[:, 3] = alpha
-    if wireframe:
-        coll = PolyCollection(uv[f][order], facecolors="none", edgecolors=[(*color, alpha)],
-                              linewidths=linewidth)
-    else:
-        coll = PolyCollection(uv[f][order], facecolors=rgba[order], edgecolors="none")
-    ax.add_collection(coll)
-    if zoom is not None:
-        lo, hi = uv.min(0), uv.max(0)
-        c, half = (lo + hi) / 2, max(float((hi - lo).max()), 1.0) * zoom / 2
-        ax.set_xlim(c[0] - half, c[0] + half)
-        ax.set_ylim(c[1] + half, c[1] - half)  # image rows grow downwards
-    elif image is not None:
-        ax.set_xlim(-0.5, image.shape[1] - 0.5)
-        ax.set_ylim(image.shape[0] - 0.5, -0.5)
-    ax.set_aspect("equal")
-    ax.set_xticks([])
-    ax.set_yticks([])
-    if title is not None:
-        ax.set_title(title, fontsize="small")
-    return coll

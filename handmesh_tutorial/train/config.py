@@ -1,0 +1,241 @@
+"""The settings of a training run: [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig].
+
+Paper, Sec. "Training": the loss is the L1 distance between predicted and ground-truth mesh
+vertices, the vertices translated so that the middle MCP joint (keypoint 9) is at the origin; Adam
+with learning rate ``1e-4`` for 200 epochs, halved every 50 epochs; batch size 32; images normalised
+with mean 0.5 and standard deviation 1.0; random crops and transformations. Those are the defaults
+of [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig]. Also here: which fields define the
+network (compared when resuming or loading a checkpoint) and which a resumed run may change
+([`RESUMABLE_KEYS`][handmesh_tutorial.train.config.RESUMABLE_KEYS],
+[`changed_settings`][handmesh_tutorial.train.config.changed_settings]).
+
+Taught in notebook 08 ("Training").
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
+
+from ..budget import budget as _budget
+
+__all__ = ["TrainConfig", "changed_settings", "RESUMABLE_KEYS"]
+
+# config keys that define the network: they must match when resuming or loading
+_ARCH_KEYS = ("encoder", "decoder", "attention", "channels", "latent_channels", "model_kwargs")
+RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_workers", "cache_data",
+                  "val_every", "checkpoint_every", "val_batch_size", "progress", "durable",
+                  "skip_bad")
+"""[`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] fields a resumed run may change (how
+long, where, how fast, what is logged, whether bad samples are skipped); every other field must
+equal the checkpoint's, so a run never silently mixes data, seeds, batch sizes or learning rates.
+"""
+_PATH_KEYS = ("data", "val_data", "template")
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run needs; the defaults are the paper's recipe.
+
+    Attributes:
+        data: training data root (INTER-SH root, or FreiHAND root with ``dataset="freihand"``). May
+            be ``None`` when datasets are passed to [`train`][handmesh_tutorial.train.loop.train]
+            directly.
+        dataset: ``"intersh"`` or ``"freihand"``.
+        val_data: separate validation root (INTER-SH root; FreiHAND root whose ``evaluation``
+            split is used). ``None``: hold out ``val_fraction`` of ``data``.
+        val_fraction: share of ``data`` held out for validation (seeded; FreiHAND holds out
+            whole unique samples, all their versions). 0 = no validation.
+        image_size: network input side, pixels (paper: 224).
+        augment: random crop / scale / rotation / colour jitter on training crops.
+        cache_data: keep decoded training samples in memory (per process; pays off with
+            ``num_workers=0``, since worker processes are restarted every epoch).
+        epochs: training epochs (paper: 200).
+        batch_size: global batch size (paper: 32); split over ranks and micro-batches.
+        lr: Adam learning rate (paper: 1e-4).
+        lr_step: epochs between learning-rate decays (paper: 50).
+        lr_gamma: decay factor (paper: 0.5).
+        weight_decay: Adam weight decay (paper: none).
+        micro_batches: gradient-accumulation chunks per rank and step.
+        encoder: encoder name (``resnet18``, ``resnet34``, ``resnet50``, ``hrnet18``).
+        decoder: ``"multi"`` (MSMR) or ``"single"`` (baseline).
+        attention: transformer on the coarse mesh.
+        channels: decoder channels per level, finest first (``None``: model defaults).
+        latent_channels: channels per coarse-mesh token.
+        model_kwargs: further [`build_model`][handmesh_tutorial.model.build_model] arguments
+            (``spiral_length``, ``num_blocks``, ``num_heads``, ...).
+        template: ``None`` = the open right hand; else a ``.npz`` path written by
+            [`save_template`][handmesh_tutorial.train.templates.save_template] (``vertices``,
+            ``faces``,
+            ``joint_regressor``).
+        out_dir: output folder (checkpoints, ``metrics.csv``, ``steps.csv``, ``config.json``).
+        seed: seed of initialisation, data order, split and augmentation.
+        device: ``"auto"`` (CUDA when available), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``.
+        threads: ``torch.set_num_threads`` value (``None``: leave as is).
+        num_workers: DataLoader worker processes.
+        val_every: validate every this many epochs (and after the last).
+        checkpoint_every: write ``checkpoint_last.pt`` every this many epochs (and after the
+            last).
+        val_batch_size: batch size of validation (``None``: ``batch_size``).
+        box_scale: crop margin around the projected target mesh (INTER-SH).
+        progress: show tqdm bars (rank 0).
+        durable: fsync checkpoints and logs before renaming them into place.
+        keypoint_weight: weight of the 2D keypoint loss (needs ``model_kwargs={"keypoints":
+            True}``); 0 = off, as the paper.
+        aligned_weight: weight of the L1 loss of Procrustes-aligned joints; 0 = off.
+        edge_weight: weight of the edge-length loss; 0 = off.
+        normal_weight: weight of the normal loss; 0 = off. (The four terms:
+            [`training_loss`][handmesh_tutorial.train.loop.training_loss],
+            [`handmesh_tutorial.losses`][handmesh_tutorial.losses].)
+        skip_bad: before training, load every training and validation item once and leave out
+            those that cannot be read (listed in ``TrainResult.skipped`` and ``skipped.json``);
+            ``False``: the first bad sample stops the run with its file named. May change on
+            resume (the batches after the resume point then differ; ``skipped.json`` says why).
+        precision: ``"float32"`` (default) or ``"bfloat16"``: forward pass and loss under
+            ``torch.autocast`` in bfloat16 (weights, gradients and the optimiser stay float32).
+            Faster on CPUs with bfloat16 units (AVX-512 BF16 / AMX), at a measured cost in
+            accuracy (``benchmarks/train.py``, docs page "Performance").
+    """
+
+    data: str | None = None
+    dataset: str = "intersh"
+    val_data: str | None = None
+    val_fraction: float = 0.1
+    image_size: int = 224
+    augment: bool = True
+    cache_data: bool = False
+    epochs: int = 200
+    batch_size: int = 32
+    lr: float = 1e-4
+    lr_step: int = 50
+    lr_gamma: float = 0.5
+    weight_decay: float = 0.0
+    micro_batches: int = 1
+    encoder: str = "resnet18"
+    decoder: str = "multi"
+    attention: bool = True
+    channels: tuple[int, ...] | None = None
+    latent_channels: int = 16
+    model_kwargs: dict = field(default_factory=dict)
+    template: str | None = None
+    out_dir: str = "runs/train"
+    seed: int = 0
+    device: str = "auto"
+    threads: int | None = None
+    num_workers: int = 0
+    val_every: int = 1
+    checkpoint_every: int = 1
+    val_batch_size: int | None = None
+    box_scale: float = 1.5
+    progress: bool = True
+    durable: bool = True
+    keypoint_weight: float = 0.0
+    aligned_weight: float = 0.0
+    edge_weight: float = 0.0
+    normal_weight: float = 0.0
+    skip_bad: bool = False
+    precision: str = "float32"
+
+    def __post_init__(self):
+        for name in ("data", "val_data", "template"):
+            v = getattr(self, name)
+            if v is not None:
+                setattr(self, name, str(v))
+        self.out_dir = str(self.out_dir)
+        if self.channels is not None:
+            self.channels = tuple(int(c) for c in self.channels)
+        self.model_kwargs = dict(self.model_kwargs or {})
+        if self.precision not in ("float32", "bfloat16"):
+            raise ValueError(f"precision must be 'float32' or 'bfloat16', got {self.precision!r}")
+        if self.dataset not in ("intersh", "freihand"):
+            raise ValueError(f"dataset must be 'intersh' or 'freihand', got {self.dataset!r}")
+        for name in ("epochs", "batch_size", "lr_step", "micro_batches", "image_size",
+                     "val_every", "checkpoint_every"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if not 0.0 <= self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be positive, got {self.lr}")
+        for name in ("keypoint_weight", "aligned_weight", "edge_weight", "normal_weight"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 0:
+                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
+            setattr(self, name, float(v))
+        if self.keypoint_weight and not self.model_kwargs.get("keypoints", False):
+            raise ValueError("keypoint_weight > 0 needs model_kwargs={'keypoints': True} (a "
+                             "model with a 2D keypoint head)")
+        if self.num_workers < 0:
+            raise ValueError(f"num_workers must be >= 0, got {self.num_workers}")
+
+    @classmethod
+    def from_budget(cls, budget=None, **overrides) -> TrainConfig:
+        """A config sized by a run-size tier.
+
+        ``epochs``, ``batch_size``, ``image_size`` and ``threads`` come from the budget; the
+        learning rate decays four times per run (``lr_step = max(1, round(epochs / 4))``: 50 at
+        the ``full`` tier's 200 epochs, as in the paper).
+
+        Args:
+            budget: a [`Budget`][handmesh_tutorial.budget.Budget] (default ``hmt.budget()``).
+            **overrides: any field of [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig].
+
+        Returns:
+            The config.
+        """
+        if budget is None:
+            budget = _budget()
+        sized = {"epochs": budget.epochs, "batch_size": budget.batch_size,
+                 "image_size": budget.image_size, "threads": budget.threads,
+                 "lr_step": max(1, round(budget.epochs / 4))}
+        if "epochs" in overrides and "lr_step" not in overrides:
+            sized["lr_step"] = max(1, round(overrides["epochs"] / 4))
+        sized.update(overrides)
+        return cls(**sized)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (tuples become lists)."""
+        d = asdict(self)
+        d["channels"] = None if self.channels is None else list(self.channels)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> TrainConfig:
+        """Inverse of [`to_dict`][handmesh_tutorial.train.config.TrainConfig.to_dict]; unknown keys
+        raise
+        ``ValueError``."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown TrainConfig keys {unknown}")
+        return cls(**dict(d))
+
+    def architecture(self) -> dict:
+        """The entries that define the network (compared when resuming or loading)."""
+        d = self.to_dict()
+        return {k: d[k] for k in _ARCH_KEYS}
+
+
+def changed_settings(saved: Mapping, config: TrainConfig) -> dict:
+    """Fields of ``config`` that differ from a checkpoint's ``saved`` config and may not.
+
+    Fields in [`RESUMABLE_KEYS`][handmesh_tutorial.train.config.RESUMABLE_KEYS] may change; paths
+    (``data``, ``val_data``, ``template``) count as equal when they name the same file or folder.
+
+    Returns:
+        ``{field: (saved value, new value)}``, empty when the run can resume.
+    """
+    now = config.to_dict()
+    diff = {}
+    for k, v in now.items():
+        if k in RESUMABLE_KEYS or k in _ARCH_KEYS:
+            continue
+        old = saved.get(k, TrainConfig.__dataclass_fields__[k].default)
+        if k in _PATH_KEYS and old is not None and v is not None \
+                and os.path.realpath(old) == os.path.realpath(v):
+            continue
+        if old != v:
+            diff[k] = (old, v)
+    return diff

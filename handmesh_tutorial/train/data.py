@@ -1,0 +1,136 @@
+"""The data of a training run: the per-epoch batch order and the train / validation datasets.
+
+Determinism: the sample order of epoch ``e`` is ``numpy.random.default_rng([seed, e]).permutation``;
+the validation split is drawn from its own seeded stream; augmentation draws come from
+``(seed, epoch, index)`` (see [`handmesh_tutorial.augment`][handmesh_tutorial.augment]).
+
+Taught in notebook 08 ("Training").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from .. import augment as A
+from ..dataset import InterSHDataset
+from ..freihand import FreiHAND
+from .config import TrainConfig
+
+__all__ = ["EpochBatchSampler", "make_datasets"]
+
+
+class EpochBatchSampler(torch.utils.data.Sampler):
+    """Global batches of a seeded permutation per epoch; yields this rank's share of each.
+
+    Epoch ``e`` orders the ``n`` items by ``numpy.random.default_rng([seed, e]).permutation(n)``
+    (``shuffle=False``: ``0..n-1``) and cuts that order into global batches of ``batch_size``.
+    A shorter last batch is filled up with the first items of the order (wrapping around), so
+    every batch has exactly ``batch_size`` items (as ``DistributedSampler`` pads; it also avoids
+    a last batch of one sample, which BatchNorm rejects). Rank ``r`` gets the ``r``-th of
+    ``world_size`` equal consecutive slices of every global batch.
+
+    Args:
+        n: dataset length.
+        batch_size: global batch size (a multiple of ``world_size * micro_batches``).
+        seed: order seed.
+        rank: this process's rank.
+        world_size: number of processes.
+        micro_batches: accumulation chunks per rank (checked: ``batch_size`` must split).
+        shuffle: permute (``False``: keep the dataset order).
+
+    Raises:
+        ValueError: ``batch_size`` is not divisible by ``world_size * micro_batches`` or
+            ``n`` is 0.
+    """
+
+    def __init__(self, n: int, batch_size: int, seed: int = 0, rank: int = 0,
+                 world_size: int = 1, micro_batches: int = 1, shuffle: bool = True):
+        chunks = world_size * micro_batches
+        if n < 1:
+            raise ValueError("the training set is empty")
+        if batch_size % chunks:
+            raise ValueError(f"batch_size {batch_size} must be divisible by world_size x "
+                             f"micro_batches = {world_size} x {micro_batches} = {chunks}")
+        self.n, self.batch_size, self.seed = n, batch_size, seed
+        self.rank, self.world_size, self.chunks = rank, world_size, chunks
+        self.shuffle = shuffle
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the order of ``epoch``."""
+        self.epoch = int(epoch)
+
+    def global_batches(self, epoch: int | None = None) -> list[list[int]]:
+        """All global batches of an epoch (padded), as lists of dataset positions."""
+        e = self.epoch if epoch is None else epoch
+        order = (np.random.default_rng([self.seed, e]).permutation(self.n) if self.shuffle
+                 else np.arange(self.n)).tolist()
+        out = []
+        for start in range(0, self.n, self.batch_size):
+            b = order[start:start + self.batch_size]
+            b = b + [order[k % self.n] for k in range(self.batch_size - len(b))]
+            out.append(b)
+        return out
+
+    def __iter__(self):
+        for b in self.global_batches():
+            per = len(b) // self.world_size
+            yield b[self.rank * per:(self.rank + 1) * per]
+
+    def __len__(self) -> int:
+        return math.ceil(self.n / self.batch_size)
+
+
+def _split(n: int, fraction: float, seed: int) -> tuple[list[int], list[int]]:
+    if fraction <= 0 or n < 2:
+        return list(range(n)), []
+    n_val = min(n - 1, max(1, round(n * fraction)))
+    perm = np.random.default_rng([seed, 7919]).permutation(n)  # 7919: its own stream
+    return sorted(perm[n_val:].tolist()), sorted(perm[:n_val].tolist())
+
+
+def make_datasets(config: TrainConfig):
+    """Training and validation torch datasets of a config.
+
+    Returns:
+        ``(train_dataset, val_dataset or None)``:
+        [`InterSHTorchDataset`][handmesh_tutorial.augment.InterSHTorchDataset] or
+        [`FreiHANDTorchDataset`][handmesh_tutorial.augment.FreiHANDTorchDataset]; validation without
+        augmentation.
+
+    Raises:
+        ValueError: ``config.data`` is not set.
+    """
+    if config.data is None:
+        raise ValueError("TrainConfig.data is None: give a data root or pass dataset= to train()")
+    common = {"image_size": config.image_size, "seed": config.seed, "cache": config.cache_data}
+    if config.dataset == "intersh":
+        src = InterSHDataset(config.data)
+
+        def make(source, idx, train):
+            return A.InterSHTorchDataset(source, train=train, augment=config.augment and train,
+                                         indices=idx, box_scale=config.box_scale, **common)
+
+        if config.val_data is not None:
+            return make(src, None, True), make(InterSHDataset(config.val_data), None, False)
+        tr, va = _split(len(src), config.val_fraction, config.seed)
+        return make(src, tr, True), (make(src, va, False) if va else None)
+
+    src = FreiHAND(config.data, "training")
+
+    def make_fh(source, idx, train):
+        return A.FreiHANDTorchDataset(source, train=train, augment=config.augment and train,
+                                      indices=idx, **common)
+
+    if config.val_data is not None:
+        return make_fh(src, None, True), make_fh(FreiHAND(config.val_data, "evaluation"), None,
+                                                 False)
+    nu = src.num_unique
+    tr_u, va_u = _split(nu, config.val_fraction, config.seed)
+    reps = len(src) // nu
+    tr = [u + nu * r for r in range(reps) for u in tr_u]
+    va = [u + nu * r for r in range(reps) for u in va_u]
+    return make_fh(src, tr, True), (make_fh(src, va, False) if va else None)

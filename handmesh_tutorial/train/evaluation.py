@@ -1,0 +1,385 @@
+"""Prediction, validation and evaluation of a trained network.
+
+[`evaluate`][handmesh_tutorial.train.evaluation.evaluate] scores a checkpoint (or a network) on
+deterministic crops: FreiHAND-style scores, per-sample errors, the table per visibility-ratio bin
+and per scene kind, the constant baselines on the same items, and (with ``out_dir``) ``eval.json``,
+``predictions.npz`` and the figures. Errors are computed in millimetres from metre inputs.
+
+Taught in notebook 09 ("Evaluation").
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from .. import augment as A
+from .. import metrics as M
+from .. import viz
+from .._io import atomic_savez, write_json
+from .._progress import progress_bar
+from ..dataset import KINDS
+from ..losses import vertex_loss
+from ..surface import flipped_face_fraction, roughness_deg
+from ._distributed import _resolve_device
+from .baselines import MEAN_HAND, REST_HAND, _rest_template, constant_hand_predictions
+from .checkpoints import load_checkpoint
+from .templates import resolve_template
+
+__all__ = ["predict", "validate", "evaluate"]
+
+
+def predict(model: nn.Module, images, batch_size: int = 32,
+            device: str | torch.device | None = None) -> dict:
+    """Run the network on crops, in eval mode, without gradients.
+
+    Args:
+        model: an [`MSMRNet`][handmesh_tutorial.model.MSMRNet].
+        images: ``(B, 3, S, S)`` normalised float tensor (as the datasets return), or uint8
+            ``(B, S, S, 3)`` / ``(S, S, 3)`` RGB crops (normalised here).
+        batch_size: images per forward pass.
+        device: default: the model's device.
+
+    Returns:
+        dict with ``vertices`` ``(B, V, 3)`` and ``joints`` ``(B, 21, 3)`` CPU float32 tensors:
+        right-hand, root-relative network frame (see
+        [`to_camera`][handmesh_tutorial.augment.to_camera] to go back to the camera).
+
+    Shapes:
+        ``images (B, 3, S, S)`` float or ``(B, S, S, 3)`` / ``(S, S, 3)`` uint8 -> ``vertices
+        (B, V, 3)``, ``joints (B, 21, 3)``.
+    """
+    if not isinstance(images, torch.Tensor) or images.dtype == torch.uint8:
+        arr = images if isinstance(images, torch.Tensor) else np.asarray(images)
+        if arr.dtype not in (np.uint8, torch.uint8):
+            raise ValueError(f"array images must be uint8 RGB (B, S, S, 3), got {arr.dtype}")
+        images = A.normalize_image(arr)
+    if images.dim() == 3:
+        images = images[None]
+    if images.dim() != 4 or images.shape[1] != 3:
+        raise ValueError(f"images must be (B, 3, S, S), got {tuple(images.shape)}")
+    dev = next(model.parameters()).device if device is None else _resolve_device(device)
+    was_training = model.training
+    model.eval()
+    outs = []
+    try:
+        with torch.no_grad():
+            for s in range(0, images.shape[0], batch_size):
+                o = model(images[s:s + batch_size].to(dev))
+                outs.append({k: o[k].float().cpu() for k in ("vertices", "joints")})
+    finally:
+        model.train(was_training)
+    return {k: torch.cat([o[k] for o in outs]) for k in ("vertices", "joints")}
+
+
+def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.device,
+                 num_workers: int = 0, progress: bool = False, desc: str = "eval") -> dict:
+    loader = torch.utils.data.DataLoader(dataset, batch_size=batch_size, shuffle=False,
+                                         num_workers=num_workers)
+    keys = ("vertices", "joints", "root", "R", "mirrored", "vr", "index", "K")
+    acc: dict[str, list] = {k: [] for k in (*keys, "pred_vertices", "pred_joints")}
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            for batch in progress_bar(loader, desc=desc, disable=not progress, leave=False):
+                out = model(batch["image"].to(device))
+                acc["pred_vertices"].append(out["vertices"].float().cpu())
+                acc["pred_joints"].append(out["joints"].float().cpu())
+                for k in keys:
+                    acc[k].append(batch[k])
+    finally:
+        model.train(was_training)
+    return {k: torch.cat(v) for k, v in acc.items()}
+
+
+def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
+             progress: bool = False) -> dict:
+    """Loss and FreiHAND-style scores of a model on a (non-augmented) dataset.
+
+    Errors are computed in the root-centred network frame (ground-truth root; mirroring and
+    rotation do not change distances).
+
+    Args:
+        model: the network.
+        dataset: a [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] (``train=False``).
+        batch_size: evaluation batch size.
+        device: default: the model's device.
+        progress: tqdm bar.
+
+    Returns:
+        dict: ``loss`` (metres) and the keys of
+        [`freihand_scores`][handmesh_tutorial.metrics.freihand_scores] (mm, AUCs, F-scores).
+    """
+    dev = next(model.parameters()).device if device is None else _resolve_device(device)
+    r = _run_dataset(model, dataset, batch_size, dev, progress=progress, desc="validate")
+    scores = M.freihand_scores(pred_joints=r["pred_joints"], gt_joints=r["joints"],
+                               pred_verts=r["pred_vertices"], gt_verts=r["vertices"])
+    scores["loss"] = float(vertex_loss(r["pred_vertices"], r["vertices"]))
+    return scores
+
+
+def _item_kinds(dataset, index: np.ndarray) -> list | None:
+    """Scene kind of each evaluated item (INTER-SH readers only), else ``None``."""
+    base = dataset
+    while isinstance(base, torch.utils.data.Subset):
+        base = base.dataset
+    source = getattr(base, "source", None)
+    if source is None or not hasattr(source, "annotation"):
+        return None
+    return [source.annotation(int(i)).get("kind") for i in index]
+
+
+def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kinds,
+                       faces) -> dict:
+    """Scores, per-sample errors and the VR / kind / overall rows of one set of predictions."""
+    errors = M.per_sample_scores(pred_joints=pred_joints, gt_joints=r["joints"],
+                                 pred_verts=pred_vertices, gt_verts=r["vertices"])
+    scores = M.scores_from_errors(errors)
+    if faces is not None:
+        pv, gv = pred_vertices.double().numpy(), r["vertices"].double().numpy()
+        errors["roughness_deg"] = roughness_deg(pv, gv, faces)
+        errors["flipped"] = flipped_face_fraction(pv, gv, faces)
+        scores["roughness_deg"] = float(errors["roughness_deg"].mean())
+        scores["flipped"] = float(errors["flipped"].mean())
+    per_sample = {
+        "index": r["index"].numpy(), "vr": vr, "mirrored": r["mirrored"].numpy(),
+        "mpjpe": 1000 * errors["joint_err"].mean(1), "mpvpe": 1000 * errors["vert_err"].mean(1),
+        "pa_mpjpe": 1000 * errors["joint_err_pa"].mean(1),
+        "pa_mpvpe": 1000 * errors["vert_err_pa"].mean(1),
+        "f_at_5mm": errors["fscore"][:, 0], "f_at_15mm": errors["fscore"][:, 1],
+    }
+    for key in M.SURFACE_KEYS:
+        if key in errors:
+            per_sample[key] = errors[key]
+    if kinds is not None:
+        per_sample["kind"] = np.array([str(k) for k in kinds])
+    vr_table = M.scores_by_vr_bin(errors, vr) if np.isfinite(vr).any() else []
+    kind_table = [] if kinds is None else M.scores_by_group(
+        errors, kinds, order=[k for k in KINDS if k in set(kinds)])
+    overall = {"bin": "all", "count": len(vr), "mpjpe": scores["mpjpe"],
+               "rr_mpjpe": 1000 * float(errors["joint_err_rr"].mean()),
+               "pa_mpjpe": scores["pa_mpjpe"], "auc": scores["auc_joints_20mm"],
+               "pa_mpvpe": scores["pa_mpvpe"], "f_at_5mm": scores["f_at_5mm"],
+               "f_at_15mm": scores["f_at_15mm"]}
+    for key in M.SURFACE_KEYS:
+        if key in scores:
+            overall[key] = scores[key]
+    return {"errors": errors, "scores": scores, "per_sample": per_sample, "vr_table": vr_table,
+            "kind_table": kind_table, "overall": overall}
+
+
+def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None = None,
+             split: str = "evaluation", image_size: int | None = None, batch_size: int = 16,
+             device: str = "auto", out_dir: str | os.PathLike | None = None,
+             camera_frame: bool = True, num_samples: int | None = None, template=None,
+             progress: bool = True, threads: int | None = None, baseline: bool = True,
+             mean_hand=None, skip_bad: bool = False) -> dict:
+    """Evaluate a trained network: FreiHAND-style scores, per-sample errors, VR table, figures.
+
+    Every item is the deterministic crop of its target hand (no augmentation); errors are
+    measured in the root-centred frame with the ground-truth root (FreiHAND's protocol reports
+    aligned and root-relative numbers; mirroring is undone for the predictions only where
+    ``camera_frame`` asks for it, distances do not change).
+
+    Args:
+        checkpoint_or_model: a checkpoint path, or a network (then give ``image_size``).
+        data: INTER-SH root (``kind="intersh"``) or FreiHAND root (``kind="freihand"``, split
+            ``split``).
+        dataset: a ready [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] instead of
+            ``data``.
+        kind: ``"intersh"`` or ``"freihand"`` (default: the checkpoint's ``dataset``, else
+            ``"intersh"``).
+        split: FreiHAND split.
+        image_size: crop side (default: the checkpoint's ``image_size``).
+        batch_size: evaluation batch size.
+        device: ``"auto"``, ``"cpu"``, ``"cuda"``.
+        out_dir: when given, writes ``eval.json``, ``predictions.npz``, ``pck.png``,
+            ``vr.png``.
+        camera_frame: predictions un-mirrored and moved back to the source camera frame
+            (ground-truth root added); ``False``: the network's root-centred right-hand frame.
+        num_samples: evaluate only the first ``num_samples`` items.
+        template: template for loading a checkpoint (see
+            [`load_checkpoint`][handmesh_tutorial.train.checkpoints.load_checkpoint]).
+        progress: tqdm bar.
+        threads: ``torch.set_num_threads`` value.
+        baseline: also score the **rest-hand baseline** on the same items: the network's template
+            (the open rest-pose hand, root-centred) predicted for every image, no network at all
+            ([`constant_hand_predictions`][handmesh_tutorial.train.baselines.constant_hand_predictions]).
+            After Procrustes alignment it is the bar a model must clear to have learnt the hand's
+            articulation.
+        mean_hand: ``(V, 3)`` network-frame vertices of a second constant baseline scored the same
+            way, normally [`mean_hand`][handmesh_tutorial.train.baselines.mean_hand] of the training
+            data (the data's average articulation): the bar a model must clear to read *each* hand's
+            pose from its image.
+        skip_bad: load every item once first and leave out those that cannot be read (listed
+            in ``skipped``); ``False``: the first bad sample stops the evaluation, named.
+
+    Returns:
+        dict with ``scores`` ([`freihand_scores`][handmesh_tutorial.metrics.freihand_scores]: mm,
+        AUC, F-scores, plus the surface scores ``roughness_deg`` and ``flipped`` when the network
+        has ``faces``: [`roughness_deg`][handmesh_tutorial.surface.roughness_deg], the mean
+        [`flipped_face_fraction`][handmesh_tutorial.surface.flipped_face_fraction]), ``per_sample``
+        (``index``, ``vr``, ``mirrored``, ``kind`` (INTER-SH) and per-sample ``mpjpe``, ``mpvpe``,
+        ``pa_mpjpe``, ``pa_mpvpe`` in mm, ``f_at_5mm``, ``f_at_15mm``, ``roughness_deg``,
+        ``flipped``; (N,) arrays), ``errors``
+        ([`per_sample_scores`][handmesh_tutorial.metrics.per_sample_scores], metres), ``vr_table``
+        (rows of [`scores_by_vr_bin`][handmesh_tutorial.metrics.scores_by_vr_bin] over the target
+        hands' VR; empty when no sample has a VR), ``kind_table`` (rows of
+        [`scores_by_group`][handmesh_tutorial.metrics.scores_by_group] per scene kind, INTER-SH
+        only, else empty), ``table`` (markdown), ``baseline`` (with ``baseline=True``: the rest
+        hand's ``scores``, ``per_sample``, ``errors``, ``vr_table``, ``kind_table`` on the same
+        items, else ``None``), ``mean_hand_baseline`` (the same for ``mean_hand``, or ``None``),
+        ``comparison`` (markdown, model / rest hand / mean hand, those scored, per VR bin, kind and
+        overall; ``""`` without either baseline), ``predictions`` (``vertices`` (N, V, 3),
+        ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
+        ``skipped`` (``[{"index": reader index, "error": message}, ...]``, the items ``skip_bad``
+        left out; also in ``eval.json``).
+
+    Shapes:
+        ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
+        ``per_sample`` entries ``(N,)``.
+    """
+    if threads is not None:
+        torch.set_num_threads(int(threads))
+    dev = _resolve_device(device)
+    source = None
+    if isinstance(checkpoint_or_model, str | os.PathLike):
+        source = str(checkpoint_or_model)
+        net, ck = load_checkpoint(checkpoint_or_model, dev, template)
+        cfg = ck["config"]
+        image_size = image_size or cfg["image_size"]
+        box_scale = cfg.get("box_scale", 1.5)
+        kind = kind or cfg.get("dataset", "intersh")
+    else:
+        net = checkpoint_or_model.to(dev)
+        box_scale = 1.5
+    if dataset is None:
+        if data is None:
+            raise ValueError("give data (a data root) or dataset")
+        if image_size is None:
+            raise ValueError("image_size is needed when evaluating a model object")
+        kind = kind or "intersh"
+        if kind == "intersh":
+            dataset = A.InterSHTorchDataset(data, image_size, train=False, box_scale=box_scale)
+        elif kind == "freihand":
+            dataset = A.FreiHANDTorchDataset(data, split, image_size, train=False)
+        else:
+            raise ValueError(f"kind must be 'intersh' or 'freihand', got {kind!r}")
+        if num_samples is not None:
+            dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
+    elif num_samples is not None:
+        dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
+    skipped = []
+    if skip_bad:
+        dataset, bad = A.drop_bad_items(dataset, progress, "evaluation")
+        skipped = [{"index": b["index"], "error": b["error"]} for b in bad]
+    if len(dataset) == 0:
+        raise ValueError("the evaluation set is empty")
+
+    r = _run_dataset(net, dataset, batch_size, dev, progress=progress, desc="evaluate")
+    faces = getattr(net, "faces", None)
+    kinds = _item_kinds(dataset, r["index"].numpy())
+    vr = r["vr"].double().numpy()
+    model = _score_predictions(r["pred_joints"], r["pred_vertices"], r, vr, kinds, faces)
+    rest = None
+    if baseline:
+        tv = getattr(net, "template", None)
+        rest_v, rest_j = constant_hand_predictions(
+            tv if tv is not None else _rest_template(resolve_template(template)),
+            net.joint_regressor, len(vr))
+        rest = _score_predictions(rest_j, rest_v, r, vr, kinds, faces)
+    mean = None
+    if mean_hand is not None:
+        mv = torch.as_tensor(mean_hand, dtype=torch.float64).detach().cpu().numpy()
+        if mv.shape != tuple(r["vertices"].shape[1:]):
+            raise ValueError(f"mean_hand must be {tuple(r['vertices'].shape[1:])}, got "
+                             f"{mv.shape}")
+        mean_v, mean_j = constant_hand_predictions(mv, net.joint_regressor, len(vr))
+        mean = _score_predictions(mean_j, mean_v, r, vr, kinds, faces)
+    table = M.format_table([*model["vr_table"], *model["kind_table"], model["overall"]])
+    comparison = ""
+    if rest is not None or mean is not None:
+        comparison = M.comparison_table(
+            *[[*x["vr_table"], *x["kind_table"], x["overall"]]
+              for x in (model, rest, mean) if x is not None], first="VR bin / kind")
+    scores, errors, per_sample = model["scores"], model["errors"], model["per_sample"]
+    vr_table = model["vr_table"]
+    if camera_frame:
+        batch = {"root": r["root"], "R": r["R"], "mirrored": r["mirrored"]}
+        pv, pj = A.to_camera(r["pred_vertices"], batch), A.to_camera(r["pred_joints"], batch)
+    else:
+        pv, pj = r["pred_vertices"], r["pred_joints"]
+    result = {
+        "scores": scores, "per_sample": per_sample, "errors": errors, "vr_table": vr_table,
+        "kind_table": model["kind_table"], "table": table, "num_samples": int(len(vr)),
+        "baseline": None if rest is None else {k: rest[k] for k in (
+            "scores", "per_sample", "errors", "vr_table", "kind_table")},
+        "mean_hand_baseline": None if mean is None else {k: mean[k] for k in (
+            "scores", "per_sample", "errors", "vr_table", "kind_table")},
+        "comparison": comparison,
+        "predictions": {"vertices": pv.numpy(), "joints": pj.numpy(),
+                        "frame": "camera" if camera_frame else "network"},
+        "files": {},
+        "skipped": skipped,
+    }
+    if out_dir is not None:
+        result["files"] = _write_eval(Path(out_dir), result, source, errors)
+    return result
+
+
+def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
+    import matplotlib.pyplot as plt
+
+
+    out.mkdir(parents=True, exist_ok=True)
+    files = {}
+    summary = {"checkpoint": source, "scores": res["scores"], "vr_table": res["vr_table"],
+               "kind_table": res["kind_table"], "num_samples": res["num_samples"],
+               "per_sample": {k: v.tolist() for k, v in res["per_sample"].items()},
+               "baseline": None if res["baseline"] is None else {
+                   "name": REST_HAND, "scores": res["baseline"]["scores"],
+                   "vr_table": res["baseline"]["vr_table"],
+                   "kind_table": res["baseline"]["kind_table"],
+                   "per_sample": {k: v.tolist()
+                                  for k, v in res["baseline"]["per_sample"].items()}},
+               "mean_hand_baseline": None if res["mean_hand_baseline"] is None else {
+                   "name": MEAN_HAND, "scores": res["mean_hand_baseline"]["scores"],
+                   "vr_table": res["mean_hand_baseline"]["vr_table"],
+                   "kind_table": res["mean_hand_baseline"]["kind_table"]},
+               "comparison": res["comparison"],
+               "predictions_frame": res["predictions"]["frame"],
+               "skipped": res.get("skipped", [])}
+    files["json"] = out / "eval.json"
+    write_json(files["json"], summary)
+    p = res["predictions"]
+    files["predictions"] = out / "predictions.npz"
+    atomic_savez(files["predictions"], compressed=False,
+                 vertices=p["vertices"].astype(np.float32), joints=p["joints"].astype(np.float32),
+                 index=res["per_sample"]["index"], vr=res["per_sample"]["vr"],
+                 mirrored=res["per_sample"]["mirrored"])
+
+    fig, ax = plt.subplots(figsize=(5, 3.6))
+    curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors["vert_err_pa"],
+              "joints (root-rel.)": errors["joint_err_rr"]}
+    if res["baseline"] is not None:  # the bar to clear, on the same samples
+        curves["rest hand, joints (PA)"] = res["baseline"]["errors"]["joint_err_pa"]
+    if res["mean_hand_baseline"] is not None:
+        curves["mean hand, joints (PA)"] = res["mean_hand_baseline"]["errors"]["joint_err_pa"]
+    viz.plot_pck_curves(ax, curves)
+    ax.set_title(f"3D PCK, {res['num_samples']} samples")
+    files["pck"] = viz.save_figure(fig, out / "pck.png", dpi=90)
+    plt.close(fig)
+    if res["vr_table"]:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+        viz.plot_error_vs_vr(axes[0], res["per_sample"]["vr"], res["per_sample"]["pa_mpjpe"],
+                             label="PA-MPJPE")
+        viz.plot_vr_table(axes[1], res["vr_table"], metric="pa_mpjpe")
+        axes[1].set_ylabel("PA-MPJPE (mm)")
+        files["vr"] = viz.save_figure(fig, out / "vr.png", dpi=90)
+        plt.close(fig)
+    return files

@@ -1,0 +1,98 @@
+"""The mesh template of a run and the network a config describes.
+
+A run's template is the library's open right hand unless ``TrainConfig.template`` names a ``.npz``
+written by [`save_template`][handmesh_tutorial.train.templates.save_template]; checkpoints store
+only its [`template_hash`][handmesh_tutorial.train.templates.template_hash]. Vertices in metres, (V,
+3); faces (F, 3); joint regressor (21, V).
+
+Taught in notebook 08 ("Training").
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+from torch import nn
+
+from .._io import atomic_savez
+from ..model import as_template, build_model
+from .config import TrainConfig
+
+__all__ = ["resolve_template", "save_template", "template_hash", "build_model_from_config"]
+
+
+def resolve_template(spec=None):
+    """The mesh template of a run.
+
+    Args:
+        spec: ``None`` (the open right hand), a path to a ``.npz`` with ``vertices``, ``faces``,
+            ``joint_regressor`` (see
+            [`save_template`][handmesh_tutorial.train.templates.save_template]), or anything
+            [`as_template`][handmesh_tutorial.model.as_template] accepts.
+
+    Returns:
+        A [`MeshTemplate`][handmesh_tutorial.model.MeshTemplate].
+
+    Raises:
+        FileNotFoundError: the ``.npz`` does not exist.
+        ValueError: it lacks a key or has bad shapes.
+    """
+    if isinstance(spec, str | os.PathLike):
+        path = Path(spec)
+        if not path.is_file():
+            raise FileNotFoundError(f"template file not found: {path}")
+        with np.load(path, allow_pickle=False) as z:
+            missing = {"vertices", "faces", "joint_regressor"} - set(z.files)
+            if missing:
+                raise ValueError(f"{path}: template lacks keys {sorted(missing)}")
+            spec = {k: z[k] for k in ("vertices", "faces", "joint_regressor")}
+    return as_template(spec)
+
+
+def save_template(path: str | os.PathLike, template) -> Path:
+    """Write a template as ``.npz`` (``vertices`` (V,3) m, ``faces`` (F,3), ``joint_regressor``
+    (21,V)) atomically, for ``TrainConfig(template=path)``.
+
+    Args:
+        path: output file.
+        template: anything [`resolve_template`][handmesh_tutorial.train.templates.resolve_template]
+            accepts.
+
+    Returns:
+        The path.
+    """
+    t = resolve_template(template)
+    path = Path(path)
+    atomic_savez(path, compressed=False, vertices=t.vertices, faces=t.faces,
+                 joint_regressor=t.joint_regressor)
+    return path
+
+
+def template_hash(template) -> str:
+    """Short SHA-256 of a template's vertices, faces and joint regressor (float64/int64 bytes)."""
+    t = resolve_template(template)
+    h = hashlib.sha256()
+    for a, dt in ((t.vertices, np.float64), (t.faces, np.int64), (t.joint_regressor, np.float64)):
+        a = np.ascontiguousarray(a, dtype=dt)
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
+    """The network described by a config (weights freshly initialised from torch's global RNG).
+
+    Args:
+        config: the run's [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig].
+        template: overrides ``config.template`` (a template object or path).
+
+    Returns:
+        An [`MSMRNet`][handmesh_tutorial.model.MSMRNet] on the CPU.
+    """
+    tmpl = resolve_template(config.template if template is None else template)
+    return build_model(encoder=config.encoder, decoder=config.decoder,
+                       attention=config.attention, template=tmpl, channels=config.channels,
+                       latent_channels=config.latent_channels, **config.model_kwargs)
