@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-MODULES = sorted((ROOT / "handmesh_tutorial").glob("*.py"))
+MODULES = sorted((ROOT / "handmesh_tutorial").rglob("*.py"))  # subpackages included
+MODULE_IDS = [str(p.relative_to(ROOT / "handmesh_tutorial")) for p in MODULES]
 SPHINX_ROLE = re.compile(r":(?:py:)?(?:mod|class|func|meth|attr|data|obj|exc|const|ref|doc|term):`")
 
 
@@ -50,7 +51,7 @@ def test_the_pattern_catches_sphinx_roles():
     assert not SPHINX_ROLE.search("[`build_model`][handmesh_tutorial.model.build_model]")
 
 
-@pytest.mark.parametrize("path", MODULES, ids=[p.name for p in MODULES])
+@pytest.mark.parametrize("path", MODULES, ids=MODULE_IDS)
 def test_no_sphinx_roles_in_docstrings(path):
     leftovers = [
         f"{path.name}:{line + text[: m.start()].count(chr(10))}: "
@@ -65,7 +66,7 @@ def test_no_sphinx_roles_in_docstrings(path):
     )
 
 
-@pytest.mark.parametrize("path", MODULES, ids=[p.name for p in MODULES])
+@pytest.mark.parametrize("path", MODULES, ids=MODULE_IDS)
 def test_attribute_docs_are_docstrings(path):
     lines = path.read_text(encoding="utf-8").splitlines()
     comments = [f"{path.name}:{i}: {ln.strip()}" for i, ln in enumerate(lines, 1)

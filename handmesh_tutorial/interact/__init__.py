@@ -25,7 +25,7 @@
    the target hand like a FreiHAND crop
    ([`frame_camera`][handmesh_tutorial.interact.framing.frame_camera]: the hand wholly inside,
    45-75 % of the image side), random lights of random colour temperature
-   ([`scene_lights`][handmesh_tutorial.interact.sample.scene_lights]), a natural photograph or a
+   ([`scene_lights`][handmesh_tutorial.render.lights.scene_lights]), a natural photograph or a
    procedural texture behind
    ([`handmesh_tutorial.render.scene_background`][handmesh_tutorial.render.scene_background]); scene
    image, label mask, every body alone, visibility ratios.

@@ -1,5 +1,6 @@
-"""Step 6, the dataset sample: `make_sample` (build a scene, then `render_scene`), the scene's
-lights (`scene_lights`), and the per-process renderer (`get_renderer`, `init_worker`).
+"""Step 6, the dataset sample: `make_sample` (build a scene, then `render_scene` under
+[`scene_lights`][handmesh_tutorial.render.lights.scene_lights]), and the per-process renderer
+(`get_renderer`, `init_worker`).
 
 Camera frame OpenCV, metres; images ``(S, S, 3)`` uint8. Taught in notebook 05 ("Rendering and
 visibility").
@@ -12,6 +13,7 @@ from dataclasses import asdict
 import numpy as np
 
 from ..dataset import KINDS
+from ..render.lights import scene_lights
 from ..visibility import visibility_ratios
 from .bodies import _hand_assets
 from .config import InteractionConfig, InteractionError
@@ -49,66 +51,6 @@ def init_worker(image_size: int = 224, threads: int = 1) -> None:
     get_renderer(image_size)
     for side in ("left", "right"):
         _hand_assets(side)
-
-
-def scene_lights(rng, depth: float = 0.5):
-    """Random lighting of varied intensity, colour temperature and direction (camera frame).
-
-    * a **key light** 20-75 degrees off the optical axis from a random side;
-    * a weaker **fill light** from the opposite side;
-    * with probability 0.3 a **rim light** from behind the bodies (it lights their silhouettes);
-    * with probability 0.3 a point light near the camera.
-
-    The key light's colour temperature is drawn log-uniformly in 2700-8000 K; the fill shares it
-    half of the time, else it differs by about 60 mired (mixed light: a lamp and a window). The
-    camera is white-balanced for a temperature near the key's (15 mired off), so colour casts
-    stay as mild as in real photos. All intensities share an exposure factor (x0.6-1.6). A side
-    key light gives the shading cues (folds, finger outlines) that real photos have;
-    ``render.random_lights`` lights mostly along the optical axis.
-
-    Args:
-        rng: ``numpy.random.Generator`` or seed.
-        depth: typical scene depth, metres (places the point light).
-
-    Returns:
-        A list of [`handmesh_tutorial.render.Light`][handmesh_tutorial.render.Light] (camera frame).
-    """
-    from ..render import Light, color_temperature
-
-    rng = np.random.default_rng(rng)
-
-    def direction(lo, hi, phi):
-        th = np.deg2rad(rng.uniform(lo, hi))
-        return (float(np.sin(th) * np.cos(phi)), float(np.sin(th) * np.sin(phi)),
-                float(np.cos(th)))
-
-    def shifted(kelvin, mired):  # colour temperatures differ evenly in mired (1e6 / K)
-        return float(np.clip(1e6 / (1e6 / kelvin + mired), 2500.0, 9000.0))
-
-    t_key = float(np.exp(rng.uniform(np.log(2700.0), np.log(8000.0))))
-    t_wb = shifted(t_key, rng.normal(0.0, 15.0))  # the camera's (imperfect) white balance
-    ref = np.asarray(color_temperature(t_wb))
-
-    def colour(kelvin):
-        c = np.asarray(color_temperature(kelvin)) / ref
-        return tuple(float(v) for v in c / c.max())
-
-    exposure = float(np.exp(rng.uniform(np.log(0.6), np.log(1.6))))
-    phi = rng.uniform(0, 2 * np.pi)
-    t_fill = t_key if rng.random() < 0.5 else shifted(t_key, rng.normal(0.0, 60.0))
-    lights = [Light("directional", colour(t_key), float(rng.uniform(1.5, 3.0)) * exposure,
-                    direction=direction(20, 75, phi)),
-              Light("directional", colour(t_fill), float(rng.uniform(0.3, 1.0)) * exposure,
-                    direction=direction(10, 50, phi + np.pi + rng.uniform(-0.8, 0.8)))]
-    if rng.random() < 0.3:
-        lights.append(Light("directional", colour(t_key), float(rng.uniform(1.0, 3.0)) * exposure,
-                            direction=direction(110, 160, rng.uniform(0, 2 * np.pi))))
-    if rng.random() < 0.3:
-        ang = rng.uniform(0, 2 * np.pi)
-        lights.append(Light("point", colour(t_wb), float(rng.uniform(0.2, 0.6) * depth**2)
-                            * exposure, position=(float(0.3 * depth * np.cos(ang)),
-                                                  float(0.3 * depth * np.sin(ang)), 0.0)))
-    return lights
 
 
 def _choose_kind(seed: int) -> str:
@@ -174,7 +116,7 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     random share (``share``, 45-75 %) of the image side with a focal length of 1.8-3.6 times the
     side; the whole target hand stays at least ``margin`` (8 %) of the side inside the border, like
     a FreiHAND 224-px crop. The other body may leave the frame.
-    **Light** ([`scene_lights`][handmesh_tutorial.interact.sample.scene_lights]): key, fill,
+    **Light** ([`scene_lights`][handmesh_tutorial.render.lights.scene_lights]): key, fill,
     sometimes rim and point lights of random colour temperature and exposure, plus an ambient term
     tinted by the background. **Background**
     ([`handmesh_tutorial.render.scene_background`][handmesh_tutorial.render.scene_background]): a
