@@ -168,4 +168,6 @@ class _Rig:
 
     def collides(self, other: _Rig) -> bool:
         """Does any cylinder of this rig meet any cylinder of ``other``?"""
-        return bodies_collide(self.cylinders(), other.cylinders())
+        # bare bodies (no names, no adjacency): this runs at every step of the approach
+        return bodies_collide(Cylinders(self.p0, self.p1, self.radius),
+                              Cylinders(other.p0, other.p1, other.radius))
