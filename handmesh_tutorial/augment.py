@@ -51,16 +51,16 @@ import numpy as np
 import torch
 import torch.nn.functional as F  # noqa: N812 - the usual torch alias
 
-__all__ = [
-    "IMAGE_MEAN", "IMAGE_STD", "AugmentConfig", "normalize_image", "denormalize_image",
-    "flip_intrinsics", "rotation_z", "crop_transform", "warp_image", "color_jitter",
-    "mirror_matrix", "unmirror", "to_camera",
-]
-
 _TORCH_VIEWS = ("HandCropDataset", "InterSHTorchDataset", "FreiHANDTorchDataset",
                 "BadSampleError", "BAD_SAMPLE_ERRORS", "find_bad_items", "without_items",
                 "drop_bad_items")
 """Names that moved to ``dataset.torch_views``, still reachable here (module ``__getattr__``)."""
+
+__all__ = [
+    "IMAGE_MEAN", "IMAGE_STD", "AugmentConfig", "normalize_image", "denormalize_image",
+    "flip_intrinsics", "rotation_z", "crop_transform", "warp_image", "color_jitter",
+    "mirror_matrix", "unmirror", "to_camera", *_TORCH_VIEWS,
+]
 
 IMAGE_MEAN = 0.5
 """Image normalisation of the paper: ``(x / 255 - IMAGE_MEAN) / IMAGE_STD``."""

@@ -23,6 +23,8 @@ from pathlib import Path
 
 from .budget import budget
 
+__all__ = ["EXIT_CODES", "build_parser", "main", "error_kind", "error_message"]
+
 EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4,
               "exists": 5, "interrupted": 130}
 """Exit codes of ``handmesh`` (argparse's own usage errors exit with 2)."""

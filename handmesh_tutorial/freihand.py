@@ -36,7 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from ._io import atomic_write_with
-from .camera import project  # noqa: F401 - re-exported: FreiHAND's projectPoints
+
+__all__ = [
+    "SAMPLE_VERSIONS", "SPLITS", "OFFICIAL_SIZES", "NUM_VERTICES", "MAX_ANNOTATION_VALUE",
+    "FreiHAND", "write_predictions", "load_predictions", "zip_predictions", "evaluate_predictions",
+]
 
 SAMPLE_VERSIONS = ("gs", "hom", "sample", "auto")
 """The sample versions of the training images, in file order (image id = sample + n * version)."""

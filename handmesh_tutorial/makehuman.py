@@ -52,7 +52,7 @@ carry over exactly (``source_vertex_ids`` maps back). Measured: the decimated su
 (mean; 95th percentile 0.22 mm, max 0.62 mm) from the full one, while the decoder's finest level,
 its most expensive, halves; the mesh hierarchy becomes 779 -> 390 -> 195 -> 98 -> 49 like MANO's.
 
-Taught in notebook 01 (the hand model). The module is a little over the library's ~500-line
+Taught in notebook 01 (the hand model). Why one file: it is a little over the library's ~500-line
 guideline because it is one build pipeline (steps 1-7 above, read in order) plus the anny
 comparison fixture; splitting it would scatter those steps.
 """

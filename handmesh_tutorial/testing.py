@@ -6,7 +6,8 @@
 Both return a sample dict that [`write_sample`][handmesh_tutorial.dataset.write_sample] and
 [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] accept, with masks, VR, meshes
 and joints consistent with each other, so the whole pipeline runs on them in seconds. Real scenes
-come from [`interact`][handmesh_tutorial.interact].
+come from [`interact`][handmesh_tutorial.interact]. Used by the tests and benchmarks (docs page
+*Reliability*, ``benchmarks/train.py``); no notebook needs them.
 """
 
 from __future__ import annotations

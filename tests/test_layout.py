@@ -86,6 +86,8 @@ def _imports_at_import_time(module: str) -> set[str]:
     found = set()
     for node in tree.body:  # top level only: function-local imports are deliberate
         stmts = [node]
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            continue  # annotations only: not imported at run time
         if isinstance(node, ast.If | ast.Try):
             stmts = [n for n in ast.walk(node) if isinstance(n, ast.Import | ast.ImportFrom)]
         for st in stmts:

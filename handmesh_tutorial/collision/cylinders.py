@@ -14,6 +14,8 @@ import numpy as np
 
 from ._common import _any_perpendicular, _check_points
 
+__all__ = ["Cylinders", "ring_cylinders", "box_cylinders"]
+
 
 def _as_points(x, name: str) -> np.ndarray:
     a = np.asarray(x, dtype=np.float64)

@@ -24,6 +24,8 @@ from ._common import (
     _x,
 )
 
+__all__ = ["ATOL", "segment_segment_distance", "cylinders_intersect", "capsules_intersect"]
+
 ATOL = 1e-9
 """Default contact tolerance of the tests, metres: cylinders are grown by ``atol / 2`` (radius and
 each end) before an exact test, so touching counts as intersecting and rounding cannot flip it.

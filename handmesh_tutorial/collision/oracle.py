@@ -14,6 +14,8 @@ import numpy as np
 from ._common import _prepare
 from .distance import cylinder_support, point_cylinder_distance, project_to_cylinder
 
+__all__ = ["distance_bounds"]
+
 
 def distance_bounds(a0, a1, ra, b0, b1, rb, *, iters: int = 2000, tol: float = 1e-13,
                     refine_at: float | None = None, return_points: bool = False):

@@ -15,6 +15,8 @@ from ._common import _contig, _d, _kernels, _zero_length_error
 from .cylinders import Cylinders
 from .exact import ATOL, _core_units, _exact_stages, _segment_closest
 
+__all__ = ["colliding_pairs", "bodies_collide", "SELF_CONTACT_COMPRESSION", "self_collisions"]
+
 
 def _units(body: Cylinders, grow: float):
     """(3, N) grown start points and unit axes, (N,) grown lengths and radii of a body."""

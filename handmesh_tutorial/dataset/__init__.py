@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import importlib
 
+from ..visibility import VR_BINS
 from .candidates import PROBE_MIN_HITS, SampleRejected
 from .files import (
     _write_folder,  # noqa: F401 - benchmarks/generate.py times it
@@ -77,7 +78,7 @@ __all__ = [
     "PROBE_MIN_HITS", "SampleRejected", "sample_seed", "probe_seed", "shard_range", "index_width",
     "vr_bins", "vr_histogram", "npz_bytes", "encode_sample", "write_sample", "read_annotation",
     "read_sample", "read_meta", "InterSHDataset", "VerifyReport", "verify_dataset",
-    "GenerationSummary", "generate_dataset", "merge_shards",
+    "GenerationSummary", "generate_dataset", "merge_shards", "VR_BINS",
 ]
 
 _TORCH_VIEWS = ("HandCropDataset", "InterSHTorchDataset", "FreiHANDTorchDataset",

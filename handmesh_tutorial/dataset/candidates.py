@@ -19,6 +19,8 @@ from .files import _encode, _write_folder
 from .schema import _canonical
 from .seeds import _SEED_RULE, probe_seed, sample_seed
 
+__all__ = ["PROBE_MIN_HITS", "SampleRejected"]
+
 PROBE_MIN_HITS = 2
 """A bin is filled by VR balancing when at least this many probe candidates hit it: one lucky
 hit would keep a bin reachable once in a hundred candidates, whose samples would then mostly end up

@@ -33,6 +33,8 @@ from .schema import (
     _label,
 )
 
+__all__ = ["npz_bytes", "encode_sample", "write_sample", "read_annotation", "read_sample"]
+
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip entry date: np.savez would store the wall clock
 _PNG_LEVEL = 6
 _JSON_KW = {"indent": 1, "sort_keys": True, "ensure_ascii": False, "allow_nan": False}

@@ -25,6 +25,8 @@ from .schema import FORMAT_NAME, FORMAT_VERSION, KINDS, MAX_LABEL, META_FILE, SA
 from .seeds import _SEED_RULE, index_width, sample_seed, shard_range, vr_bins, vr_histogram
 from .workers import _callable_name, _check_for_workers, _run
 
+__all__ = ["GenerationSummary", "generate_dataset"]
+
 
 def _fmt_bin(b: Sequence[float]) -> str:
     return f"[{b[0]:.2f}, {b[1]:.2f}{']' if b[1] >= 1 else ')'}"

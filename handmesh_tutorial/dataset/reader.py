@@ -27,6 +27,8 @@ from .schema import (
 )
 from .seeds import sample_seed
 
+__all__ = ["read_meta", "InterSHDataset", "VerifyReport", "verify_dataset"]
+
 
 def read_meta(root: str | os.PathLike) -> dict:
     """Read ``root/meta.json`` (raises FileNotFoundError / ValueError naming the file)."""

@@ -20,6 +20,8 @@ from .files import _is_own_temporary, _temporary, _write_atomic
 from .reader import _planned, _present, read_meta
 from .schema import LOCK_FILE, META_FILE, SAMPLES_DIR, TMP_PREFIX
 
+__all__ = ["merge_shards"]
+
 
 def _coalesce(ranges: Sequence[Sequence[int]]) -> list[list[int]]:
     out: list[list[int]] = []

@@ -19,6 +19,11 @@ import numpy as np
 
 from .._io import json_safe
 
+__all__ = [
+    "FORMAT_NAME", "FORMAT_VERSION", "READABLE_FORMAT_VERSIONS", "KINDS", "META_FILE",
+    "SAMPLES_DIR", "TMP_PREFIX", "LOCK_FILE", "MIN_INDEX_WIDTH", "MAX_SAMPLES", "MAX_LABEL",
+]
+
 FORMAT_NAME = "INTER-SH"
 FORMAT_VERSION = 2
 """Version written by this library. 2: FreiHAND-like framing, photo backgrounds, anatomical

@@ -40,6 +40,11 @@ from ..freihand import FreiHAND
 from ..metrics import ROOT_INDEX
 from .reader import InterSHDataset
 
+__all__ = [
+    "HandCropDataset", "BAD_SAMPLE_ERRORS", "BadSampleError", "find_bad_items", "drop_bad_items",
+    "without_items", "InterSHTorchDataset", "FreiHANDTorchDataset",
+]
+
 
 class HandCropDataset(torch.utils.data.Dataset):
     """Base class: one target hand per item, cropped, mirrored to the right, augmented.

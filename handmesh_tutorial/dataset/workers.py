@@ -17,6 +17,8 @@ from typing import Any
 
 from .candidates import _make_and_write, _Task
 
+__all__: list[str] = []  # private helpers only; see the package
+
 
 def _callable_name(fn: Callable | None) -> str | None:
     if fn is None:

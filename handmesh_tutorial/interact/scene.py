@@ -106,7 +106,7 @@ class Scene:
     def scenery_meshes(self, R=None, t=None) -> list[tuple]:
         """``(vertices, faces, sRGB colors, owner label)`` of the scenery (the hands' forearms),
         optionally moved ``x -> R x + t``; see
-        [`handmesh_tutorial.render.Renderer.render`][handmesh_tutorial.render.Renderer.render]'s
+        [`handmesh_tutorial.render.Renderer.render`][handmesh_tutorial.render.renderer.Renderer.render]'s
         ``occluders``."""
         R = np.eye(3) if R is None else np.asarray(R, float)
         t = np.zeros(3) if t is None else np.asarray(t, float)

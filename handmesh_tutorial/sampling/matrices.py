@@ -13,6 +13,8 @@ import trimesh
 
 from ._common import _check_mesh
 
+__all__ = ["selection_matrix", "barycentric_upsampling", "to_torch_sparse"]
+
 
 def selection_matrix(kept, num_fine: int) -> sp.csr_matrix:
     """0/1 down-sampling matrix that picks the kept vertices.

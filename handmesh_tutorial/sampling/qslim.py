@@ -13,6 +13,8 @@ import numpy as np
 
 from ._common import _check_mesh
 
+__all__ = ["vertex_quadrics", "decimate"]
+
 # Weight of the planes that pin open boundaries (Garland & Heckbert's "boundary constraints"),
 # relative to a face plane. Closed meshes (the hand) never use it.
 _BOUNDARY_WEIGHT = 10.0

@@ -61,8 +61,8 @@ def mean_hand(dataset, template=None, iterations: int = 5) -> np.ndarray:
     pose, not to read each hand's pose from its image.
 
     Args:
-        dataset: a [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] (e.g. the training
-            split of [`make_datasets`][handmesh_tutorial.train.data.make_datasets]; its
+        dataset: a [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] (e.g.
+            the training split of [`make_datasets`][handmesh_tutorial.train.data.make_datasets]; its
             ``target_shape``, without images) or any dataset of items with ``vertices``.
         template: the network's template (default: the library's hand).
         iterations: alignment-and-average rounds (the mean changes by < 0.01 mm after 3 on
@@ -101,7 +101,8 @@ def constant_hand_scores(dataset, vertices=None, template=None) -> dict:
     """FreiHAND-style scores of one constant mesh predicted for every item (no network).
 
     Args:
-        dataset: a [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] (or a ``Subset``
+        dataset: a [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] (or a
+            ``Subset``
             of one); only its ``vertices`` and ``joints`` are read.
         vertices: ``(V, 3)`` the constant mesh in the network frame, e.g.
             [`mean_hand`][handmesh_tutorial.train.baselines.mean_hand]; default the rest hand (the

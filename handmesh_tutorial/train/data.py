@@ -14,8 +14,8 @@ import math
 import numpy as np
 import torch
 
-from .. import augment as A
 from ..dataset import InterSHDataset
+from ..dataset import torch_views as TV
 from ..freihand import FreiHAND
 from .config import TrainConfig
 
@@ -97,8 +97,9 @@ def make_datasets(config: TrainConfig):
 
     Returns:
         ``(train_dataset, val_dataset or None)``:
-        [`InterSHTorchDataset`][handmesh_tutorial.augment.InterSHTorchDataset] or
-        [`FreiHANDTorchDataset`][handmesh_tutorial.augment.FreiHANDTorchDataset]; validation without
+        [`InterSHTorchDataset`][handmesh_tutorial.dataset.torch_views.InterSHTorchDataset] or
+        [`FreiHANDTorchDataset`][handmesh_tutorial.dataset.torch_views.FreiHANDTorchDataset];
+        validation without
         augmentation.
 
     Raises:
@@ -111,7 +112,7 @@ def make_datasets(config: TrainConfig):
         src = InterSHDataset(config.data)
 
         def make(source, idx, train):
-            return A.InterSHTorchDataset(source, train=train, augment=config.augment and train,
+            return TV.InterSHTorchDataset(source, train=train, augment=config.augment and train,
                                          indices=idx, box_scale=config.box_scale, **common)
 
         if config.val_data is not None:
@@ -122,7 +123,7 @@ def make_datasets(config: TrainConfig):
     src = FreiHAND(config.data, "training")
 
     def make_fh(source, idx, train):
-        return A.FreiHANDTorchDataset(source, train=train, augment=config.augment and train,
+        return TV.FreiHANDTorchDataset(source, train=train, augment=config.augment and train,
                                       indices=idx, **common)
 
     if config.val_data is not None:

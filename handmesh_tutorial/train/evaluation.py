@@ -23,6 +23,7 @@ from .. import viz
 from .._io import atomic_savez, write_json
 from .._progress import progress_bar
 from ..dataset import KINDS
+from ..dataset import torch_views as TV
 from ..losses import vertex_loss
 from ..surface import flipped_face_fraction, roughness_deg
 from ._distributed import _resolve_device
@@ -106,7 +107,8 @@ def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
 
     Args:
         model: the network.
-        dataset: a [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] (``train=False``).
+        dataset: a [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]
+            (``train=False``).
         batch_size: evaluation batch size.
         device: default: the model's device.
         progress: tqdm bar.
@@ -190,7 +192,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         checkpoint_or_model: a checkpoint path, or a network (then give ``image_size``).
         data: INTER-SH root (``kind="intersh"``) or FreiHAND root (``kind="freihand"``, split
             ``split``).
-        dataset: a ready [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] instead of
+        dataset: a ready [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]
+            instead of
             ``data``.
         kind: ``"intersh"`` or ``"freihand"`` (default: the checkpoint's ``dataset``, else
             ``"intersh"``).
@@ -265,9 +268,9 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             raise ValueError("image_size is needed when evaluating a model object")
         kind = kind or "intersh"
         if kind == "intersh":
-            dataset = A.InterSHTorchDataset(data, image_size, train=False, box_scale=box_scale)
+            dataset = TV.InterSHTorchDataset(data, image_size, train=False, box_scale=box_scale)
         elif kind == "freihand":
-            dataset = A.FreiHANDTorchDataset(data, split, image_size, train=False)
+            dataset = TV.FreiHANDTorchDataset(data, split, image_size, train=False)
         else:
             raise ValueError(f"kind must be 'intersh' or 'freihand', got {kind!r}")
         if num_samples is not None:
@@ -276,7 +279,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         dataset = torch.utils.data.Subset(dataset, range(min(num_samples, len(dataset))))
     skipped = []
     if skip_bad:
-        dataset, bad = A.drop_bad_items(dataset, progress, "evaluation")
+        dataset, bad = TV.drop_bad_items(dataset, progress, "evaluation")
         skipped = [{"index": b["index"], "error": b["error"]} for b in bad]
     if len(dataset) == 0:
         raise ValueError("the evaluation set is empty")

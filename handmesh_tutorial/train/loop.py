@@ -52,9 +52,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from .. import augment as A
 from .._io import write_json
 from .._progress import progress_bar
+from ..dataset import torch_views as TV
 from ..keypoints import keypoint_loss, normalised_keypoints
 from ..losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
 from ._distributed import (
@@ -222,7 +222,8 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
             (they are replaced). Without ``resume`` or ``overwrite`` such a folder is refused,
             so a forgotten ``--resume`` never destroys a run.
         dataset: a training dataset to use instead of ``config.data`` (items as
-            [`HandCropDataset`][handmesh_tutorial.augment.HandCropDataset] returns; ``set_epoch`` is
+            [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] returns;
+            ``set_epoch`` is
             called when it exists).
         val_dataset: a validation dataset (with ``dataset``), or ``None``.
         template: overrides ``config.template`` (object or path; only its hash is stored).
@@ -431,7 +432,7 @@ def _skip_bad_items(train_ds, val_ds, progress: bool):
     for split, ds in (("train", train_ds), ("val", val_ds)):
         if ds is None:
             continue
-        found[split], bad = A.drop_bad_items(ds, progress, "training" if split == "train"
+        found[split], bad = TV.drop_bad_items(ds, progress, "training" if split == "train"
                                              else "validation", allow_empty=split == "val")
         skipped += [{"split": split, "index": b["index"], "error": b["error"]} for b in bad]
         if bad:
