@@ -151,3 +151,12 @@ def test_the_import_graph_has_no_cycles():
         graph[m] = {d for d in deps if not m.startswith(d + ".")}
     assert "handmesh_tutorial.model" in graph and graph["handmesh_tutorial.model"], "graph empty"
     assert not _cycles(graph), f"import cycles: {_cycles(graph)}"
+
+
+def test_the_library_map_names_every_module_file():
+    page = (PACKAGE_DIR.parent / "docs" / "concepts" / "pipeline.md").read_text()
+    files = [p.relative_to(PACKAGE_DIR).as_posix() for p in sorted(PACKAGE_DIR.rglob("*.py"))
+             if "__pycache__" not in p.parts and p.name != "__init__.py"
+             and not (p.name.startswith("_") and p.name != "_numba.py" and p.parent != PACKAGE_DIR)]
+    missing = [f for f in files if f"`{f}`" not in page]
+    assert not missing, f"docs/concepts/pipeline.md 'Map of the library' does not name {missing}"

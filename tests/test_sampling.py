@@ -302,7 +302,7 @@ def test_tetrahedron_cannot_shrink():
 # ----------------------------------------------------------------------------------------------
 # The library's hand template
 # ----------------------------------------------------------------------------------------------
-@pytest.mark.skipif(not HAVE_HAND, reason="handmesh_tutorial/hand.py (HandModel) not present yet")
+@pytest.mark.skipif(not HAVE_HAND, reason="handmesh_tutorial.hand (HandModel) not present yet")
 def test_hand_template_hierarchy(tmp_path):
     hand = hmt.hand.HandModel("right")
     v = np.asarray(hand.template_vertices, dtype=np.float64)

@@ -18,22 +18,22 @@ from matplotlib.patches import FancyArrowPatch, FancyBboxPatch  # noqa: E402
 
 # name: (column, row, first line, second line); rows from the top (0) down
 BOXES = {
-    "hand": (0, 0, "hand.py / mano.py", "MakeHuman hand, skin"),
-    "lcs": (1, 0, "lcs.py", "local frames, limits"),
-    "col": (2, 0, "collision.py", "cylinders, capsules"),
-    "obj": (3, 0, "objects.py", "objects, chain"),
-    "inter": (4, 0, "interact.py", "6-step algorithm"),
-    "render": (5, 0, "render.py", "RGB + label masks"),
+    "hand": (0, 0, "hand/, mano/", "MakeHuman hand, skin"),
+    "lcs": (1, 0, "lcs/", "local frames, limits"),
+    "col": (2, 0, "collision/", "cylinders, capsules"),
+    "obj": (3, 0, "objects/", "objects, chain"),
+    "inter": (4, 0, "interact/", "6-step algorithm"),
+    "render": (5, 0, "render/", "RGB + label masks"),
     "vis": (6, 0, "visibility.py", "VR metric"),
-    "data": (7, 0, "dataset.py", "INTER-SH on disk"),
-    "samp": (0, 1, "sampling.py", "mesh hierarchy"),
+    "data": (7, 0, "dataset/", "INTER-SH on disk"),
+    "samp": (0, 1, "sampling/", "mesh hierarchy"),
     "spiral": (1, 1, "spiral.py", "SpiralConv"),
     "blocks": (2, 1, "blocks.py", "residual, fusion"),
     "dec": (3, 1, "decoder.py", "single / multi-path"),
     "model": (5, 1, "model.py", "MSMRNet"),
     "enc": (5, 2, "encoder.py", "ResNet, HRNet"),
-    "train": (7, 1, "train.py", "loop, checkpoints"),
-    "metrics": (7, 2, "metrics.py", "FreiHAND-exact, VR bins"),
+    "train": (7, 1, "train/", "loop, checkpoints"),
+    "metrics": (7, 2, "metrics/", "FreiHAND-exact, VR bins"),
 }
 EDGES = [
     ("hand", "lcs"), ("lcs", "col"), ("col", "obj"), ("obj", "inter"), ("inter", "render"),

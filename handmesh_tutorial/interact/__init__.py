@@ -73,8 +73,8 @@ Everything is seeded: the same seed gives the same scene, to the byte.
   (notebook 04).
 * [`framing`][handmesh_tutorial.interact.framing]: the camera of step 6, `frame_camera`,
   `camera_pose` (notebook 05).
-* [`sample`][handmesh_tutorial.interact.sample]: step 6, `make_sample`, `render_scene`,
-  `scene_lights`, the per-process renderer (notebook 05).
+* [`sample`][handmesh_tutorial.interact.sample]: step 6, `make_sample`, `render_scene` (lit by
+  `render.scene_lights`), the per-process renderer (notebook 05).
 * [`generate`][handmesh_tutorial.interact.generate]: the dataset driver `generate_interactions`
   (``handmesh generate``, notebook 05).
 
@@ -84,13 +84,14 @@ Every public name is importable from ``handmesh_tutorial.interact`` itself.
 from __future__ import annotations
 
 from ..dataset import KINDS
+from ..render.lights import scene_lights
 from .bodies import FOREARM_LENGTH
 from .config import STOP_REASONS, InteractionConfig, InteractionError
 from .contact import closest_points_on_triangles, mesh_contact, signed_distance
 from .framing import FRAME_FOCAL, FRAME_MARGIN, FRAME_SHARE, camera_pose, frame_camera
 from .generate import MAX_IMAGE_SIZE, MIN_IMAGE_SIZE, generate_interactions
 from .generator import build_scene
-from .sample import get_renderer, init_worker, make_sample, render_scene, scene_lights
+from .sample import get_renderer, init_worker, make_sample, render_scene
 from .scene import Scene, SceneBody
 
 # A dataset's meta.json records its make_sample as "<module>.<name>" and a resumed run must

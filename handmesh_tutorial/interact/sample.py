@@ -21,7 +21,7 @@ from .framing import FRAME_FOCAL, FRAME_MARGIN, FRAME_SHARE, frame_camera
 from .generator import build_scene
 from .scene import Scene
 
-__all__ = ["get_renderer", "init_worker", "make_sample", "render_scene", "scene_lights"]
+__all__ = ["get_renderer", "init_worker", "make_sample", "render_scene"]
 
 
 _RENDERERS: dict = {}
