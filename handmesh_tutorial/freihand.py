@@ -36,10 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from ._io import atomic_write_with
+from .camera import project  # FreiHAND's projectPoints (the library's one projection)
 
 __all__ = [
-    "SAMPLE_VERSIONS", "SPLITS", "OFFICIAL_SIZES", "NUM_VERTICES", "MAX_ANNOTATION_VALUE",
-    "FreiHAND", "write_predictions", "load_predictions", "zip_predictions", "evaluate_predictions",
+    "project", "SAMPLE_VERSIONS", "SPLITS", "OFFICIAL_SIZES", "NUM_VERTICES",
+    "MAX_ANNOTATION_VALUE", "FreiHAND", "write_predictions", "load_predictions", "zip_predictions", "evaluate_predictions",
 ]
 
 SAMPLE_VERSIONS = ("gs", "hom", "sample", "auto")
