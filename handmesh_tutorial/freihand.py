@@ -40,7 +40,8 @@ from .camera import project  # FreiHAND's projectPoints (the library's one proje
 
 __all__ = [
     "project", "SAMPLE_VERSIONS", "SPLITS", "OFFICIAL_SIZES", "NUM_VERTICES",
-    "MAX_ANNOTATION_VALUE", "FreiHAND", "write_predictions", "load_predictions", "zip_predictions", "evaluate_predictions",
+    "MAX_ANNOTATION_VALUE", "FreiHAND", "write_predictions", "load_predictions", "zip_predictions",
+    "evaluate_predictions",
 ]
 
 SAMPLE_VERSIONS = ("gs", "hom", "sample", "auto")
