@@ -1,11 +1,11 @@
 """The pinhole camera: intrinsics, projection to pixels, crop cameras and framing.
 
-One convention for the whole library (docs page *Rendering and cameras*): the OpenCV camera
-frame (x right, y down, z forward, metres), intrinsics ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``
-in pixels, pixel centres at integer coordinates: the top-left pixel's centre is ``(0, 0)``, so the
-centre of a ``W``-wide image is ``cx = (W - 1) / 2``. The FreiHAND annotations, the renderer, the
-crops of the training pipeline and the 2D keypoint targets all project with `project`
-(`project_checked` adds the renderer's input checks).
+One convention for the whole library (docs page *Rendering and cameras*, "Camera conventions"):
+the OpenCV camera frame (x right, y down, z forward, metres), intrinsics
+``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` in pixels, pixel centres at integer coordinates: the
+top-left pixel's centre is ``(0, 0)``, so the centre of a ``W``-wide image is ``cx = (W - 1) / 2``.
+The FreiHAND annotations, the renderer, the crops of the training pipeline and the 2D keypoint
+targets all project with `project` (`project_checked` adds the renderer's input checks).
 
 Cameras: `intrinsics` builds ``K``, `check_intrinsics` validates it, `crop_camera` picks a ``K``
 that frames given points (like cropping a photo) and `framing` measures how points sit in an image.
