@@ -48,16 +48,12 @@ class Body:
         Returns:
             A new `Body` (faces, colours and params shared with this one).
         """
+        cylinders = self.cylinders.transform(R, t)  # checks the shapes of R and t
         R = np.asarray(R, dtype=np.float64)
-        t = np.asarray(t, dtype=np.float64).reshape(-1)
-        if R.shape != (3, 3):
-            raise ValueError(f"R must have shape (3, 3), got {R.shape}")
-        if t.shape != (3,):
-            raise ValueError(f"t must have shape (3,), got {t.shape}")
         if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
             raise ValueError("R must be a rotation matrix (orthonormal, det +1)")
-        return replace(self, vertices=self.vertices @ R.T + t,
-                       cylinders=self.cylinders.transform(R, t))
+        t = np.asarray(t, dtype=np.float64).reshape(-1)
+        return replace(self, vertices=self.vertices @ R.T + t, cylinders=cylinders)
 
     def render_mesh(self, label: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """``(vertices, faces, colors, label)``: the input format of ``Renderer.render``."""
