@@ -148,6 +148,58 @@ def test_hand_angles_respect_the_limits(scenes):
                for b in sc.bodies for dip, pip in hmt.lcs.DIP_FOLLOWS_PIP.items())
 
 
+def _finger_flexion(scene_list) -> np.ndarray:
+    """(hands, 4, 2) MCP and PIP flexion (degrees) of every hand of the scenes."""
+    idx = np.array(hmt.lcs.FINGER_JOINTS)[:, :2] - 1
+    return np.rad2deg(np.array([b.angles[idx, 1] for sc in scene_list for b in sc.bodies
+                                if b.kind == "hand"]))
+
+
+def test_poses_follow_the_limits_and_the_paper_rule_is_one_setting_away():
+    assert interact.InteractionConfig().poses == "natural"
+    assert interact.InteractionConfig(limits="paper").poses == "uniform"
+    assert interact.InteractionConfig(limits="paper", poses="natural").poses == "natural"
+    # the limits shortcut selects the paper's whole generator: its limits and its uniform rule
+    a = interact.build_scene("hand-object", 5, limits="paper")
+    b = interact.build_scene("hand-object", 5, interact.InteractionConfig(limits="paper",
+                                                                         poses="uniform"))
+    for x, y in zip(a.bodies, b.bodies, strict=True):
+        assert np.array_equal(x.vertices, y.vertices)
+    with pytest.raises(ValueError, match="poses must be"):
+        interact.InteractionConfig(poses="random")
+    with pytest.raises(ValueError, match="grasp_closure"):
+        interact.InteractionConfig(grasp_closure=(0.9, 0.2))
+
+
+def test_natural_poses_flex_in_synergies_unlike_the_uniform_rule():
+    def batch(**kw):  # 6 scenes per kind (a rejected seed is skipped, as the dataset does)
+        out = []
+        for kind in ("hand-hand", "hand-object"):
+            have = 0
+            for i in range(20):
+                if have == 6:
+                    break
+                try:
+                    out.append(interact.build_scene(kind, dataset.sample_seed(4, i), **kw))
+                    have += 1
+                except interact.InteractionError:
+                    continue
+        return out
+
+    natural, uniform = batch(), batch(poses="uniform")
+    assert len(natural) == len(uniform) == 12
+    fn, fu = _finger_flexion(natural), _finger_flexion(uniform)
+    def corr(f):  # a finger's MCP and PIP flexion, over all fingers
+        return float(np.corrcoef(f[..., 0].ravel(), f[..., 1].ravel())[0, 1])
+    # measured over three seed batches: natural 0.72-0.77, uniform 0.31-0.45
+    assert corr(fn) > 0.6 > 0.5 > corr(fu)
+    # the four fingers of a natural hand flex alike (per-hand spread of the PIPs: 9-12 vs 16-19)
+    assert fn[..., 1].std(1).mean() < 13 < 15 < fu[..., 1].std(1).mean()
+    # the natural scenes are still close interactions (the settle step's tolerances)
+    for sc in natural:
+        assert sc.stats["contact_mm"] <= 1.5 + 1e-6 and sc.stats["penetration_mm"] <= 1.5 + 1e-6
+
+
 def test_no_self_collision_of_the_hands(scenes):
     for sc in scenes.values():
         for b in sc.bodies:

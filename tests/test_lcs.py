@@ -327,3 +327,69 @@ def test_left_frames_mirror_right(hand, right, left):
     out_r = rmodel(pose=torch.as_tensor(pr))
     out_l = lmodel(pose=torch.as_tensor(pl))
     np.testing.assert_allclose(np_(out_l.vertices), np_(out_r.vertices) @ mirror, atol=1e-5)
+
+
+# ------------------------------------------------------------------------------ synergy prior
+def _finger_flexion_deg(angles):
+    """(n, 4, 3) flexion (y) of MCP, PIP, DIP per finger (index, middle, ring, little), degrees."""
+    idx = np.array(L.FINGER_JOINTS) - 1
+    return np.rad2deg(np.asarray(angles)[..., idx, 1])
+
+
+def test_natural_hand_angles_limits_seed_and_dip_coupling():
+    lower, upper = L.hand_joint_limits("anatomical")
+    a = np.stack([L.natural_hand_angles(s) for s in range(200)])
+    assert a.shape == (200, 15, 3)
+    assert (a >= lower - 1e-12).all() and (a <= upper + 1e-12).all()
+    assert L.natural_hand_angles(7).tobytes() == L.natural_hand_angles(7).tobytes()
+    assert L.natural_hand_angles(7).tobytes() != L.natural_hand_angles(8).tobytes()
+    for dip, pip in L.DIP_FOLLOWS_PIP.items():
+        np.testing.assert_allclose(a[:, dip - 1, 1], L.DIP_PIP_RATIO * a[:, pip - 1, 1])
+
+
+def test_natural_hand_angles_move_in_synergies_unlike_uniform_angles(right):
+    _, art = right
+    nat = _finger_flexion_deg([L.natural_hand_angles(s) for s in range(400)])
+    uni = _finger_flexion_deg(art.with_limits("anatomical").random_angles(0, n=400))
+    def corr(x, y):
+        return float(np.corrcoef(x, y)[0, 1])
+    # MCP and PIP of a finger flex together; neighbouring fingers alike
+    assert min(corr(nat[:, f, 0], nat[:, f, 1]) for f in range(4)) > 0.8
+    assert min(corr(nat[:, f, 1], nat[:, f + 1, 1]) for f in range(1, 3)) > 0.7
+    assert max(abs(corr(uni[:, f, 0], uni[:, f, 1])) for f in range(4)) < 0.2
+    # a "claw" (straight knuckle, bent middle joint) is rare; uniform angles make it often
+    def claws(x):
+        return float(((x[..., 1] > 60) & (x[..., 0] < 10)).mean())
+    assert claws(nat) < 0.02 < 0.10 < claws(uni)
+
+
+def test_natural_hand_angles_closure_opens_and_closes_the_hand():
+    open_ = _finger_flexion_deg([L.natural_hand_angles(s, closure=0.0, point_prob=0.0)
+                                 for s in range(100)])
+    fist = _finger_flexion_deg([L.natural_hand_angles(s, closure=1.0, point_prob=0.0)
+                                for s in range(100)])
+    assert np.median(open_[..., 1]) < 15 and np.median(fist[..., 1]) > 80
+    assert np.median(fist[..., 0]) > 60 > 10 > np.median(open_[..., 0])
+    # the relaxed cascade: the little finger is more flexed than the index on average
+    mid = _finger_flexion_deg([L.natural_hand_angles(s, closure=0.5, point_prob=0.0)
+                               for s in range(300)])
+    assert mid[:, 3, 1].mean() > mid[:, 0, 1].mean() + 5
+
+
+def test_natural_hand_angles_left_hand_is_the_mirror_image(hand, right, left):
+    (rmodel, rart), (lmodel, lart) = right, left
+    mirror = np.diag(hand.mirror_points(np.ones(3)))
+    for seed in range(3):
+        ra = L.natural_hand_angles(seed, side="right")
+        la = L.natural_hand_angles(seed, side="left")
+        rj = np_(rmodel(pose=torch.as_tensor(rart.to_pose(ra))[None]).joints[0])
+        lj = np_(lmodel(pose=torch.as_tensor(lart.to_pose(la))[None]).joints[0])
+        np.testing.assert_allclose(lj, rj @ mirror, atol=2e-5)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"closure": 1.5}, "closure"), ({"closure": (0.8, 0.2)}, "closure"),
+    ({"side": "middle"}, "side"), ({"sigma": -1.0}, "sigma")])
+def test_natural_hand_angles_errors(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        L.natural_hand_angles(0, **kwargs)

@@ -56,7 +56,20 @@ class InteractionConfig:
         init_pose_scale: the centre hand's random pose uses this fraction of each joint range.
         axis_weights: scale of a joint's random direction about its LCS ``(x, y, z)`` axes
             (abduction, flexion, twist).
-        flexion_bias: probability that a hand joint's direction flexes (rather than extends).
+        flexion_bias: probability that a hand joint's direction flexes (rather than extends);
+            only with ``poses="uniform"``.
+        poses: ``"natural"`` (the default with anatomical limits): every hand draws a target pose from the synergy prior
+            ([`lcs.natural_hand_angles`][handmesh_tutorial.lcs.synergy.natural_hand_angles]:
+            fingers flex together, MCP with PIP, neighbours alike); the centre hand starts part of
+            the way there, the second hand flat, and in step 4 each joint moves straight towards
+            its target until it gets there or touches the other body. ``"uniform"``: the paper's
+            rule: random initial angles (``init_pose_scale``) and a random direction per joint,
+            moved until contact or a joint limit (the default with ``limits="paper"``, so that
+            the paper's generator stays one setting away). ``None`` picks by ``limits``.
+        natural_closure: ``(lo, hi)`` range of the closure (0 open, 1 fist) of the natural
+            target poses of hand-hand scenes.
+        grasp_closure: the same for the hand of hand-object and hand-chain scenes (it closes
+            around the body until contact).
         shape_scale: scales the adult shape ranges of
             [`SHAPE_SAMPLE_RANGES`][handmesh_tutorial.hand.SHAPE_SAMPLE_RANGES] (0 = every hand
             average).
@@ -80,6 +93,9 @@ class InteractionConfig:
     init_pose_scale: float = 0.5
     axis_weights: tuple[float, float, float] = (0.3, 1.0, 0.15)
     flexion_bias: float = 0.9
+    poses: str | None = None
+    natural_closure: tuple[float, float] = (0.0, 0.9)
+    grasp_closure: tuple[float, float] = (0.4, 1.0)
     shape_scale: float = 1.0
     lateral_offset: float = 0.025
     contact_tol: float = 0.0015
@@ -93,6 +109,16 @@ class InteractionConfig:
     def __post_init__(self):
         if self.limits not in ("paper", "anatomical"):
             raise ValueError(f"limits must be 'paper' or 'anatomical', got {self.limits!r}")
+        if self.poses is None:  # frozen dataclass: resolve the default once, here
+            object.__setattr__(self, "poses",
+                               "natural" if self.limits == "anatomical" else "uniform")
+        if self.poses not in ("natural", "uniform"):
+            raise ValueError(f"poses must be 'natural' or 'uniform', got {self.poses!r}")
+        for name in ("natural_closure", "grasp_closure"):
+            lo, hi = getattr(self, name)
+            if not 0.0 <= lo <= hi <= 1.0:
+                raise ValueError(f"{name} must be (lo, hi) with 0 <= lo <= hi <= 1, got "
+                                 f"{getattr(self, name)}")
         for name in ("approach_step", "joint_step_deg", "sweep_deg", "contact_tol",
                      "penetration_tol"):
             if not getattr(self, name) > 0:

@@ -56,7 +56,16 @@ class _Generator:
         shape = random_shape(self.rng, 1, self.cfg.shape_scale)[0]
         model, _ = _hand_assets(side)
         colors = model.vertex_colors(tone, rng=int(self.rng.integers(2**31)))
-        return _Hand(side, shape, self.cfg.limits, label, colors)
+        hand = _Hand(side, shape, self.cfg.limits, label, colors)
+        hand.target = None   # natural poses: the LCS angles its joints move towards (step 4)
+        return hand
+
+    def _natural_target(self, hand, closure) -> None:
+        """Draw the hand's natural target pose (``poses="natural"``): the synergy prior's angles
+        inside the hand's own limits."""
+        from ..lcs import natural_hand_angles
+
+        hand.target = hand.art.clip(natural_hand_angles(self.rng, closure, side=hand.side))
 
     def snapshot(self, step: str, text: str, bodies) -> None:
         if self.history is None:
@@ -90,8 +99,13 @@ class _Generator:
             centre = self._hand(centre_side, labels[centre_side], tone)
             mover = self._hand(other_side, labels[other_side],
                                tone if same_person else self._tone())
+            natural = cfg.poses == "natural"
             for _ in range(cfg.max_attempts):
-                angles = self._random_hand_angles(centre.art)
+                if natural:  # part of the way to its target pose; step 4 goes on from there
+                    self._natural_target(centre, cfg.natural_closure)
+                    angles = centre.target * rng.uniform(0.4, 1.0)
+                else:
+                    angles = self._random_hand_angles(centre.art)
                 centre.rig.set_angles(angles)
                 if not centre.rig.self_collides():
                     break
@@ -133,6 +147,9 @@ class _Generator:
             lo = np.minimum(centre.rig.p0, centre.rig.p1).min(0)
             hi = np.maximum(centre.rig.p0, centre.rig.p1).max(0)
             centre.rig.translate(-0.5 * (lo + hi))
+        if cfg.poses == "natural":  # the second hand starts flat and closes towards its target
+            self._natural_target(mover, cfg.natural_closure if self.kind == "hand-hand"
+                                 else cfg.grasp_closure)
         return centre, mover, target
 
     # -- steps 2 and 3 -------------------------------------------------------------------------
@@ -184,9 +201,18 @@ class _Generator:
         return None
 
     # -- steps 4 and 5 -------------------------------------------------------------------------
-    def _direction(self, body, j) -> np.ndarray | None:
+    def _direction(self, body, j) -> tuple[np.ndarray, float] | None:
+        """A joint's move of step 4: ``(unit direction (3,), largest travel in radians)``, or
+        ``None`` when the joint does not move. The paper's rule: a random direction (flexion with
+        probability ``flexion_bias``), travel up to the limits. Natural poses: straight towards
+        the hand's target pose, travel up to it."""
         if j in body.rig.followers:   # driven by its leader (a DIP by its PIP)
             return None
+        target = getattr(body, "target", None)
+        if target is not None:
+            d = target[j - 1] - body.rig.angles[j - 1]
+            n = float(np.linalg.norm(d))
+            return None if n < 1e-9 else (d / n, n)
         span = body.rig.upper[j - 1] - body.rig.lower[j - 1]
         w = np.asarray(self.cfg.axis_weights, float) if body.kind == "hand" else np.ones(3)
         d = self.rng.normal(size=3) * w * (span > 0)
@@ -194,7 +220,7 @@ class _Generator:
             flex = self.rng.random() < self.cfg.flexion_bias
             d[1] = abs(d[1]) if flex else -abs(d[1])
         n = np.linalg.norm(d)
-        return None if n < 1e-12 else d / n
+        return None if n < 1e-12 else (d / n, np.inf)
 
     def _blocked(self, body, others, node, cand, limit=None) -> np.ndarray:
         """(K,) bool: candidate angles of ``node`` that collide (other bodies or itself).
@@ -244,7 +270,8 @@ class _Generator:
         step = np.deg2rad(cfg.joint_step_deg)
         per_round = max(1, int(round(cfg.sweep_deg / cfg.joint_step_deg)))
         dynamic = [b for b in bodies if b.dynamic]
-        # each joint gets one random direction; it moves along it until blocked
+        # each joint gets one direction (random, or towards its natural target); it moves along
+        # it until blocked (contact, a limit, or the target reached)
         active = {}
         for b in dynamic:
             for j in range(1, b.rig.num_joints + 1):
@@ -263,12 +290,16 @@ class _Generator:
                 if key not in active:
                     continue
                 body = by_label[key[0]]
-                j, d = key[1], active[key]
+                j, (d, travel) = key[1], active[key]
                 others = [o for o in bodies if o is not body]
                 a0 = body.rig.angles[j - 1]
-                cand = a0 + step * np.arange(1, per_round + 1)[:, None] * d
+                k = np.arange(1, per_round + 1)
+                cand = a0 + step * k[:, None] * d
                 ok_lim = ((cand >= body.rig.lower[j - 1] - 1e-12)
                           & (cand <= body.rig.upper[j - 1] + 1e-12)).all(1)
+                if np.isfinite(travel):   # natural poses: the last step lands on the target
+                    cand[k * step >= travel] = a0 + travel * d
+                    ok_lim &= (k - 1) * step < travel
                 # candidates in chunks of 8: most sweeps end early (contact or limit)
                 n = per_round
                 for c0 in range(0, per_round, 8):
@@ -283,6 +314,8 @@ class _Generator:
                     body.rig.set_joint(j, cand[n - 1])
                     moves += 1
                     moved = True
+                    if np.isfinite(travel):
+                        active[key] = (d, max(travel - n * step, 0.0))
                 if n < per_round:  # blocked: by a limit or by a collision
                     del active[key]
                     if ok_lim[n]:
@@ -403,7 +436,8 @@ def build_scene(kind: str, seed: int | np.random.Generator, config: InteractionC
         record: keep a snapshot of every step in ``Scene.history`` (for figures).
         **overrides: fields of
             [`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig] to change,
-            e.g. ``limits="anatomical"``.
+            e.g. ``limits="paper"`` (which also selects that limit set's poses, the paper's
+            uniform rule, unless ``poses`` is given too).
 
     Returns:
         A [`Scene`][handmesh_tutorial.interact.scene.Scene] in the world frame (centre body near the
@@ -420,6 +454,8 @@ def build_scene(kind: str, seed: int | np.random.Generator, config: InteractionC
         bad = sorted(set(overrides) - set(asdict(cfg)))
         if bad:
             raise ValueError(f"unknown InteractionConfig fields {bad}")
+        if "limits" in overrides and "poses" not in overrides:
+            overrides = {**overrides, "poses": None}   # the limits' own poses (see the config)
         cfg = InteractionConfig(**{**asdict(cfg), **overrides})
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     s = None if isinstance(seed, np.random.Generator) else seed

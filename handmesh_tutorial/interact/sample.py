@@ -78,8 +78,8 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
             per-process one ([`get_renderer`][handmesh_tutorial.interact.sample.get_renderer]).
         config: generator parameters
             ([`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig]).
-        limits: shortcut for ``config.limits``: ``"anatomical"`` (the default config's) or
-            ``"paper"`` (±60° on every axis).
+        limits: shortcut for ``config.limits``: ``"anatomical"`` (the default config's, with
+            natural poses) or ``"paper"`` (±60° on every axis, with the paper's uniform poses).
 
     Returns:
         The sample dict of [`render_scene`][handmesh_tutorial.interact.sample.render_scene].
@@ -94,7 +94,9 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
         raise ValueError(f"kind must be one of {KINDS} or 'mixed', got {kind!r}")
     cfg = config or InteractionConfig()
     if limits is not None and limits != cfg.limits:
-        cfg = InteractionConfig(**{**asdict(cfg), "limits": limits})
+        # the shortcut selects a whole generator: anatomical limits with natural poses, or the
+        # paper's limits with its uniform poses
+        cfg = InteractionConfig(**{**asdict(cfg), "limits": limits, "poses": None})
     scene_ss, view_ss, _ = np.random.SeedSequence(int(sample_seed)).spawn(3)
     try:
         scene = build_scene(kind, np.random.default_rng(scene_ss), cfg)

@@ -88,13 +88,16 @@ from .limits import (
     PAPER_LIMIT_DEG,
     hand_joint_limits,
 )
+from .synergy import FINGER_JOINTS, THUMB_JOINTS, natural_hand_angles
 
 __all__ = [
     "ANATOMICAL_LIMITS_DEG",
     "DIP_FOLLOWS_PIP",
     "DIP_PIP_RATIO",
+    "FINGER_JOINTS",
     "HAND_JOINT_KINDS",
     "PAPER_LIMIT_DEG",
+    "THUMB_JOINTS",
     "Articulation",
     "clip_angles",
     "forward_kinematics",
@@ -103,6 +106,7 @@ __all__ = [
     "lcs_angles_to_pose",
     "local_frames",
     "mirror_angles",
+    "natural_hand_angles",
     "palm_normal",
     "pose_to_lcs_angles",
     "random_pose",
