@@ -124,8 +124,12 @@ class HandModel(nn.Module):
         half-edges, as an outward face glued to the rim does (see
         [`forearm_mesh`][handmesh_tutorial.hand.mesh.forearm_mesh]).
         """
-        skin = self.faces[~np.asarray(self.template.cap_faces, bool)]
-        return _boundary_loop(skin)[::-1].copy()   # the boundary half-edges, walked backwards
+        loop = self.__dict__.get("_wrist_loop")
+        if loop is None:   # a walk in Python over the mesh's edges: computed once per model
+            skin = self.faces[~np.asarray(self.template.cap_faces, bool)]
+            loop = _boundary_loop(skin)[::-1].copy()   # the boundary half-edges, walked backwards
+            self.__dict__["_wrist_loop"] = loop
+        return loop.copy()
 
     @property
     def num_vertices(self) -> int:

@@ -51,18 +51,19 @@ contacts lost by joint moves are restored. (c) *Natural poses* (``poses="natural
 with anatomical limits): the paper's random directions send every joint that meets nothing to a
 limit, so hands end up as claws (a straight knuckle under a fully bent middle joint) and with
 neighbouring fingers bent in opposite ways. Instead each hand draws a target pose from a
-flexion-synergy prior ([`lcs.natural_hand_angles`][handmesh_tutorial.lcs.synergy.natural_hand_angles]:
-the fingers of a hand close together, MCP with PIP, neighbours alike); the centre hand starts part
-of the way there (step 1), the second hand flat (step 2), and in step 4 every joint moves straight
-towards its target until it gets there or touches the other body, so a grasp wraps around the
-object where they meet. ``limits="paper"`` restores the paper's rule (``poses="uniform"``).
+flexion-synergy prior
+([`lcs.natural_hand_angles`][handmesh_tutorial.lcs.synergy.natural_hand_angles]: the fingers of a
+hand close together, MCP with PIP, neighbours alike); the centre hand starts part of the way there
+(step 1), the second hand flat (step 2), and in step 4 every joint moves straight towards its
+target until it gets there or touches the other body, so a grasp wraps around the object where they
+meet. ``limits="paper"`` restores the paper's rule (``poses="uniform"``).
 
 Further choices the paper leaves open, all in
 [`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig]: with
-``poses="uniform"``, a joint's random direction has per-axis weights ``axis_weights`` (abduction, flexion, twist) and flexes rather than
-extends with probability ``flexion_bias``; the centre hand's random pose uses ``init_pose_scale`` of
-the range; a joint stops for good once it is blocked (by contact or limit), which is what makes "no
-valid move" reachable.
+``poses="uniform"``, a joint's random direction has per-axis weights ``axis_weights`` (abduction,
+flexion, twist) and flexes rather than extends with probability ``flexion_bias``; the centre hand's
+random pose uses ``init_pose_scale`` of the range; a joint stops for good once it is blocked (by
+contact or limit), which is what makes "no valid move" reachable.
 
 Everything is seeded: the same seed gives the same scene, to the byte.
 

@@ -58,7 +58,8 @@ class InteractionConfig:
             (abduction, flexion, twist).
         flexion_bias: probability that a hand joint's direction flexes (rather than extends);
             only with ``poses="uniform"``.
-        poses: ``"natural"`` (the default with anatomical limits): every hand draws a target pose from the synergy prior
+        poses: ``"natural"`` (the default with anatomical limits): every hand draws a target
+            pose from the synergy prior
             ([`lcs.natural_hand_angles`][handmesh_tutorial.lcs.synergy.natural_hand_angles]:
             fingers flex together, MCP with PIP, neighbours alike); the centre hand starts part of
             the way there, the second hand flat, and in step 4 each joint moves straight towards

@@ -80,7 +80,21 @@ class _MeshSDF:
     for a query at distance ``r`` from its nearest mesh vertex, every face whose bounding sphere
     (centroid, radius ``rho``) comes within ``r`` is tested (k-d trees of vertices and of face
     centroids).
+
+    Finding those faces fast: the faces are split by size. Faces with ``rho`` above
+    ``big_face`` (the wrist cap's fan, an object's large flat sides) are tested against every
+    point. For the others, each point takes its ``k`` nearest face centroids in one vectorised
+    k-d tree query; that set is complete when the ``k``-th centroid is farther than ``r`` plus the
+    largest small-face radius, and only the few points where it is not fall back to a radius
+    query. (One radius query with ``r`` plus the *largest* radius of all faces, 31 mm for the
+    hand's cap, returned hundreds of faces per point as Python lists: 68 ms for a hand's 779
+    vertices against the other hand, against 12 ms now.)
     """
+
+    big_face = 0.012
+    """Faces whose bounding radius exceeds this (metres) are tested against every point."""
+    k = 48
+    """Nearest small-face centroids gathered per point in the vectorised query."""
 
     def __init__(self, vertices, faces):
         v = np.asarray(vertices, float)
@@ -109,8 +123,49 @@ class _MeshSDF:
         self.tree = cKDTree(v)
         self.centroid = v[f].mean(1)
         self.rho = np.linalg.norm(v[f] - self.centroid[:, None], axis=2).max(1)
-        self.rho_max = float(self.rho.max())
-        self.ctree = cKDTree(self.centroid)
+        big = self.rho > self.big_face
+        self.big_ids = np.flatnonzero(big)
+        self.small_ids = np.flatnonzero(~big)
+        self.rho_small = float(self.rho[self.small_ids].max()) if len(self.small_ids) else 0.0
+        self.ctree = cKDTree(self.centroid[self.small_ids]) if len(self.small_ids) else None
+
+    def _candidates(self, p: np.ndarray, dmin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(point ids, face ids)`` of every (point, face) pair whose face's bounding sphere
+        comes within the point's nearest-vertex distance ``dmin`` (a superset of the faces that
+        hold each point's closest surface point)."""
+        n = len(p)
+        slack = 1 + 1e-9
+
+        def reaches(dist, pid, face):   # the bounding sphere comes within dmin of the point
+            return dist <= dmin[pid] + self.rho[face] * slack + 1e-12
+
+        pid_parts, face_parts = [], []
+        if len(self.small_ids):
+            k = min(self.k, len(self.small_ids))
+            dist, idx = self.ctree.query(p, k=k)
+            dist, idx = dist.reshape(n, k), idx.reshape(n, k)
+            reach = dmin + self.rho_small * slack + 1e-12
+            complete = np.full(n, True) if k == len(self.small_ids) else dist[:, -1] > reach
+            pid = np.repeat(np.flatnonzero(complete), k)
+            face = self.small_ids[idx[complete].ravel()]
+            keep = reaches(dist[complete].ravel(), pid, face)
+            pid_parts.append(pid[keep])
+            face_parts.append(face[keep])
+            rest = np.flatnonzero(~complete)
+            if len(rest):   # more than k small faces may reach these points: a radius query
+                near = self.ctree.query_ball_point(p[rest], reach[rest])
+                pid = np.repeat(rest, [len(x) for x in near])
+                face = self.small_ids[np.concatenate([np.asarray(x, np.int64) for x in near])]
+                keep = reaches(np.linalg.norm(p[pid] - self.centroid[face], axis=1), pid, face)
+                pid_parts.append(pid[keep])
+                face_parts.append(face[keep])
+        if len(self.big_ids):   # every point against every big face, as one (N, B) matrix
+            c = self.centroid[self.big_ids]
+            dist = np.sqrt(((p[:, None, :] - c[None]) ** 2).sum(-1))
+            pid, j = np.nonzero(dist <= dmin[:, None] + self.rho[self.big_ids] * slack + 1e-12)
+            pid_parts.append(pid)
+            face_parts.append(self.big_ids[j])
+        return np.concatenate(pid_parts), np.concatenate(face_parts)
 
     def __call__(self, points) -> np.ndarray:
         """(N,) signed distances of points (N,3), metres: negative inside the mesh."""
@@ -119,14 +174,7 @@ class _MeshSDF:
             return np.zeros(0)
         f = self.f
         dmin, _ = self.tree.query(p)  # the nearest vertex bounds the distance to the surface
-        near = self.ctree.query_ball_point(p, dmin + self.rho_max * (1 + 1e-9) + 1e-12)
-        counts = np.array([len(x) for x in near])
-        face = np.concatenate([np.asarray(x, np.int64) for x in near])
-        pid = np.repeat(np.arange(len(p)), counts)
-        # a face can hold the closest point only if its bounding sphere reaches within dmin
-        keep = (np.linalg.norm(p[pid] - self.centroid[face], axis=1)
-                <= dmin[pid] + self.rho[face] * (1 + 1e-9) + 1e-12)
-        pid, face = pid[keep], face[keep]
+        pid, face = self._candidates(p, dmin)
         tri = self.v[f[face]]
         q, reg = closest_points_on_triangles(p[pid], tri[:, 0], tri[:, 1], tri[:, 2])
         d2 = ((q - p[pid]) ** 2).sum(-1)

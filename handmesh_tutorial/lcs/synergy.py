@@ -100,7 +100,7 @@ def natural_hand_angles(rng=None, closure: float | tuple[float, float] = (0.0, 0
     spread = (1.0 - g) * rng.uniform(0.0, 1.0)           # fingers fan out when the hand opens
     # right hand: +x swings a finger towards the little finger, so the index spreads with -x
     fan = np.array([-1.0, -0.3, 0.4, 1.0]) * 12.0 * spread
-    for f, (mcp, pip, dip) in enumerate(FINGER_JOINTS):
+    for f, (mcp, pip, _dip) in enumerate(FINGER_JOINTS):   # the DIP follows below
         deg[mcp - 1, 1] = -5.0 + 85.0 * c[f] + noise[f, 0]
         deg[mcp - 1, 0] = fan[f] + 3.0 * rng.standard_normal()
         deg[pip - 1, 1] = 3.0 + 97.0 * c[f] + noise[f, 1]
