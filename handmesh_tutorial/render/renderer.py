@@ -135,6 +135,52 @@ def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 _LIVE_RENDERERS = 0  # open Renderers of this process (they share the EGL display)
 
 
+def _ordered_scene_class(pr):
+    """pyrender's ``Scene`` with its mesh and light nodes in insertion order (a subclass).
+
+    pyrender keeps nodes in sets, so they come out in the order of their object ids, which changes
+    from run to run. Two things depended on it: the drawing order of meshes (pyrender sorts them
+    by the distance of their node's origin to the camera, and every node here sits at the origin),
+    which decides a pixel where two surfaces have the same depth (a hand's wrist rim and its
+    forearm share vertices), and the order in which the shader sums the lights, which moves a
+    pixel by one grey level now and then. Both made the same seed give slightly different images.
+    In insertion order, bodies are drawn before scenery and win such ties.
+    """
+
+    class OrderedScene(pr.Scene):
+        def add_node(self, node, parent_node=None):
+            super().add_node(node, parent_node)
+            order = self.__dict__.setdefault("_insertion", {})
+            order.setdefault(node, len(order))
+
+        def _in_order(self, nodes) -> list:
+            order = self.__dict__.get("_insertion", {})
+            return sorted(nodes, key=lambda n: order.get(n, len(order)))
+
+        @property
+        def mesh_nodes(self):
+            return self._in_order(self._mesh_nodes)
+
+        @property
+        def point_light_nodes(self):
+            return self._in_order(self._point_light_nodes)
+
+        @property
+        def spot_light_nodes(self):
+            return self._in_order(self._spot_light_nodes)
+
+        @property
+        def directional_light_nodes(self):
+            return self._in_order(self._directional_light_nodes)
+
+        @property
+        def light_nodes(self):
+            return self._in_order(self._point_light_nodes | self._spot_light_nodes
+                                  | self._directional_light_nodes)
+
+    return OrderedScene
+
+
 class Renderer:
     """An offscreen pyrender renderer of a fixed image size, reused for many scenes.
 
@@ -166,6 +212,7 @@ class Renderer:
         self.znear, self.zfar = float(znear), float(zfar)
         self._pr = import_pyrender()
         self._r = self._pr.OffscreenRenderer(self.width, self.height)
+        self._scene_class = _ordered_scene_class(self._pr)
         global _LIVE_RENDERERS
         _LIVE_RENDERERS += 1
 
@@ -203,7 +250,7 @@ class Renderer:
                ambient: Any):
         pr = self._pr
         amb = np.broadcast_to(np.asarray(ambient, dtype=float), (3,)).copy()
-        scene = pr.Scene(bg_color=np.zeros(4), ambient_light=amb)
+        scene = self._scene_class(bg_color=np.zeros(4), ambient_light=amb)
         # pyrender's IntrinsicsCamera puts u = fx X/Z + cx at a pixel's left edge (OpenGL window
         # coordinates); +0.5 moves it to the pixel centre (OpenCV convention).
         cam = pr.IntrinsicsCamera(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2] + 0.5, cy=K[1, 2] + 0.5,
