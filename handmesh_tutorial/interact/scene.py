@@ -70,8 +70,9 @@ class Scene:
             vertex of one mesh inside the other), ``rounds``, ``stop`` (one of
             [`STOP_REASONS`][handmesh_tutorial.interact.config.STOP_REASONS]), ``moves`` (accepted
             joint moves), ``blocked_contact`` / ``blocked_limit`` (joints stopped by a collision / a
-            limit), ``approach_mm`` (distance travelled in step 3), ``settle_mm`` (signed shift of
-            the settle step, positive towards the centre), ``attempts`` (candidates tried).
+            limit, or with natural poses by reaching their target), ``approach_mm`` (distance
+            travelled in step 3), ``settle_mm`` (signed shift of the settle step, positive
+            towards the centre), ``attempts`` (candidates tried).
         history: with ``record=True``, a list of snapshots ``{"step", "text", "bodies"}`` where
             ``bodies`` maps label -> ``{"cylinders", "vertices", "faces", "colors"}``.
     """
