@@ -27,6 +27,7 @@ import http.server
 import json
 import os
 import shutil
+import signal
 import socketserver
 import subprocess
 import sys
@@ -150,6 +151,7 @@ class Browser:
              "about:blank"],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
+            start_new_session=True,  # its own process group: close() stops its helpers too
         )
         port_file = profile / "DevToolsActivePort"
         deadline = time.time() + 60
@@ -219,11 +221,17 @@ class Browser:
     def close(self):
         with contextlib.suppress(Exception):
             self.ws.close()
-        self.proc.terminate()
+        # Chromium's helper processes (zygote, renderers, crash handler) outlive the main one and
+        # kept writing to the profile while it was being removed ("Directory not empty"): stop
+        # the whole process group.
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.proc.pid, signal.SIGTERM)
         try:
             self.proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
-            self.proc.kill()
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait(timeout=10)
 
 
 def event_problems(events: list[dict], base: str) -> list[str]:
@@ -259,7 +267,10 @@ def check_site(site: Path, out: Path, pages: list[str] | None = None) -> dict:
     chromium = find_chromium()
     pages = pages or site_pages(site)
     report: dict = {"site": str(site), "pages": {}, "screenshots": []}
-    with serve(site) as base, tempfile.TemporaryDirectory(prefix="docs-check-profile-") as prof:
+    # ignore_cleanup_errors: a helper process that still writes to the profile as it is removed
+    # must not fail a check whose pages all passed
+    with serve(site) as base, tempfile.TemporaryDirectory(prefix="docs-check-profile-",
+                                                          ignore_cleanup_errors=True) as prof:
         browser = Browser(chromium, Path(prof))
         try:
             for rel in pages:
