@@ -84,8 +84,8 @@ TRAINED = {
 #: Where the committed ``default`` run picked up what an earlier run had left in ``notebooks/runs/``
 #: (the notebooks reuse data sets and checkpoints): its time is then less than a first run's.
 REUSED = {
-    "08_training": "the committed run reused the INTER-SH set in `notebooks/runs/` and spent its "
-                   "time training; a first run also generates the scenes",
+    "08_training": "the committed run generated its INTER-SH set too (about 3.5 min of the "
+                   "total); a later run reuses it from `notebooks/runs/` and only trains",
     "09_evaluation": "reuses notebook 08's data set and checkpoint",
     "10_ablation": "the committed run evaluated trainings done beforehand in `notebooks/runs/` "
                    "(one thread each, about 10 min per run on this CPU); a first run also "
