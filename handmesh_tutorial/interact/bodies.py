@@ -62,6 +62,7 @@ class _Hand:
         self.rig = _Rig(rest16, self.model.parents, self.art.frames, self.art.lower,
                         self.art.upper, cyl, _hand_attach(), followers=followers)
         self.dynamic = True
+        self.target = None   # natural poses: the LCS angles its joints move towards (step 4)
 
     def mesh(self):
         """(vertices (V,3), joints (21,3)) world, via the hand model (LBS), float64."""

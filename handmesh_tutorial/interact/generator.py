@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from ..collision import cylinders_intersect
 from ..dataset import KINDS
+from ..lcs import natural_hand_angles
 from ._common import _random_direction, _random_rotation, _unit
 from .bodies import FOREARM_LENGTH, _ChainBody, _Hand, _hand_assets, _Static
 from .config import InteractionConfig, InteractionError
@@ -56,15 +57,11 @@ class _Generator:
         shape = random_shape(self.rng, 1, self.cfg.shape_scale)[0]
         model, _ = _hand_assets(side)
         colors = model.vertex_colors(tone, rng=int(self.rng.integers(2**31)))
-        hand = _Hand(side, shape, self.cfg.limits, label, colors)
-        hand.target = None   # natural poses: the LCS angles its joints move towards (step 4)
-        return hand
+        return _Hand(side, shape, self.cfg.limits, label, colors)
 
     def _natural_target(self, hand, closure) -> None:
         """Draw the hand's natural target pose (``poses="natural"``): the synergy prior's angles
         inside the hand's own limits."""
-        from ..lcs import natural_hand_angles
-
         hand.target = hand.art.clip(natural_hand_angles(self.rng, closure, side=hand.side))
 
     def snapshot(self, step: str, text: str, bodies) -> None:

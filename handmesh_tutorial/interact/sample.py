@@ -8,8 +8,6 @@ visibility").
 
 from __future__ import annotations
 
-from dataclasses import asdict
-
 import numpy as np
 
 from ..dataset import KINDS
@@ -93,13 +91,11 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS} or 'mixed', got {kind!r}")
     cfg = config or InteractionConfig()
-    if limits is not None and limits != cfg.limits:
-        # the shortcut selects a whole generator: anatomical limits with natural poses, or the
-        # paper's limits with its uniform poses
-        cfg = InteractionConfig(**{**asdict(cfg), "limits": limits, "poses": None})
+    # build_scene's limits override selects a whole generator (those limits with their poses)
+    overrides = {} if limits is None or limits == cfg.limits else {"limits": limits}
     scene_ss, view_ss, _ = np.random.SeedSequence(int(sample_seed)).spawn(3)
     try:
-        scene = build_scene(kind, np.random.default_rng(scene_ss), cfg)
+        scene = build_scene(kind, np.random.default_rng(scene_ss), cfg, **overrides)
     except InteractionError as e:
         raise InteractionError(kind, int(sample_seed), e.reason) from None
     scene.seed = int(sample_seed)

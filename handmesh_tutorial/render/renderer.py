@@ -19,6 +19,7 @@ Taught in notebook 05 ("Rendering and the visibility ratio").
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -135,6 +136,7 @@ def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 _LIVE_RENDERERS = 0  # open Renderers of this process (they share the EGL display)
 
 
+@functools.cache
 def _ordered_scene_class(pr):
     """pyrender's ``Scene`` with its mesh and light nodes in insertion order (a subclass).
 
