@@ -38,7 +38,7 @@ import torch
 
 import handmesh_tutorial as hmt
 from handmesh_tutorial.dataset.torch_views import InterSHTorchDataset
-from handmesh_tutorial.metrics import procrustes_align
+from handmesh_tutorial.metrics import point_errors, procrustes_align
 
 
 def crops(root: Path, cache: Path, size: int) -> dict:
@@ -58,7 +58,7 @@ def crops(root: Path, cache: Path, size: int) -> dict:
 
 def pa_mpjpe_mm(pred: np.ndarray, gt: np.ndarray) -> float:
     """Mean PA-MPJPE (official FreiHAND alignment), mm. ``(N, 21, 3)`` metres."""
-    return 1000 * float(np.linalg.norm(procrustes_align(pred, gt) - gt, axis=-1).mean())
+    return 1000 * float(point_errors(procrustes_align(pred, gt), gt).mean())
 
 
 def aligned_to(joints: np.ndarray, ref: np.ndarray) -> np.ndarray:
@@ -119,8 +119,10 @@ def main(argv=None) -> None:
     print("explained variance of the first 1..5 components:", np.round(explained[:5], 3))
     template = hmt.model.as_template()
     rest_j = np.asarray(template.joint_regressor) @ hmt.model.root_centred_template(template)
-    print(f"test: rest hand {pa_mpjpe_mm(np.broadcast_to(rest_j, gt.shape), gt):.2f} mm, "
-          f"mean hand (k=0) {pa_mpjpe_mm(np.broadcast_to(ref, gt.shape), gt):.2f} mm")
+    for name, joints in (("validation", val_gt), ("test", gt)):
+        print(f"{name}: rest hand {pa_mpjpe_mm(np.broadcast_to(rest_j, joints.shape), joints):.2f}"
+              f" mm, mean hand (k=0) {pa_mpjpe_mm(np.broadcast_to(ref, joints.shape), joints):.2f}"
+              " mm")
     test_aligned = aligned_to(gt, ref).reshape(len(gt), -1)
     for k in (1, 2, 3, 5, 8, 12, 20):
         rec = mu + ((test_aligned - mu) @ vt[:k].T) @ vt[:k]
