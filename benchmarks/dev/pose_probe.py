@@ -30,6 +30,7 @@ run takes 3-5 CPU minutes. Example::
 from __future__ import annotations
 
 import argparse
+import hashlib
 import time
 from pathlib import Path
 
@@ -42,8 +43,10 @@ from handmesh_tutorial.metrics import point_errors, procrustes_align
 
 
 def crops(root: Path, cache: Path, size: int) -> dict:
-    """The deterministic crops and target joints of a root (cached as npz: float16 images)."""
-    f = cache / f"{root.name}_{size}.npz"
+    """The deterministic crops and target joints of a root (cached as npz: float16 images; the
+    file name carries a hash of the root's absolute path, so two roots never share a cache)."""
+    key = hashlib.sha1(str(root.resolve()).encode()).hexdigest()[:10]
+    f = cache / f"{root.name}_{key}_{size}.npz"
     if f.exists():
         with np.load(f) as z:
             return {k: z[k] for k in z.files}
@@ -52,7 +55,9 @@ def crops(root: Path, cache: Path, size: int) -> dict:
     out = {"images": np.stack([it["image"].numpy().astype(np.float16) for it in items]),
            "joints": np.stack([it["joints"].numpy().astype(np.float64) for it in items])}
     cache.mkdir(parents=True, exist_ok=True)
-    np.savez(f, **out)
+    tmp = f.with_suffix(".tmp.npz")
+    np.savez(tmp, **out)
+    tmp.replace(f)  # atomic: an interrupted run leaves no half-written cache
     return out
 
 
@@ -156,8 +161,7 @@ def main(argv=None) -> None:
         return (mean + c @ basis).numpy().astype(np.float64).reshape(-1, 21, 3)
 
     print(f"probe: {args.encoder} -> {k} coefficients, {len(x_train)} training crops, "
-          f"augment {args.augment}; validation mean hand "
-          f"{pa_mpjpe_mm(np.broadcast_to(ref, val_gt.shape), val_gt):.2f} mm")
+          f"augment {args.augment}")
     rng = np.random.default_rng(args.seed)
     t0 = time.perf_counter()
     for step in range(1, args.steps + 1):
