@@ -10,8 +10,12 @@ Two measurements:
 2. **End to end**, ``handmesh generate`` in a fresh process with 1 and 2 workers: samples/s
    including start-up (imports, hand models, OpenGL context per process) and in the steady
    state (rate over the samples after the first of each worker, from the folders' times).
+3. **Worker start method**: 100 hand-hand scenes with 2 workers, spawned (the baseline: every
+   worker imports torch, the library and pyrender again and tears the interpreter down at the
+   end) against ``mp_context="auto"`` (forked where it is safe), interleaved; same bytes.
 
-Usage: ``python benchmarks/generate.py [--num 12] [--split 8] [--kinds hand-hand,...]``.
+Usage: ``python benchmarks/generate.py [--num 12] [--split 8] [--kinds hand-hand,...]
+[--start-num 100] [--start-repeats 2]``.
 The machine is shared: run it when it is otherwise idle, and read ratios rather than absolute
 times when it is not.
 """
@@ -72,16 +76,27 @@ def split(kind: str, n: int) -> dict:
     return ms
 
 
-def end_to_end(kind: str, num: int, workers: int) -> dict:
-    """Run ``handmesh generate`` in a fresh process (start-up included, as a user sees it)."""
+def end_to_end(kind: str, num: int, workers: int, start: str = "cli") -> dict:
+    """Generate ``num`` scenes in a fresh process (start-up included, as a user sees it).
+
+    ``start="cli"`` runs ``handmesh generate`` (workers forked where it is safe); ``"spawn"`` /
+    ``"auto"`` call ``interact.generate_interactions(mp_context=start)`` in a fresh process, the
+    same work with the worker start method pinned (``"spawn"`` is the path before issue 14).
+    """
     import subprocess
     import sys
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_gen_e2e_"))
     try:
-        cmd = [sys.executable, "-m", "handmesh_tutorial.cli", "generate", "--kind", kind,
-               "--num", str(num), "--seed", "0", "--out", str(tmp / "ds"), "--image-size",
-               str(SIZE), "--workers", str(workers), "--quiet", "--no-fsync"]
+        if start == "cli":
+            cmd = [sys.executable, "-m", "handmesh_tutorial.cli", "generate", "--kind", kind,
+                   "--num", str(num), "--seed", "0", "--out", str(tmp / "ds"), "--image-size",
+                   str(SIZE), "--workers", str(workers), "--quiet", "--no-fsync"]
+        else:
+            cmd = [sys.executable, "-c",
+                   "import sys; from handmesh_tutorial.interact import generate_interactions as g; "
+                   f"g(sys.argv[1], {kind!r}, {num}, 0, image_size={SIZE}, workers={workers}, "
+                   f"progress=False, durable=False, mp_context={start!r})", str(tmp / "ds")]
         t = time.perf_counter()
         subprocess.run(cmd, check=True, capture_output=True)
         wall = time.perf_counter() - t
@@ -94,11 +109,27 @@ def end_to_end(kind: str, num: int, workers: int) -> dict:
     return {"written": len(mt), "wall_s": wall, "rate": len(mt) / wall, "steady": steady}
 
 
+def start_methods(kind: str, num: int, workers: int, repeats: int) -> None:
+    """Worker start-up: spawn (the baseline) against auto (fork where safe), interleaved."""
+    walls: dict[str, list[float]] = {"spawn": [], "auto": []}
+    for _ in range(repeats):
+        for start in walls:
+            walls[start].append(end_to_end(kind, num, workers, start)["wall_s"])
+    med = {k: float(np.median(v)) for k, v in walls.items()}
+    for start, w in med.items():
+        print(f"{kind:12s} {start:>6s} {workers:7d} {num:7d} {w:7.2f} {num / w:9.2f}   "
+              f"RATIO vs spawn ({num / med['spawn']:.2f} samples/s): {med['spawn'] / w:.2f}x"
+              f"   (runs: {', '.join(f'{x:.2f}' for x in walls[start])} s)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--num", type=int, default=12, help="samples per end-to-end run")
     ap.add_argument("--split", type=int, default=8, help="samples per kind for the time split")
     ap.add_argument("--kinds", default="hand-hand,hand-object,hand-chain")
+    ap.add_argument("--start-num", type=int, default=100,
+                    help="samples of the start-method comparison (hand-hand, 2 workers)")
+    ap.add_argument("--start-repeats", type=int, default=2)
     args = ap.parse_args()
     kinds = args.kinds.split(",")
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; "
@@ -124,6 +155,11 @@ def main() -> None:
             one = one or r["rate"]
             print(f"{kind:12s} {w:7d} {r['written']:7d} {r['wall_s']:7.1f} {r['rate']:9.2f} "
                   f"{r['steady']:9.2f} {r['rate'] / one:7.2f}x")
+    print(f"\n3. worker start method, {args.start_num} hand-hand samples, 2 workers, fresh "
+          f"process each (median of {args.start_repeats}, interleaved)")
+    print(f"{'kind':12s} {'start':>6s} {'workers':>7s} {'samples':>7s} {'wall s':>7s} "
+          f"{'samples/s':>9s}")
+    start_methods("hand-hand", args.start_num, 2, args.start_repeats)
     print(f"\nload average at the end: {os.getloadavg()[0]:.1f}")
 
 

@@ -417,12 +417,16 @@ def _mark_worker(folder):
     Path(folder, str(os.getpid())).touch()
 
 
-def test_workers_give_the_same_bytes(tmp_path):
+@pytest.mark.parametrize("start", ["spawn", "fork", "auto"])
+def test_workers_give_the_same_bytes(tmp_path, start):
+    if start not in ("spawn", "auto") and not sys.platform.startswith("linux"):
+        pytest.skip("fork start method: Linux only")
     marks1, marks2 = tmp_path / "m1", tmp_path / "m2"
     marks1.mkdir()
     marks2.mkdir()
     gen(tmp_path / "w1", num=4, worker_init=functools.partial(_mark_worker, marks1))
-    s = gen(tmp_path / "w2", num=4, workers=2, worker_init=functools.partial(_mark_worker, marks2))
+    s = gen(tmp_path / "w2", num=4, workers=2, worker_init=functools.partial(_mark_worker, marks2),
+            mp_context=start)
     assert s.written == 4
     assert tree(tmp_path / "w1") == tree(tmp_path / "w2")
     assert [p.name for p in marks1.iterdir()] == [str(os.getpid())]  # in-process, once
@@ -430,6 +434,54 @@ def test_workers_give_the_same_bytes(tmp_path):
     assert 1 <= len(pids) <= 2 and str(os.getpid()) not in pids
     with pytest.raises(ValueError, match="picklable"):
         gen(tmp_path / "w3", num=4, workers=2, fn=lambda seed: make(seed))
+
+
+START_METHOD_SCRIPT = textwrap.dedent("""
+    import sys, threading
+    from handmesh_tutorial.dataset.workers import _start_method
+
+    def show(what):
+        print(what, _start_method("auto"), _start_method("spawn"))
+
+    show("fresh")
+    monitor = threading.Thread(target=lambda: None, name="tqdm_monitor")
+    monitor.start()  # tqdm's monitor: ignored
+    show("tqdm-monitor")
+    monitor.join()
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    show("thread")
+    stop.set()
+    other.join()
+    show("thread-ended")
+    if sys.argv[1] == "gl":
+        from handmesh_tutorial.render import Renderer, gl_opened
+        assert not gl_opened()
+        Renderer(16).close()  # closed, but the driver's state stays in this process
+        assert gl_opened()
+        show("gl")
+    else:
+        import torch
+        show("torch")
+""")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forks only on Linux")
+@pytest.mark.parametrize("case", ["gl", "torch"])
+def test_auto_start_method_forks_only_where_it_is_safe(tmp_path, case):
+    script = tmp_path / "start.py"
+    script.write_text(START_METHOD_SCRIPT)
+    out = subprocess.run([sys.executable, str(script), case], capture_output=True, text=True,
+                         check=True, timeout=120).stdout.split("\n")
+    assert out[:5] == ["fresh fork spawn", "tqdm-monitor fork spawn", "thread spawn spawn",
+                       "thread-ended fork spawn", f"{case} spawn spawn"]
+
+
+def test_unknown_start_method_is_refused_before_writing(tmp_path):
+    with pytest.raises(ValueError, match="mp_context must be 'auto' or one of .*'bogus'"):
+        gen(tmp_path / "r", num=2, workers=2, mp_context="bogus")
+    assert not (tmp_path / "r").exists()
 
 
 def test_notebook_functions_are_refused_for_workers(tmp_path, monkeypatch):
@@ -680,7 +732,8 @@ ORPHAN_SCRIPT = textwrap.dedent("""
         return synthetic_sample(seed, image_size=32, resolution=4)
 
     if __name__ == "__main__":
-        D.generate_dataset(sys.argv[1], make, 40, 3, "hand-hand", workers=2, progress=False)
+        D.generate_dataset(sys.argv[1], make, 40, 3, "hand-hand", workers=2, progress=False,
+                           mp_context=sys.argv[2])
 """)
 
 
@@ -706,14 +759,15 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
-def test_workers_die_with_a_killed_main_process(tmp_path):
+@pytest.mark.parametrize("start", ["spawn", "fork"])
+def test_workers_die_with_a_killed_main_process(tmp_path, start):
     script = tmp_path / "orphans.py"
     script.write_text(ORPHAN_SCRIPT)
     root = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, str(script), str(root)])
+    proc = subprocess.Popen([sys.executable, str(script), str(root), start])
     deadline, workers = time.time() + 90, []
     while time.time() < deadline:  # until both workers have written a sample
-        workers = [k for k in _children(proc.pid) if "spawn_main" in
+        workers = [k for k in _children(proc.pid) if "resource_tracker" not in
                    (Path("/proc") / str(k) / "cmdline").read_text(errors="replace")]
         if len(workers) == 2 and len(list((root / "samples").glob("0*"))) >= 2:
             break

@@ -8,6 +8,7 @@ visibility ratio").
 
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import sys
@@ -69,12 +70,61 @@ def _init_worker(task: _Task, worker_init: Callable[[], Any] | None,
     _WORKER_TASK = task
     if worker_init is not None:
         worker_init()  # e.g. one OffscreenRenderer per process, kept in a module global
+    # The modules, models and renderer loaded so far live as long as the worker: move them out
+    # of the garbage collector's sight, so that its full collections (about 60 ms each with
+    # torch loaded) scan only what the samples allocate.
+    gc.freeze()
 
 
 def _worker_make(index: int) -> dict:
     assert _WORKER_TASK is not None, "worker not initialised"
     return _make_and_write(_WORKER_TASK, index)
 
+
+
+def _start_method(requested: str) -> str:
+    """The multiprocessing start method of the worker pool for ``mp_context=requested``.
+
+    ``"auto"`` forks where forking is safe and otherwise spawns. A spawned worker starts a fresh
+    interpreter and imports everything again (torch, the library, pyrender: about 2 s on a
+    2-core laptop, in every worker of every run), and at the end runs the interpreter's full
+    teardown (about 0.4 s with torch loaded); a forked worker inherits the parent's imports and
+    leaves with ``os._exit``. Forking is safe here when
+
+    * the platform is Linux (macOS system frameworks and Windows do not support it);
+    * this process has opened no OpenGL context
+      ([`render.gl_opened`][handmesh_tutorial.render.backend.gl_opened]; e.g. the VR probe of
+      ``balance_vr`` renders in this process), since a child would inherit the driver's state
+      without its threads;
+    * this process has not imported torch: once torch has run an operation on several threads,
+      its OpenMP thread pool exists, and a forked child that runs torch on several threads hangs
+      (GNU OpenMP is not fork-safe);
+    * no other Python thread runs (a Jupyter kernel has several), whose locks a child could
+      inherit held. tqdm's monitor thread is the exception: it only takes tqdm's own lock, which
+      workers never use.
+
+    ``handmesh generate`` and the demo's generation meet all four (the generator imports torch
+    and pyrender only inside its workers); a notebook, or a script that trains first, spawns.
+    """
+    import multiprocessing
+    import threading
+
+    if requested != "auto":
+        if requested not in multiprocessing.get_all_start_methods():
+            raise ValueError(f"mp_context must be 'auto' or one of "
+                             f"{multiprocessing.get_all_start_methods()}, got {requested!r}")
+        return requested
+    if not sys.platform.startswith("linux"):
+        return "spawn"
+    # look the renderer's flag up without importing the render package (and pyrender)
+    backend = sys.modules.get("handmesh_tutorial.render.backend")
+    if backend is not None and backend.gl_opened():
+        return "spawn"
+    if "torch" in sys.modules:
+        return "spawn"
+    others = [t for t in threading.enumerate()
+              if t is not threading.current_thread() and t.name != "tqdm_monitor"]
+    return "spawn" if others else "fork"
 
 
 def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
@@ -116,7 +166,8 @@ def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | Non
         from concurrent.futures.process import BrokenProcessPool
 
         ex = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                                 mp_context=multiprocessing.get_context(mp_context),
+                                 mp_context=multiprocessing.get_context(
+                                     _start_method(mp_context)),
                                  initializer=_init_worker,
                                  initargs=(task, worker_init, os.getpid()))
         it, pending = iter(todo), set()

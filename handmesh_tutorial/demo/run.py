@@ -126,9 +126,7 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     """
     import matplotlib.pyplot as plt
 
-    from .. import train as T
     from ..dataset import InterSHDataset
-    from ..model import parameter_counts
 
     cfg = config or DemoConfig.from_budget()
     say = log or (lambda *_: None)
@@ -141,6 +139,11 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
         f"(mixed kinds; test set VR-balanced) in {out / 'data'}")
     t = time.perf_counter()
     data = generate_data(out / "data", cfg, seed, progress)
+    # torch only now: the generator's workers fork only from a process without torch
+    # (dataset.generate_dataset, mp_context="auto"), which saves seconds of start-up
+    from .. import train as T
+    from ..model import parameter_counts
+
     gen_train, gen_test = data["train_summary"], data["test_summary"]
     seconds["generate"] = time.perf_counter() - t
     say(f"      {gen_train.written + gen_test.written} written, "

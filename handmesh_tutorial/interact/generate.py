@@ -31,7 +31,7 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
                           workers: int = 1, balance_vr: bool = False,
                           shard: tuple[int, int] | None = None, limits: str = "anatomical",
                           durable: bool = True, progress: bool = True, max_attempts: int = 100,
-                          vr_probe: int = 64):
+                          vr_probe: int = 64, mp_context: str = "auto"):
     """Generate (or resume) an INTER-SH dataset of rendered interactions on disk.
 
     A thin wrapper of
@@ -58,6 +58,9 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
         progress: tqdm progress bar.
         max_attempts: candidates per sample (VR balancing rejects some).
         vr_probe: candidates of the VR probe that finds the reachable bins (``balance_vr``).
+        mp_context: start method of the worker processes: ``"auto"`` (fork where it is safe,
+            else spawn; same bytes either way), ``"spawn"`` or ``"fork"`` (see
+            [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]).
 
     Returns:
         The
@@ -82,4 +85,4 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
                             balance_vr=balance_vr, max_attempts=max_attempts,
                             vr_probe=vr_probe,
                             worker_init=functools.partial(init_worker, int(image_size)),
-                            durable=durable)
+                            durable=durable, mp_context=mp_context)

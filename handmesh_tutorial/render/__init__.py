@@ -15,7 +15,7 @@ Submodules (each name below is also importable from ``handmesh_tutorial.render``
 
 * `renderer`: the offscreen `Renderer`, `RenderMesh`, `RenderResult`, `CV_TO_GL`.
 * `backend`: pyrender's import (`import_pyrender`), EGL when headless (`ensure_egl`), the NumPy 2
-  fix (`patch_pyrender_numpy2`).
+  fix (`patch_pyrender_numpy2`), whether this process has opened an OpenGL context (`gl_opened`).
 * `lights`: `Light`, `default_lights`, `random_lights`, and the generator's `scene_lights`.
 * `color`: `srgb_to_linear` and black-body light colours (`color_temperature`).
 * `backgrounds`: procedural (`random_background`) and photograph (`photo_background`,
@@ -30,7 +30,7 @@ from __future__ import annotations
 from ..camera import check_intrinsics as _check_K  # noqa: F401 - used by benchmarks/render.py
 from ..camera import crop_camera, framing, intrinsics
 from ..camera import project_checked as project
-from .backend import ensure_egl, import_pyrender, patch_pyrender_numpy2
+from .backend import ensure_egl, gl_opened, import_pyrender, patch_pyrender_numpy2
 from .backgrounds import (
     BACKGROUND_PHOTOS,
     BackgroundPhoto,
@@ -68,6 +68,7 @@ __all__ = [
     "default_lights",
     "ensure_egl",
     "framing",
+    "gl_opened",
     "import_pyrender",
     "intrinsics",
     "patch_pyrender_numpy2",

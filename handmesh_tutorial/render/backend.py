@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ensure_egl", "import_pyrender", "patch_pyrender_numpy2"]
+__all__ = ["ensure_egl", "gl_opened", "import_pyrender", "patch_pyrender_numpy2"]
 
 
 def ensure_egl() -> str | None:
@@ -73,6 +73,20 @@ def patch_pyrender_numpy2(mesh_module: types.ModuleType) -> bool:
 
 
 _PYRENDER = None
+_GL_OPENED = False  # set by the first Renderer of this process, never reset
+
+
+def gl_opened() -> bool:
+    """Whether this process has opened an OpenGL context (any
+    [`Renderer`][handmesh_tutorial.render.renderer.Renderer], even one closed since).
+
+    A forked child inherits a copy of the graphics driver's state without the driver's threads
+    (Mesa's llvmpipe rasterises in its own threads); creating a context there can hang. Worker
+    pools therefore fork only from a process where this is ``False``
+    ([`generate_dataset`][handmesh_tutorial.dataset.generate_dataset], ``mp_context="auto"``).
+    Importing pyrender (`import_pyrender`) opens no context.
+    """
+    return _GL_OPENED
 
 
 def import_pyrender() -> types.ModuleType:

@@ -27,6 +27,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..camera import check_intrinsics
+from . import backend as _backend
 from .backend import _keep_egl_display, import_pyrender
 from .color import srgb_to_linear
 from .lights import Light, default_lights
@@ -213,6 +214,7 @@ class Renderer:
             raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
         self.znear, self.zfar = float(znear), float(zfar)
         self._pr = import_pyrender()
+        _backend._GL_OPENED = True  # before the attempt: a failed one may leave driver state
         self._r = self._pr.OffscreenRenderer(self.width, self.height)
         self._scene_class = _ordered_scene_class(self._pr)
         global _LIVE_RENDERERS
