@@ -8,7 +8,6 @@ visibility ratio").
 
 from __future__ import annotations
 
-import gc
 import os
 import pickle
 import sys
@@ -70,10 +69,6 @@ def _init_worker(task: _Task, worker_init: Callable[[], Any] | None,
     _WORKER_TASK = task
     if worker_init is not None:
         worker_init()  # e.g. one OffscreenRenderer per process, kept in a module global
-    # The modules, models and renderer loaded so far live as long as the worker: move them out
-    # of the garbage collector's sight, so that its full collections (about 60 ms each with
-    # torch loaded) scan only what the samples allocate.
-    gc.freeze()
 
 
 def _worker_make(index: int) -> dict:
