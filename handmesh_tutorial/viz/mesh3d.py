@@ -281,6 +281,25 @@ def _cylinder_polygons(p0, p1, r, n: int = 24):
     return quads, [bottom[:-1], top[:-1]]
 
 
+def _same_length(polygons: list) -> np.ma.MaskedArray:
+    """Polygons of different vertex counts as one masked (P, max count, 3) array: each padded
+    with copies of its last vertex, the padding masked (matplotlib then ignores it when it sorts
+    and draws, as it does for a ragged list).
+
+    Matplotlib's ``Poly3DCollection`` stores a ragged list in an uninitialised (``np.empty``)
+    array and autoscales the axes on all of it, padding included (matplotlib 3.11), so whatever
+    the heap held there could reach the axis limits: infinite limits or a singular projection in
+    a long-running Jupyter kernel, never in a fresh script. Here the padding is finite and inside
+    the polygon's own bounds.
+    """
+    counts = np.array([len(p) for p in polygons])
+    m = int(counts.max())
+    data = np.stack([np.concatenate([p, np.repeat(p[-1:], m - len(p), axis=0)])
+                     for p in map(np.asarray, polygons)])
+    pad = np.arange(m)[None, :, None] >= counts[:, None, None]
+    return np.ma.MaskedArray(data, mask=np.broadcast_to(pad, data.shape))
+
+
 def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: int = 24,
                    edgecolor=None, axes: bool = True, labels: bool = False,
                    capsule: bool = False):
@@ -330,7 +349,7 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
                                      for i in range(m)]
         else:
             polys = polys + caps
-        col = Poly3DCollection(polys, facecolor=to_rgba(colors[k], alpha),
+        col = Poly3DCollection(_same_length(polys), facecolor=to_rgba(colors[k], alpha),
                                edgecolor=edgecolor or "none", linewidth=0.3)
         ax.add_collection3d(col)
         artists.append(col)
