@@ -2,7 +2,8 @@
 the capsule test and the segment-segment distance they build on.
 
 The numpy kernels here are the reference; ``_numba.py`` mirrors them operation for operation
-(opt-in through [`BACKEND`][handmesh_tutorial.collision.BACKEND] or ``backend=``). Inside, a batch
+and is used by default when numba imports ([`BACKEND`][handmesh_tutorial.collision.BACKEND] or
+``backend=`` choose). Inside, a batch
 of K vectors is one (3, K) array (structure of arrays). Taught in notebook 03 (cylinder collision).
 """
 
