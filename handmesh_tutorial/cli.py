@@ -48,6 +48,15 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _share(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--frame-share must look like MIN,MAX (e.g. 0.3,0.5), got {text!r}") from None
+    return lo, hi
+
+
 def _shard(text: str) -> tuple[int, int]:
     try:
         k, n = (int(x) for x in text.split("/"))
@@ -80,7 +89,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     s = interact.generate_interactions(
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,
         workers=args.workers, balance_vr=args.balance_vr, shard=args.shard, limits=args.limits,
-        durable=not args.no_fsync, progress=not args.quiet, vr_probe=args.vr_probe)
+        durable=not args.no_fsync, progress=not args.quiet, vr_probe=args.vr_probe,
+        frame_share=args.frame_share)
     print(f"handmesh generate: {s.written} samples written, {s.skipped} already present "
           f"(skipped), {s.attempts} candidates, {s.samples_per_second:.2f} samples/s, "
           f"{s.seconds:.1f} s -> {s.root}")
@@ -215,6 +225,10 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument("--limits", choices=("anatomical", "paper"), default="anatomical",
                      help="joint limits of the hands: anatomical (default: natural poses) or "
                      "paper (+-60 deg about every LCS axis, the paper's generator)")
+    gen.add_argument("--frame-share", type=_share, default=None, metavar="MIN,MAX",
+                     help="share of the image side covered by the target hand's bounding box "
+                     "(default: 0.45,0.75, FreiHAND-like crops; smaller shows more arm and "
+                     "surroundings)")
     gen.add_argument("--no-fsync", action="store_true",
                      help="skip fsync of every file (faster, not safe against power cuts)")
     gen.add_argument("--verify", action="store_true",

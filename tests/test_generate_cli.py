@@ -126,7 +126,7 @@ def test_generate_help_through_the_module_entry_point():
     r = subprocess.run([sys.executable, "-m", "handmesh_tutorial.cli", "generate", "--help"],
                        capture_output=True, text=True, check=True)
     for opt in ("--kind", "--num", "--seed", "--out", "--image-size", "--workers",
-                "--balance-vr", "--vr-probe", "--shard", "--limits"):
+                "--balance-vr", "--vr-probe", "--shard", "--limits", "--frame-share"):
         assert opt in r.stdout
     assert "anatomical (default" in r.stdout and "paper" in r.stdout
 
@@ -157,3 +157,41 @@ def test_verify_command_and_generate_verify(tmp_path, capsys):
     assert "1 removed" in out and "1 samples written, 2 already present" in out
     assert (tmp_path / "r" / "samples" / "000001" / "annotation.npz").read_bytes() == ref
     assert cli.main(["verify", str(tmp_path / "r"), "--quiet"]) == 0
+
+
+def test_frame_share_sets_the_target_hands_share_and_is_recorded(tmp_path, capsys):
+    root = tmp_path / "loose"
+    args = ["--kind", "mixed", "--num", "3", "--seed", "6", "--out", str(root), "--image-size",
+            "64", "--quiet", "--no-fsync"]
+    code, _ = _run(capsys, *args, "--frame-share", "0.3,0.4")
+    assert code == 0
+    ds = dataset.InterSHDataset(root)
+    assert ds.meta["params"]["frame_share"] == [0.3, 0.4]
+    shares = [dataset.read_annotation(root / "samples" / f"{i:06d}")["stats"]["target_share"]
+              for i in range(3)]
+    assert all(0.3 - 1e-6 <= s <= 0.4 + 1e-6 for s in shares), shares
+    # the default framing (0.45-0.75) leaves meta.json as before: no frame_share key
+    assert _run(capsys, *args[:7], str(tmp_path / "default"), *args[8:])[0] == 0
+    assert "frame_share" not in dataset.InterSHDataset(tmp_path / "default").meta["params"]
+    # resuming with another framing is refused (it would mix two framings in one root)
+    code = cli.main(["generate", *args, "--frame-share", "0.3,0.5"])
+    assert code == cli.EXIT_CODES["bad-input"] and "frame_share" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("share,why", [("0.5,0.3", "0 < min <= max <= 0.84"),
+                                       ("0.3,0.9", "0 < min <= max <= 0.84"),
+                                       ("0,0.5", "0 < min <= max <= 0.84")])
+def test_a_bad_frame_share_is_refused_before_anything_is_written(tmp_path, capsys, share, why):
+    out = tmp_path / "root"
+    code = cli.main(["generate", "--kind", "hand-hand", "--num", "2", "--out", str(out),
+                     "--frame-share", share, "--quiet"])
+    assert code == cli.EXIT_CODES["bad-input"]
+    assert why in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_frame_share_must_be_two_numbers(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["generate", "--kind", "hand-hand", "--num", "1", "--out", str(tmp_path),
+                  "--frame-share", "half"])
+    assert e.value.code == 2 and "--frame-share must look like MIN,MAX" in capsys.readouterr().err

@@ -102,7 +102,7 @@ def vr_bin(vr: float) -> int:
 # generate (project venv)
 # ---------------------------------------------------------------------------------------------
 def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
-             balance: bool, max_candidates: int) -> None:
+             balance: bool, max_candidates: int, share: tuple[float, float] | None = None) -> None:
     """Render ``num`` scenes per kind and write them to ``out`` (see the module docstring)."""
     import torch
     from PIL import Image
@@ -132,7 +132,7 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
             s_seed = sample_seed(seed, KIND_STRIDE * k + j)
             tried += 1
             try:
-                s = interact.make_sample(s_seed, kind=kind, image_size=image_size)
+                s = interact.make_sample(s_seed, kind=kind, image_size=image_size, share=share)
             except SampleRejected:
                 continue
             t = s["target"]
@@ -472,6 +472,8 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--kinds", default=",".join(KIND_NAMES))
     g.add_argument("--image-size", type=int, default=224)
+    g.add_argument("--frame-share", default=None, metavar="MIN,MAX",
+                   help="target hand's box / image side (default: the generator's 0.45,0.75)")
     g.add_argument("--balance-vr", action=argparse.BooleanOptionalAction, default=True)
     g.add_argument("--max-candidates", type=int, default=None,
                    help="per kind (default 15 x num with --balance-vr, else 3 x num)")
@@ -498,7 +500,9 @@ def main(argv: list[str] | None = None) -> int:
         bad = [k for k in kinds if k not in KIND_NAMES]
         if bad:
             ap.error(f"unknown kinds {bad}")
-        generate(a.out, a.num, a.seed, kinds, a.image_size, a.balance_vr, a.max_candidates)
+        share = None if a.frame_share is None else tuple(float(x) for x in a.frame_share.split(","))
+        generate(a.out, a.num, a.seed, kinds, a.image_size, a.balance_vr, a.max_candidates,
+                 share)
     else:
         detect(a.data, [float(c) for c in a.conf.split(",")], a.match, a.pad,
                a.model_complexity, a.sheet, a.json)

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..dataset import KINDS, generate_dataset
 from .config import InteractionConfig
+from .framing import FRAME_MARGIN
 from .sample import init_worker, make_sample
 
 __all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
@@ -31,7 +32,8 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
                           workers: int = 1, balance_vr: bool = False,
                           shard: tuple[int, int] | None = None, limits: str = "anatomical",
                           durable: bool = True, progress: bool = True, max_attempts: int = 100,
-                          vr_probe: int = 64, mp_context: str = "auto"):
+                          vr_probe: int = 64, mp_context: str = "auto",
+                          frame_share: tuple[float, float] | None = None):
     """Generate (or resume) an INTER-SH dataset of rendered interactions on disk.
 
     A thin wrapper of
@@ -58,6 +60,11 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
         progress: tqdm progress bar.
         max_attempts: candidates per sample (VR balancing rejects some).
         vr_probe: candidates of the VR probe that finds the reachable bins (``balance_vr``).
+        frame_share: (min, max) share of the image side covered by the target hand's bounding
+            box; ``None`` = [`FRAME_SHARE`][handmesh_tutorial.interact.framing.FRAME_SHARE]
+            (0.45-0.75, FreiHAND-like crops). Smaller shares show more of the arm and the
+            surroundings (docs page "Realistic scenes" measures what that does to a real-photo
+            hand detector). Stored in ``meta.json`` (``params.frame_share``) when given.
         mp_context: start method of the worker processes: ``"auto"`` (fork where it is safe,
             else spawn; same bytes either way), ``"spawn"`` or ``"fork"`` (see
             [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]).
@@ -75,11 +82,26 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
         raise ValueError(f"image_size must be an integer in [{MIN_IMAGE_SIZE}, "
                          f"{MAX_IMAGE_SIZE}] pixels, got {image_size!r}")
     InteractionConfig(limits=limits)  # validates
-    fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits)
+    extra = {}
+    if frame_share is not None:
+        try:
+            lo, hi = (float(x) for x in frame_share)
+        except (TypeError, ValueError):
+            raise ValueError(f"frame_share must be two numbers (min, max), got "
+                             f"{frame_share!r}") from None
+        top = 1.0 - 2.0 * FRAME_MARGIN
+        if not 0.0 < lo <= hi <= top:
+            raise ValueError(f"frame_share must satisfy 0 < min <= max <= {top:.2f} (the target "
+                             f"hand keeps a {FRAME_MARGIN:.0%} margin), got {frame_share!r}")
+        extra["share"] = (lo, hi)
+    fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits,
+                           **extra)
     kinds = list(KINDS) if kind == "mixed" else kind
     params = {"generator": "handmesh_tutorial.interact", "kind": kind, "limits": limits,
               "config": {k: (list(v) if isinstance(v, tuple) else v)
                          for k, v in asdict(InteractionConfig(limits=limits)).items()}}
+    if extra:  # only when given: roots made before this option keep their meta.json
+        params["frame_share"] = list(extra["share"])
     return generate_dataset(root, fn, int(num), int(seed), kinds, shard=shard, workers=workers,
                             progress=progress, params=params, image_size=int(image_size),
                             balance_vr=balance_vr, max_attempts=max_attempts,

@@ -58,7 +58,7 @@ def _choose_kind(seed: int) -> str:
 
 def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224,
                 renderer=None, config: InteractionConfig | None = None, *,
-                limits: str | None = None) -> dict:
+                limits: str | None = None, share: tuple[float, float] | None = None) -> dict:
     """One INTER-SH sample: [`build_scene`][handmesh_tutorial.interact.generator.build_scene] then
     [`render_scene`][handmesh_tutorial.interact.sample.render_scene].
 
@@ -78,6 +78,9 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
             ([`InteractionConfig`][handmesh_tutorial.interact.config.InteractionConfig]).
         limits: shortcut for ``config.limits``: ``"anatomical"`` (the default config's, with
             natural poses) or ``"paper"`` (±60° on every axis, with the paper's uniform poses).
+        share: (min, max) share of the image side covered by the target hand's bounding box;
+            ``None`` = [`FRAME_SHARE`][handmesh_tutorial.interact.framing.FRAME_SHARE] (see
+            [`render_scene`][handmesh_tutorial.interact.sample.render_scene]).
 
     Returns:
         The sample dict of [`render_scene`][handmesh_tutorial.interact.sample.render_scene].
@@ -99,7 +102,8 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
     except InteractionError as e:
         raise InteractionError(kind, int(sample_seed), e.reason) from None
     scene.seed = int(sample_seed)
-    return render_scene(scene, np.random.default_rng(view_ss), image_size, renderer)
+    return render_scene(scene, np.random.default_rng(view_ss), image_size, renderer,
+                        share=FRAME_SHARE if share is None else share)
 
 
 def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
