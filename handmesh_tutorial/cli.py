@@ -48,21 +48,21 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _share(text: str) -> tuple[float, float]:
+def _two_numbers(text: str, sep: str, cast, form: str):
+    """``"a<sep>b"`` -> ``(cast(a), cast(b))``; argparse's error names the expected ``form``."""
     try:
-        lo, hi = (float(x) for x in text.split(","))
+        a, b = (cast(x) for x in text.split(sep))
     except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--frame-share must look like MIN,MAX (e.g. 0.3,0.5), got {text!r}") from None
-    return lo, hi
+        raise argparse.ArgumentTypeError(f"{form}, got {text!r}") from None
+    return a, b
+
+
+def _share(text: str) -> tuple[float, float]:
+    return _two_numbers(text, ",", float, "--frame-share must look like MIN,MAX (e.g. 0.3,0.5)")
 
 
 def _shard(text: str) -> tuple[int, int]:
-    try:
-        k, n = (int(x) for x in text.split("/"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--shard must look like K/N (e.g. 0/4), got {text!r}") from None
+    k, n = _two_numbers(text, "/", int, "--shard must look like K/N (e.g. 0/4)")
     if n < 1 or not 0 <= k < n:
         raise argparse.ArgumentTypeError(f"--shard K/N needs 0 <= K < N, got {text!r}")
     return k, n
