@@ -59,6 +59,20 @@ FRAME_MARGIN: float = 0.08
 """Free border, as a fraction of the image side, that the target hand never enters."""
 
 
+def _check_share(share, margin: float = FRAME_MARGIN, name: str = "share") -> tuple[float, float]:
+    """``share`` as ``(min, max)`` floats, or ValueError unless ``0 < min <= max <= 1 - 2 margin``
+    (the whole target hand, with its margin on both sides, must fit in the image)."""
+    try:
+        lo, hi = (float(x) for x in share)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be two numbers (min, max), got {share!r}") from None
+    top = 1.0 - 2.0 * margin
+    if not 0.0 < lo <= hi <= top:
+        raise ValueError(f"{name} must satisfy 0 < min <= max <= {top:.2f} (the target hand keeps "
+                         f"a {margin:.0%} margin), got {share!r}")
+    return lo, hi
+
+
 def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
                  spread: float = 0.6, share: tuple[float, float] = FRAME_SHARE,
                  focal: tuple[float, float] = FRAME_FOCAL,
@@ -106,10 +120,9 @@ def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
     V = np.asarray(target_vertices, float)
     S = int(image_size)
     rng = np.random.default_rng(rng)
-    lo_s, hi_s = (float(x) for x in share)
-    if not 0 <= margin < 0.5 or not 0 < lo_s <= hi_s <= 1 - 2 * margin:
-        raise ValueError(f"need 0 <= margin < 0.5 and 0 < share[0] <= share[1] <= 1 - 2 * margin, "
-                         f"got share {share}, margin {margin}")
+    if not 0 <= margin < 0.5:
+        raise ValueError(f"need 0 <= margin < 0.5, got {margin}")
+    lo_s, hi_s = _check_share(share, margin)
     if not 0 < focal[0] <= focal[1]:
         raise ValueError(f"focal must be (min, max) with 0 < min <= max, got {focal}")
     centre = 0.5 * (V.min(0) + V.max(0))

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..dataset import KINDS, generate_dataset
 from .config import InteractionConfig
-from .framing import FRAME_MARGIN
+from .framing import _check_share
 from .sample import init_worker, make_sample
 
 __all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
@@ -84,16 +84,7 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
     InteractionConfig(limits=limits)  # validates
     extra = {}
     if frame_share is not None:
-        try:
-            lo, hi = (float(x) for x in frame_share)
-        except (TypeError, ValueError):
-            raise ValueError(f"frame_share must be two numbers (min, max), got "
-                             f"{frame_share!r}") from None
-        top = 1.0 - 2.0 * FRAME_MARGIN
-        if not 0.0 < lo <= hi <= top:
-            raise ValueError(f"frame_share must satisfy 0 < min <= max <= {top:.2f} (the target "
-                             f"hand keeps a {FRAME_MARGIN:.0%} margin), got {frame_share!r}")
-        extra["share"] = (lo, hi)
+        extra["share"] = _check_share(frame_share, name="frame_share")
     fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits,
                            **extra)
     kinds = list(KINDS) if kind == "mixed" else kind
