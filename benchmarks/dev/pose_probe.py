@@ -38,6 +38,7 @@ import numpy as np
 import torch
 
 import handmesh_tutorial as hmt
+from handmesh_tutorial._io import atomic_savez
 from handmesh_tutorial.dataset.torch_views import InterSHTorchDataset
 from handmesh_tutorial.metrics import point_errors, procrustes_align
 
@@ -55,9 +56,7 @@ def crops(root: Path, cache: Path, size: int) -> dict:
     out = {"images": np.stack([it["image"].numpy().astype(np.float16) for it in items]),
            "joints": np.stack([it["joints"].numpy().astype(np.float64) for it in items])}
     cache.mkdir(parents=True, exist_ok=True)
-    tmp = f.with_suffix(".tmp.npz")
-    np.savez(tmp, **out)
-    tmp.replace(f)  # atomic: an interrupted run leaves no half-written cache
+    atomic_savez(f, compressed=False, **out)  # an interrupted run leaves no half-written cache
     return out
 
 
