@@ -98,8 +98,9 @@ def _start_method(requested: str) -> str:
       inherit held. tqdm's monitor thread is the exception: it only takes tqdm's own lock, which
       workers never use.
 
-    ``handmesh generate`` and the demo's generation meet all four (the generator imports torch
-    and pyrender only inside its workers); a notebook, or a script that trains first, spawns.
+    ``handmesh generate`` and the demo's training set meet all four (the generator imports
+    torch and pyrender only inside its workers); a notebook, a script that trains first, or a
+    ``balance_vr`` run (its probe renders in this process) spawns.
     """
     import multiprocessing
     import threading
