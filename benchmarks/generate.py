@@ -15,7 +15,7 @@ Two measurements:
    end) against ``mp_context="auto"`` (forked where it is safe), interleaved; same bytes.
 
 Usage: ``python benchmarks/generate.py [--num 12] [--split 8] [--kinds hand-hand,...]
-[--start-num 100] [--start-repeats 2]``.
+[--start-num 100] [--start-repeats 2] [--sim 20]``.
 The machine is shared: run it when it is otherwise idle, and read ratios rather than absolute
 times when it is not.
 """
@@ -122,6 +122,51 @@ def start_methods(kind: str, num: int, workers: int, repeats: int) -> None:
               f"   (runs: {', '.join(f'{x:.2f}' for x in walls[start])} s)")
 
 
+def kernels(kinds: list[str], n: int) -> None:
+    """Part 4: the simulation with the numpy reference against the numba kernels."""
+    import torch
+
+    import handmesh_tutorial as hmt
+    from handmesh_tutorial import interact
+    from handmesh_tutorial.interact.contact import _MeshSDF
+
+    torch.set_num_threads(1)
+    for backend in ("numpy", "numba"):   # warm-up: hand models, numba's cache
+        hmt.collision.BACKEND = backend
+        interact.build_scene("hand-hand", 123)
+    try:
+        for kind in kinds:
+            times: dict[str, list[float]] = {"numpy": [], "numba": []}
+            for i in range(n):
+                for backend in times:
+                    hmt.collision.BACKEND = backend
+                    t = time.perf_counter()
+                    try:
+                        interact.build_scene(kind, 1000 + i)
+                    except interact.InteractionError:
+                        pass
+                    times[backend].append(time.perf_counter() - t)
+            ref, new = (1e3 * float(np.median(times[b])) for b in ("numpy", "numba"))
+            print(f"{kind:12s} build_scene {ref:6.1f} ms numpy  {new:6.1f} ms numba   "
+                  f"RATIO vs numpy: {ref / new:.2f}x")
+        sc = interact.build_scene("hand-hand", 7)
+        (va, fa), (vb, fb) = [(b.vertices, b.faces) for b in sc.bodies]
+        sdf = _MeshSDF(vb, fb)
+        out = {}
+        for backend in ("numpy", "numba") * 3:
+            t = time.perf_counter()
+            for _ in range(20):
+                out.setdefault(backend, sdf(va, backend))
+            out.setdefault(f"{backend}_t", []).append((time.perf_counter() - t) / 20)
+        ref, new = (1e3 * float(np.median(out[f"{b}_t"])) for b in ("numpy", "numba"))
+        same = np.array_equal(np.abs(out["numpy"]), np.abs(out["numba"]))
+        print(f"{'hand-hand':12s} signed distance, {len(va)} vertices vs a hand: {ref:.2f} ms "
+              f"numpy  {new:.2f} ms numba   RATIO vs numpy: {ref / new:.2f}x   "
+              f"(same distances: {same})")
+    finally:
+        hmt.collision.BACKEND = "auto"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--num", type=int, default=12, help="samples per end-to-end run")
@@ -130,6 +175,7 @@ def main() -> None:
     ap.add_argument("--start-num", type=int, default=100,
                     help="samples of the start-method comparison (hand-hand, 2 workers)")
     ap.add_argument("--start-repeats", type=int, default=2)
+    ap.add_argument("--sim", type=int, default=20, help="scenes per kind for part 4")
     args = ap.parse_args()
     kinds = args.kinds.split(",")
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; "
@@ -160,6 +206,9 @@ def main() -> None:
     print(f"{'kind':12s} {'start':>6s} {'workers':>7s} {'samples':>7s} {'wall s':>7s} "
           f"{'samples/s':>9s}")
     start_methods("hand-hand", args.start_num, 2, args.start_repeats)
+    print(f"\n4. compiled kernels in the simulation, {args.sim} scenes per kind, one process "
+          "(median, interleaved)")
+    kernels(kinds, args.sim)
     print(f"\nload average at the end: {os.getloadavg()[0]:.1f}")
 
 

@@ -64,6 +64,71 @@ def test_signed_distance_matches_trimesh_on_a_hand():
     assert (mine < 0).sum() > 50  # the test covers inside points
 
 
+def _sdf_test_points(v, rng):
+    """Query points that reach every branch: on vertices, face centroids and edge midpoints,
+    just off the surface, inside, and far away."""
+    span = v.max(0) - v.min(0)
+    return np.concatenate([v, v + rng.normal(size=v.shape) * 1e-4,
+                           v + rng.normal(size=v.shape) * 3e-3,
+                           rng.uniform(v.min(0) - 0.3 * span, v.max(0) + 0.3 * span, (600, 3)),
+                           v.mean(0) + rng.normal(size=(50, 3)) * 0.5])
+
+
+def _sdf_test_meshes():
+    model = hmt.hand.HandModel("right")
+    rng = np.random.default_rng(3)
+    meshes = []
+    for pose in (hmt.hand.example_pose("pinch")[None], rng.normal(0, 0.3, (1, 15, 3))):
+        out = model(pose=torch.as_tensor(pose, dtype=torch.float32))
+        meshes.append((out.vertices[0].numpy().astype(float), np.asarray(model.faces)))
+    for kind in hmt.objects.OBJECT_KINDS:   # objects have large flat faces (another branch)
+        body = hmt.objects.make_object(kind, rng=5)
+        meshes.append((np.asarray(body.vertices, float), np.asarray(body.faces)))
+    return meshes
+
+
+def test_signed_distance_backends_agree():
+    pytest.importorskip("numba")
+    rng = np.random.default_rng(2)
+    tested = inside = 0
+    for v, f in _sdf_test_meshes():
+        sdf = interact.contact._MeshSDF(v, f)
+        pts = np.concatenate([_sdf_test_points(v, rng), v[f].mean(1),
+                              0.5 * (v[f[:, 0]] + v[f[:, 1]])])
+        ref, fast = sdf(pts, "numpy"), sdf(pts, "numba")
+        assert np.array_equal(np.abs(ref), np.abs(fast)), np.abs(np.abs(ref) - np.abs(fast)).max()
+        # a point on an edge (|d| ~ 1e-18 m) lies on two faces that tie; the two paths may break
+        # the tie differently and so report either sign: there the sign means nothing
+        on_surface = np.abs(ref) < 1e-15
+        assert np.array_equal(ref[~on_surface], fast[~on_surface])
+        tested, inside = tested + len(pts), inside + int((ref < 0).sum())
+    assert inside > 500 and tested > 20000          # both signs, every mesh
+    assert interact.signed_distance(pts[:5], v, f, backend="numba").shape == (5,)
+
+
+@pytest.mark.parametrize("kind", interact.KINDS)
+def test_scenes_are_the_same_with_either_backend(kind, monkeypatch):
+    """The compiled kernels (cylinder test and the settle step's signed distances) change the
+    generator's speed, never its scenes."""
+    pytest.importorskip("numba")
+    built = {}
+    for backend in ("numpy", "numba"):
+        monkeypatch.setattr(hmt.collision, "BACKEND", backend)
+        sc = interact.build_scene(kind, 21)
+        built[backend] = [(b.vertices.copy(), b.faces.copy()) for b in sc.bodies], sc.stats
+    (ref, ref_stats), (fast, fast_stats) = built["numpy"], built["numba"]
+    assert ref_stats == fast_stats
+    for (v0, f0), (v1, f1) in zip(ref, fast):
+        assert np.array_equal(v0, v1) and np.array_equal(f0, f1)
+
+
+def test_signed_distance_backend_is_checked():
+    v = np.asarray(trimesh.creation.box().vertices)
+    f = np.asarray(trimesh.creation.box().faces)
+    with pytest.raises(ValueError, match="backend must be"):
+        interact.signed_distance(np.zeros((1, 3)), v, f, backend="cuda")
+
+
 def test_mesh_contact_of_two_spheres():
     s = trimesh.creation.icosphere(4, radius=0.02)
     v, f = np.asarray(s.vertices), np.asarray(s.faces)

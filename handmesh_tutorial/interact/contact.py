@@ -11,6 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..collision import Cylinders
+from ..collision._common import _kernels
 
 __all__ = ["closest_points_on_triangles", "mesh_contact", "signed_distance"]
 
@@ -128,6 +129,7 @@ class _MeshSDF:
         self.small_ids = np.flatnonzero(~big)
         self.rho_small = float(self.rho[self.small_ids].max()) if len(self.small_ids) else 0.0
         self.ctree = cKDTree(self.centroid[self.small_ids]) if len(self.small_ids) else None
+        self._kernel_args = None   # the numba path's arrays, made on its first call
 
     def _candidates(self, p: np.ndarray, dmin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(point ids, face ids)`` of every (point, face) pair whose face's bounding sphere
@@ -167,11 +169,16 @@ class _MeshSDF:
             face_parts.append(self.big_ids[j])
         return np.concatenate(pid_parts), np.concatenate(face_parts)
 
-    def __call__(self, points) -> np.ndarray:
-        """(N,) signed distances of points (N,3), metres: negative inside the mesh."""
+    def __call__(self, points, backend: str | None = None) -> np.ndarray:
+        """(N,) signed distances of points (N,3), metres: negative inside the mesh.
+
+        ``backend`` as in [`signed_distance`][handmesh_tutorial.interact.contact.signed_distance].
+        """
         p = np.asarray(points, float).reshape(-1, 3)
         if len(p) == 0:
             return np.zeros(0)
+        if _kernels(backend) is not None:
+            return self._compiled(p)
         f = self.f
         dmin, _ = self.tree.query(p)  # the nearest vertex bounds the distance to the surface
         pid, face = self._candidates(p, dmin)
@@ -188,20 +195,34 @@ class _MeshSDF:
         n[on_vert] = self.vn[f[face[on_vert], reg[on_vert] - 4]]
         return np.where(((p - qc) * n).sum(1) < 0, -d, d)
 
+    def _compiled(self, p: np.ndarray) -> np.ndarray:
+        """The numba kernel's signed distances (contiguous copies of the mesh arrays made once)."""
+        if self._kernel_args is None:
+            self._kernel_args = [np.ascontiguousarray(a, dtype=np.int64 if a.dtype.kind == "i"
+                                                      else np.float64)
+                                 for a in (self.v, self.f, self.fn, self.en, self.vn,
+                                           self.edge_of, self.centroid, self.rho)]
+        from ._contact_numba import signed_distances
+        return signed_distances(np.ascontiguousarray(p, dtype=np.float64), *self._kernel_args)
 
-def signed_distance(points, vertices, faces) -> np.ndarray:
+
+def signed_distance(points, vertices, faces, backend: str | None = None) -> np.ndarray:
     """Signed distance of points to a closed triangle mesh (negative inside).
 
     Args:
         points: (N, 3) metres.
         vertices: (V, 3) mesh vertices, metres.
         faces: (F, 3) int, consistently oriented, closed (watertight) mesh.
+        backend: ``"numba"`` (a compiled kernel that walks the faces point by point),
+            ``"numpy"`` (the vectorised reference with k-d trees), ``"auto"`` (numba when it
+            imports), or ``None``: [`hmt.collision.BACKEND`][handmesh_tutorial.collision.BACKEND],
+            the switch of the cylinder test. Both give the same distances.
 
     Returns:
         (N,) float64 metres: ``> 0`` outside, ``< 0`` inside (the opposite sign of
         ``trimesh.proximity.signed_distance``).
     """
-    return _MeshSDF(vertices, faces)(points)
+    return _MeshSDF(vertices, faces)(points, backend)
 
 
 def _near(points, cyl_p0, cyl_p1, radius, dist: float) -> np.ndarray:
@@ -216,7 +237,7 @@ def _near(points, cyl_p0, cyl_p1, radius, dist: float) -> np.ndarray:
 
 def mesh_contact(a_vertices, a_faces, b_vertices, b_faces, *, a_cylinders: Cylinders | None = None,
                  b_cylinders: Cylinders | None = None, near: float = 0.01, a_shift=None,
-                 sdf_a=None, sdf_b=None) -> dict:
+                 sdf_a=None, sdf_b=None, backend: str | None = None) -> dict:
     """Contact and penetration between two closed meshes, measured on their vertices.
 
     Each mesh's vertices are tested against the other mesh's surface (signed distance with an exact
@@ -236,6 +257,8 @@ def mesh_contact(a_vertices, a_faces, b_vertices, b_faces, *, a_cylinders: Cylin
         a_shift: optional (3,) translation applied to mesh A (and its cylinders), metres.
         sdf_a: optional prebuilt signed-distance object of the (unshifted) first mesh.
         sdf_b: optional prebuilt signed-distance object of the second mesh.
+        backend: the signed-distance path, as in
+            [`signed_distance`][handmesh_tutorial.interact.contact.signed_distance].
 
     Returns:
         dict with ``contact_mm`` (smallest vertex-to-surface distance, 0 when some vertex is
@@ -254,7 +277,7 @@ def mesh_contact(a_vertices, a_faces, b_vertices, b_faces, *, a_cylinders: Cylin
         pb = pb[_near(pb, a_cylinders.p0 + sh, a_cylinders.p1 + sh, a_cylinders.radius, near)]
     if len(pa) == 0 or len(pb) == 0:  # nothing near the other body: test every vertex
         pa, pb = av + sh, bv
-    d = np.concatenate([sb(pa), sa(pb - sh)])
+    d = np.concatenate([sb(pa, backend), sa(pb - sh, backend)])
     inside = d < 0
     gap = float(d[~inside].min()) if (~inside).any() else float("inf")
     pen = float(-d[inside].min()) if inside.any() else 0.0
