@@ -118,7 +118,7 @@ def test_scenes_are_the_same_with_either_backend(kind, monkeypatch):
         built[backend] = [(b.vertices.copy(), b.faces.copy()) for b in sc.bodies], sc.stats
     (ref, ref_stats), (fast, fast_stats) = built["numpy"], built["numba"]
     assert ref_stats == fast_stats
-    for (v0, f0), (v1, f1) in zip(ref, fast):
+    for (v0, f0), (v1, f1) in zip(ref, fast, strict=True):
         assert np.array_equal(v0, v1) and np.array_equal(f0, f1)
 
 
