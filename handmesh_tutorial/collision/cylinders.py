@@ -8,6 +8,7 @@ Taught in notebook 03 (cylinder collision); objects built from them in notebook 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,12 @@ def _as_points(x, name: str) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name} contains NaN or inf")
     return a
+
+
+@functools.lru_cache(maxsize=64)
+def _default_names(n: int) -> tuple[str, ...]:
+    # made once per size: the generator builds thousands of unnamed bodies per scene
+    return tuple(f"cyl{i}" for i in range(n))
 
 
 @dataclass
@@ -68,8 +75,11 @@ class Cylinders:
         if not np.all(np.isfinite(self.radius)) or np.any(self.radius < 0):
             raise ValueError("radius must be finite and non-negative")
         if not self.names:
-            self.names = tuple(f"cyl{i}" for i in range(n))
-        self.names = tuple(str(s) for s in self.names)
+            self.names = _default_names(n)
+        elif not all(type(s) is str for s in self.names):
+            self.names = tuple(str(s) for s in self.names)
+        else:
+            self.names = tuple(self.names)
         if len(self.names) != n:
             raise ValueError(f"names must have {n} entries, got {len(self.names)}")
         self.parts = (np.zeros(n, dtype=np.int64) if self.parts is None

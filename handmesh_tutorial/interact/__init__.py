@@ -77,7 +77,8 @@ Everything is seeded: the same seed gives the same scene, to the byte.
   generation (notebook 04).
 * [`scene`][handmesh_tutorial.interact.scene]: the result, `Scene` and `SceneBody` (notebook 04).
 * [`contact`][handmesh_tutorial.interact.contact]: signed distances to meshes, `mesh_contact`
-  (notebook 04).
+  (notebook 04); ``_contact_numba`` (private) holds their compiled kernel, selected like the
+  cylinder test's by [`hmt.collision.BACKEND`][handmesh_tutorial.collision.BACKEND].
 * [`generator`][handmesh_tutorial.interact.generator]: steps 1-5 and the settle, `build_scene`
   (notebook 04).
 * [`framing`][handmesh_tutorial.interact.framing]: the camera of step 6, `frame_camera`,
