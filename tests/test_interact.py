@@ -122,6 +122,25 @@ def test_scenes_are_the_same_with_either_backend(kind, monkeypatch):
         assert np.array_equal(v0, v1) and np.array_equal(f0, f1)
 
 
+def test_scene_hands_know_their_skin_tone():
+    sample, scene = interact.make_sample(11, "hand-hand", S, return_scene=True)
+    assert np.array_equal(sample["image"], interact.make_sample(11, "hand-hand", S)["image"])
+    for body in scene.bodies:
+        assert body.kind == "hand" and 0 <= body.tone < len(hmt.hand.SKIN_TONES)
+        # the colours were made from that tone: the back of the hand (no palm, knuckle or nail
+        # label) has the tone's colour up to the +-4 % blotches
+        model = hmt.hand.HandModel(body.side)
+        plain = ((model.palmar < 0.01) & (model.template.nail < 0.01)
+                 & (hmt.hand.appearance.knuckle_weights(model.template_vertices,
+                                                        model.rest_joints, model.palmar) < 0.01))
+        back = np.median(body.colors[plain], axis=0)
+        nearest = np.argmin(np.abs(np.asarray(hmt.hand.SKIN_TONES) - back).sum(1))
+        assert nearest == body.tone
+    _, obj_scene = interact.make_sample(11, "hand-object", S, return_scene=True)
+    assert [b.tone is None for b in obj_scene.bodies] == [b.kind != "hand"
+                                                          for b in obj_scene.bodies]
+
+
 def test_signed_distance_backend_is_checked():
     v = np.asarray(trimesh.creation.box().vertices)
     f = np.asarray(trimesh.creation.box().faces)

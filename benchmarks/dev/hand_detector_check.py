@@ -17,7 +17,8 @@ Two halves, so the two environments never mix:
 fresh scenes with :func:`handmesh_tutorial.interact.make_sample` and writes one ``NNNNN.npz``
 (+ ``NNNNN.png``) per scene: ``image`` (S,S,3) uint8, ``joints`` (21,3) target hand, camera frame,
 metres, FreiHAND order; ``other_joints`` (21,3) of the other hand (hand-hand) or NaN; ``K``;
-``vr`` (target); ``side``, ``other_side``, ``kind``, ``seed``. ``index.json`` records the seeds.
+``vr`` (target); ``side``, ``other_side``, ``kind``, ``seed``, ``tone`` (the target's skin tone,
+an index into ``hand.SKIN_TONES``, 0 lightest). ``index.json`` records the seeds.
 
 ``detect`` (detector venv; needs only numpy + pillow + mediapipe) runs the detector on every
 image and writes ``results.json`` (per scene and summary) and prints the table.
@@ -132,7 +133,8 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
             s_seed = sample_seed(seed, KIND_STRIDE * k + j)
             tried += 1
             try:
-                s = interact.make_sample(s_seed, kind=kind, image_size=image_size, share=share)
+                s, scene = interact.make_sample(s_seed, kind=kind, image_size=image_size,
+                                                share=share, return_scene=True)
             except SampleRejected:
                 continue
             t = s["target"]
@@ -151,10 +153,11 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
                 out / f"{name}.npz", image=s["image"],
                 joints=np.asarray(s["joints"][t], np.float32), other_joints=other,
                 K=np.asarray(s["K"], np.float64), vr=vr, side=s["sides"][t],
-                other_side=s["sides"][others[0]] if others else "", kind=kind, seed=s_seed)
+                other_side=s["sides"][others[0]] if others else "", kind=kind, seed=s_seed,
+                tone=scene.body(t).tone)
             Image.fromarray(s["image"]).save(out / f"{name}.png")
             index.append({"name": name, "kind": kind, "seed": s_seed, "candidate": j, "vr": vr,
-                          "side": s["sides"][t]})
+                          "side": s["sides"][t], "tone": scene.body(t).tone})
             kept += 1
         print(f"{kind}: {kept} scenes from {j + 1} candidates, per VR bin {have} (candidates "
               f"rendered per bin, <0.4 first: {drawn[kind]})"
@@ -308,7 +311,8 @@ def _summary(recs: list[dict]) -> dict:
 
 
 def summarise(recs: list[dict]) -> dict:
-    """Per kind x VR bin, per kind, and the headline figures (VR >= 0.95, VR >= 0.4)."""
+    """Per kind x VR bin, per kind, the headline figures (VR >= 0.95, VR >= 0.4), and those per
+    skin tone of the target hand (``tone k``; scenes from ``generate`` record it)."""
     groups = {}
     for kind in [*KIND_NAMES, "all"]:
         rk = [r for r in recs if kind == "all" or r["kind"] == kind]
@@ -321,6 +325,11 @@ def summarise(recs: list[dict]) -> dict:
         g["VR>=0.95"] = _summary([r for r in rk if r["vr"] >= 0.95])
         g["VR>=0.40"] = _summary([r for r in rk if r["vr"] >= 0.40])
         groups[kind] = g
+    tones = sorted({r["tone"] for r in recs if r.get("tone") is not None})
+    for tone in tones:   # the target's skin tone (SKIN_TONES index, 0 lightest), all kinds
+        rt = [r for r in recs if r.get("tone") == tone]
+        groups[f"tone {tone}"] = {"VR>=0.95": _summary([r for r in rt if r["vr"] >= 0.95]),
+                                  "VR>=0.40": _summary([r for r in rt if r["vr"] >= 0.40])}
     return groups
 
 
@@ -443,7 +452,8 @@ def detect(data: Path, confs: list[float], match: float, pad: float, model_compl
         for n, sc, ds in zip(names, scenes, all_dets, strict=True):
             rec = evaluate_scene(sc, ds, match)
             rec.update(name=n, kind=str(sc["kind"]), vr=float(sc["vr"]), seed=int(sc["seed"]),
-                       side=str(sc["side"]))
+                       side=str(sc["side"]),
+                       tone=int(sc["tone"]) if "tone" in sc else None)   # older sets: none
             recs.append(rec)
         groups = summarise(recs)
         print_table(groups, conf)

@@ -43,8 +43,10 @@ FOREARM_LENGTH: float = 0.25
 class _Hand:
     """A hand during generation: its rig plus what is needed to produce the mesh."""
 
-    def __init__(self, side: str, shape: np.ndarray, limits: str, label: int, colors):
+    def __init__(self, side: str, shape: np.ndarray, limits: str, label: int, colors,
+                 tone: int | None = None):
         self.side, self.label, self.kind, self.colors = side, label, "hand", colors
+        self.tone = tone   # index into SKIN_TONES (None: colours given some other way)
         self.name = f"{side}_hand"
         self.model, art = _hand_assets(side)
         self.art = art.with_limits(limits)

@@ -57,7 +57,7 @@ class _Generator:
         shape = random_shape(self.rng, 1, self.cfg.shape_scale)[0]
         model, _ = _hand_assets(side)
         colors = model.vertex_colors(tone, rng=int(self.rng.integers(2**31)))
-        return _Hand(side, shape, self.cfg.limits, label, colors)
+        return _Hand(side, shape, self.cfg.limits, label, colors, tone=tone)
 
     def _natural_target(self, hand, closure) -> None:
         """Draw the hand's natural target pose (``poses="natural"``): the synergy prior's angles
@@ -417,7 +417,8 @@ class _Generator:
                 cylinders=b.rig.cylinders(), joints=joints[b.label],
                 pose=b.art.to_pose(b.rig.angles) if is_hand else None,
                 angles=b.rig.angles.copy() if b.rig.num_joints else None,
-                shape=b.shape.copy() if is_hand else None, dynamic=b.dynamic, forearm=forearm))
+                shape=b.shape.copy() if is_hand else None, dynamic=b.dynamic, forearm=forearm,
+                tone=b.tone if is_hand else None))
         return Scene(self.kind, self.seed, out, target, u, stats, self.history)
 
 

@@ -38,6 +38,10 @@ class SceneBody:
             ``(vertices (N,3) world, faces (M,3), colours (N,3))``
             ([`forearm_mesh`][handmesh_tutorial.hand.forearm_mesh]: scenery, not a body: it occludes
             but has no label, no annotation and no collision), else ``None``.
+        tone: a hand's skin tone, an index into
+            [`SKIN_TONES`][handmesh_tutorial.hand.appearance.SKIN_TONES] (0 lightest), else
+            ``None``. Kept in memory only (the dataset stores the colours it produced, not the
+            index): e.g. to break a detector's or a model's scores down by skin tone.
     """
 
     label: int
@@ -54,6 +58,7 @@ class SceneBody:
     shape: np.ndarray | None = None
     dynamic: bool = True
     forearm: tuple | None = None
+    tone: int | None = None
 
 
 @dataclass
