@@ -296,10 +296,22 @@ def evaluate_scene(scene: dict, dets: list[dict], match: float) -> dict:
     return rec
 
 
+def wilson_interval(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a rate ``k / n`` (how far a rate on N scenes can be from
+    the generator's true rate: about +-6 points at N = 246)."""
+    if n == 0:
+        return float("nan"), float("nan")
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return float(centre - half), float(centre + half)
+
+
 def _summary(recs: list[dict]) -> dict:
     found = [r for r in recs if r["found"]]
     n = len(recs)
     out = {"n": n, "found": len(found), "rate": len(found) / n if n else float("nan"),
+           "rate_ci95": wilson_interval(len(found), n),
            "any_detection": sum(r["num_detections"] > 0 for r in recs) / n if n else float("nan"),
            "localised": sum(r["localised"] for r in recs) / n if n else float("nan")}
     if found:
@@ -463,8 +475,10 @@ def detect(data: Path, confs: list[float], match: float, pad: float, model_compl
             contact_sheet(data, scenes, recs, all_dets, sheet)
     print(LEGEND)
     head = result["by_confidence"][str(confs[-1])]["summary"]["all"]
+    ci = {k: "-".join(f"{x:.1%}" for x in head[k]["rate_ci95"]) for k in ("VR>=0.95", "VR>=0.40")}
     print(f"headline (conf {confs[-1]}): found VR>=0.95 {head['VR>=0.95']['rate']:.1%} "
-          f"(target >= 90 %), VR>=0.4 {head['VR>=0.40']['rate']:.1%} (target >= 60 %), "
+          f"(95 % CI {ci['VR>=0.95']}; target >= 90 %), VR>=0.4 {head['VR>=0.40']['rate']:.1%} "
+          f"(95 % CI {ci['VR>=0.40']}; target >= 60 %), "
           f"PA {head['VR>=0.40'].get('pa_mm', float('nan')):.1f} mm (target <= 18 mm)")
     path = out or data / "results.json"
     path.write_text(json.dumps(result, indent=1))
