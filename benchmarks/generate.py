@@ -1,6 +1,6 @@
 """Throughput of the INTER-SH interaction generator (``handmesh generate``) at 224x224.
 
-Two measurements:
+Four measurements:
 
 1. **Time split**, in-process, one sample at a time: simulation (``interact.build_scene``: the six
    steps on cylinders plus the mesh settle), rendering (``interact.render_scene``: camera, scene
