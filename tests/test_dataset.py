@@ -556,6 +556,36 @@ def test_vr_balancing_leaves_out_unreachable_bins_up_front(tmp_path):
         gen(tmp_path / "z", num=2, balance_vr=bins, vr_probe=0)
 
 
+def _fails_on_probe_seeds(seed):
+    if seed in {D.probe_seed(SEED, k) for k in range(16)}:
+        raise RuntimeError(f"broken candidate {seed}")
+    return _never_below_half(seed)
+
+
+@pytest.mark.parametrize("start", ["spawn", "auto"])
+def test_vr_probe_runs_in_the_workers(tmp_path, start):
+    """With workers, the probe's candidates are made by the pool (this process renders
+    nothing, so "auto" can fork), and the result is the same as in-process, to the byte."""
+    bins = ((0.0, 0.3), (0.5, 0.75), (0.75, 1.0))
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    with pytest.warns(UserWarning, match="left out"):
+        one = gen(tmp_path / "p1", num=6, fn=_never_below_half, balance_vr=bins, vr_probe=16)
+    with pytest.warns(UserWarning, match="left out"):
+        two = gen(tmp_path / "p2", num=6, fn=_never_below_half, balance_vr=bins, vr_probe=16,
+                  workers=2, mp_context=start, worker_init=functools.partial(_mark_worker, marks))
+    assert tree(tmp_path / "p1") == tree(tmp_path / "p2")      # meta.json and its probe too
+    assert two.vr_probe == one.vr_probe and two.probe_attempts == 16 and two.written == 6
+    assert two.vr_histogram == [0, 3, 3] and two.off_bin == 0
+    pids = [p.name for p in marks.iterdir()]
+    assert 1 <= len(pids) <= 2 and str(os.getpid()) not in pids  # worker_init only in workers
+    # a candidate that raises stops the run before anything is written
+    with pytest.raises(RuntimeError, match="broken candidate"):
+        gen(tmp_path / "p3", num=6, fn=_fails_on_probe_seeds, balance_vr=bins, vr_probe=16,
+            workers=2, mp_context=start)
+    assert not (tmp_path / "p3" / D.META_FILE).exists()
+
+
 def test_vr_balancing_never_stops_on_a_hard_bin(tmp_path, monkeypatch):
     """A bin the probe kept but a sample cannot reach: the nearest candidate is written."""
     monkeypatch.setattr(D.candidates, "PROBE_MIN_HITS", 0)  # keep even the bin nobody reaches

@@ -131,23 +131,35 @@ def _make_and_write(task: _Task, index: int) -> dict:
                        f"raise max_attempts or relax accept")
 
 
-def _probe(task: _Task, num: int) -> dict:
-    """VR probe of a balanced set: ``num`` candidates (seeds
-    [`probe_seed`][handmesh_tutorial.dataset.seeds.probe_seed]), their target-VR counts per bin, and
+def _probe_outcome(task: _Task, k: int) -> int | None:
+    """Probe candidate ``k`` (seed [`probe_seed`][handmesh_tutorial.dataset.seeds.probe_seed]):
+    the VR bin of its target (-1 outside every bin), or ``None`` when it is rejected."""
+    canon = _candidate(task, None, k, probe_seed(task.seed, k))
+    if canon is None or (task.accept is not None and not task.accept(canon)):
+        return None
+    return vr_bin(canon["vr"][canon["target"]], task.bins)
+
+
+def _probe_summary(task: _Task, outcomes) -> dict:
+    """The probe of a balanced set from its candidates' outcomes (any order): hits per bin and
     the bins balancing fills (those with at least
     [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.candidates.PROBE_MIN_HITS] hits)."""
+    outcomes = list(outcomes)
     hits = [0] * len(task.bins)
     rejected = outside = 0
-    for k in range(num):
-        canon = _candidate(task, None, k, probe_seed(task.seed, k))
-        if canon is None or (task.accept is not None and not task.accept(canon)):
+    for b in outcomes:
+        if b is None:
             rejected += 1
-            continue
-        b = vr_bin(canon["vr"][canon["target"]], task.bins)
-        if b < 0:
+        elif b < 0:
             outside += 1
         else:
             hits[b] += 1
-    return {"candidates": int(num), "hits": hits, "outside": outside, "rejected": rejected,
+    return {"candidates": len(outcomes), "hits": hits, "outside": outside, "rejected": rejected,
             "min_hits": PROBE_MIN_HITS,
             "filled": [b for b, h in enumerate(hits) if h >= PROBE_MIN_HITS]}
+
+
+def _probe(task: _Task, num: int) -> dict:
+    """VR probe of a balanced set in this process: ``num`` candidates, summarised by
+    `_probe_summary` (the worker pool runs the same candidates in parallel)."""
+    return _probe_summary(task, (_probe_outcome(task, k) for k in range(num)))

@@ -8,6 +8,7 @@ Taught in notebook 05 ("Rendering and the visibility ratio").
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
@@ -17,13 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .candidates import _probe, _Task
+from .candidates import _probe, _probe_summary, _Task
 from .files import read_annotation
 from .reader import _present, read_meta
 from .root import _coalesce, _lock, _open_root
 from .schema import FORMAT_NAME, FORMAT_VERSION, KINDS, MAX_LABEL, META_FILE, SAMPLES_DIR
 from .seeds import _SEED_RULE, index_width, sample_seed, shard_range, vr_bins, vr_histogram
-from .workers import _callable_name, _check_for_workers, _run, _start_method
+from .workers import _callable_name, _check_for_workers, _Pool, _run, _start_method, _worker_probe
 
 __all__ = ["GenerationSummary", "generate_dataset"]
 
@@ -150,7 +151,8 @@ def generate_dataset(
         balance_vr: ``True`` (bins from [`vr_bins`][handmesh_tutorial.dataset.seeds.vr_bins]) or a
             list of bins: the target VRs are spread evenly over the bins that ``make_sample`` can
             reach. First a *probe* makes ``vr_probe`` candidates (seeds
-            [`probe_seed`][handmesh_tutorial.dataset.seeds.probe_seed], not samples) and counts
+            [`probe_seed`][handmesh_tutorial.dataset.seeds.probe_seed], not samples; in the
+            workers when ``workers > 1``, in this process otherwise) and counts
             their target VRs per bin; bins it hits fewer than
             [`PROBE_MIN_HITS`][handmesh_tutorial.dataset.candidates.PROBE_MIN_HITS] times (e.g.
             [0.40, 0.60) for hand-chain scenes, whose thin rings rarely hide half a hand) are
@@ -226,15 +228,24 @@ def generate_dataset(
     task = _Task(make_sample, accept, int(seed), kinds, bins if balance_vr else None,
                  tuple(image_size) if image_size else None, int(max_attempts),
                  str(root / SAMPLES_DIR), width, durable)
-    probe, probe_calls = None, 0
-    with _lock(root):
+    probe, probe_calls, pool = None, 0, None
+    with _lock(root), contextlib.ExitStack() as stack:
         if balance_vr:
             old = read_meta(root) if (root / META_FILE).exists() else {}
             probe = old.get("vr_probe")
             if not (isinstance(probe, dict) and probe.get("candidates") == vr_probe):
-                if worker_init is not None:
-                    worker_init()  # the probe runs in this process
-                probe = _probe(task, vr_probe)
+                if workers > 1 and vr_probe > 1:
+                    # the probe's candidates in the workers, which then make the samples: this
+                    # process renders nothing, so the pool can fork (mp_context="auto")
+                    pool = _Pool(task, workers, worker_init, mp_context)
+                    stack.callback(pool.close)
+                    outcomes: list = []
+                    pool.map(_worker_probe, [(k,) for k in range(vr_probe)], outcomes.append)
+                    probe = _probe_summary(task, outcomes)
+                else:
+                    if worker_init is not None:
+                        worker_init()  # the probe runs in this process
+                    probe = _probe(task, vr_probe)
                 probe_calls = vr_probe
             task.filled = tuple(probe["filled"])
             meta["vr_probe"] = probe
@@ -265,7 +276,8 @@ def generate_dataset(
         skipped = len(done_vr)
         todo = [i for i in indices if i not in done_vr]
         results = _run(task, todo, workers, worker_init, progress, len(indices), skipped,
-                       mp_context, f"INTER-SH {'/'.join(kinds)}", initialised=probe_calls > 0)
+                       mp_context, f"INTER-SH {'/'.join(kinds)}",
+                       initialised=probe_calls > 0 and pool is None, pool=pool)
     for r in results:
         done_vr[r["index"]] = r["target_vr"]
     hist = vr_histogram(list(done_vr.values()), bins)

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .candidates import _make_and_write, _Task
+from .candidates import _make_and_write, _probe_outcome, _Task
 
 __all__: list[str] = []  # private helpers only; see the package
 
@@ -71,9 +71,16 @@ def _init_worker(task: _Task, worker_init: Callable[[], Any] | None,
         worker_init()  # e.g. one OffscreenRenderer per process, kept in a module global
 
 
-def _worker_make(index: int) -> dict:
+def _worker_make(index: int, filled: tuple[int, ...] | None = None) -> dict:
     assert _WORKER_TASK is not None, "worker not initialised"
+    if filled is not None:   # the VR probe ran in this pool, after the task was sent
+        _WORKER_TASK.filled = tuple(filled)
     return _make_and_write(_WORKER_TASK, index)
+
+
+def _worker_probe(k: int) -> int | None:
+    assert _WORKER_TASK is not None, "worker not initialised"
+    return _probe_outcome(_WORKER_TASK, k)
 
 
 
@@ -88,9 +95,9 @@ def _start_method(requested: str) -> str:
 
     * the platform is Linux (macOS system frameworks and Windows do not support it);
     * this process has opened no OpenGL context
-      ([`render.gl_opened`][handmesh_tutorial.render.backend.gl_opened]; e.g. the VR probe of
-      ``balance_vr`` renders in this process), since a child would inherit the driver's state
-      without its threads;
+      ([`render.gl_opened`][handmesh_tutorial.render.backend.gl_opened]; e.g. an earlier run
+      with ``workers=1`` rendered in this process), since a child would inherit the driver's
+      state without its threads;
     * this process has not imported torch: once torch has run an operation on several threads,
       its OpenMP thread pool exists, and a forked child that runs torch on several threads hangs
       (GNU OpenMP is not fork-safe);
@@ -98,9 +105,9 @@ def _start_method(requested: str) -> str:
       inherit held. tqdm's monitor thread is the exception: it only takes tqdm's own lock, which
       workers never use.
 
-    ``handmesh generate`` and the demo's training set meet all four (the generator imports
-    torch and pyrender only inside its workers); a notebook, a script that trains first, or a
-    ``balance_vr`` run (its probe renders in this process) spawns.
+    ``handmesh generate`` and the demo's two sets meet all four (the generator imports torch
+    and pyrender only inside its workers, where a ``balance_vr`` probe runs too); a notebook or
+    a script that rendered or trained first spawns.
     """
     import multiprocessing
     import threading
@@ -141,58 +148,99 @@ def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
                              "Move it to a module, or use workers=1")
 
 
-def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | None,
-         progress: bool, total: int, initial: int, mp_context: str, desc: str,
-         initialised: bool = False) -> list[dict]:
-    from .._progress import progress_bar
+class _Pool:
+    """The worker processes of one ``generate_dataset`` call (a ``ProcessPoolExecutor`` whose
+    workers hold the task), for the VR probe and then the samples.
 
-    results: list[dict] = []
-    bar = progress_bar(total=total, initial=initial, disable=not progress, desc=desc,
-                       unit="sample")
-    try:
-        if workers == 1 or len(todo) <= 1:
-            if worker_init is not None and todo and not initialised:
-                worker_init()
-            for i in todo:
-                results.append(_make_and_write(task, i))
-                bar.update(1)
-            return results
+    Args:
+        task: the `_Task` every worker receives once.
+        workers: processes.
+        worker_init: called once in each worker.
+        mp_context: ``"auto"``, ``"fork"``, ``"spawn"``... (see `_start_method`).
+    """
+
+    def __init__(self, task: _Task, workers: int, worker_init: Callable | None,
+                 mp_context: str):
         import multiprocessing
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.workers = workers
+        self._failed = False   # after an error: shut down without waiting for queued work
+        self._ex = ProcessPoolExecutor(max_workers=workers,
+                                       mp_context=multiprocessing.get_context(
+                                           _start_method(mp_context)),
+                                       initializer=_init_worker,
+                                       initargs=(task, worker_init, os.getpid()))
+
+    def map(self, fn: Callable, args: Sequence[tuple], on_result: Callable[[Any], None]) -> None:
+        """Run ``fn(*a)`` for every ``a`` of ``args`` in the workers; ``on_result`` gets each
+        result as it comes (any order). A worker's exception is raised here, and then the pool
+        is shut down (its queued work cancelled)."""
+        from concurrent.futures import FIRST_COMPLETED, wait
         from concurrent.futures.process import BrokenProcessPool
 
-        ex = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                                 mp_context=multiprocessing.get_context(
-                                     _start_method(mp_context)),
-                                 initializer=_init_worker,
-                                 initargs=(task, worker_init, os.getpid()))
-        it, pending = iter(todo), set()
+        it, pending = iter(args), set()
         try:
             # A bounded window of submissions keeps Ctrl-C responsive and memory flat.
-            for i in it:
-                pending.add(ex.submit(_worker_make, i))
-                if len(pending) >= 2 * workers:
+            for a in it:
+                pending.add(self._ex.submit(fn, *a))
+                if len(pending) >= 2 * self.workers:
                     break
             while pending:
                 finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in finished:
                     try:
-                        results.append(fut.result())  # re-raises a worker's error here
+                        result = fut.result()  # re-raises a worker's error here
                     except BrokenProcessPool as e:
                         note = getattr(e, "add_note", lambda _: None)  # Python >= 3.11
                         note("a worker process died: out of memory, killed, or it could not "
                              "start (a script using workers needs an "
                              "`if __name__ == '__main__':` guard)")
                         raise
-                    bar.update(1)
+                    on_result(result)
                     nxt = next(it, None)
                     if nxt is not None:
-                        pending.add(ex.submit(_worker_make, nxt))
+                        pending.add(self._ex.submit(fn, *nxt))
         except BaseException:
-            ex.shutdown(wait=False, cancel_futures=True)
+            self._failed = True
+            self._ex.shutdown(wait=False, cancel_futures=True)
             raise
-        ex.shutdown(wait=True)
+
+    def close(self) -> None:
+        """Wait for the workers to finish and end them (idempotent; after an error, end them
+        without waiting)."""
+        self._ex.shutdown(wait=not self._failed, cancel_futures=self._failed)
+
+
+def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | None,
+         progress: bool, total: int, initial: int, mp_context: str, desc: str,
+         initialised: bool = False, pool: _Pool | None = None) -> list[dict]:
+    """Make and write the samples ``todo``: in this process (``workers == 1``, or a single sample
+    and no ``pool``), else in ``pool`` (the call's pool, which ran the VR probe) or a new one."""
+    from .._progress import progress_bar
+
+    results: list[dict] = []
+    bar = progress_bar(total=total, initial=initial, disable=not progress, desc=desc,
+                       unit="sample")
+
+    def done(result: dict) -> None:
+        results.append(result)
+        bar.update(1)
+
+    try:
+        if pool is None and (workers == 1 or len(todo) <= 1):
+            if worker_init is not None and todo and not initialised:
+                worker_init()
+            for i in todo:
+                done(_make_and_write(task, i))
+            return results
+        own = pool is None
+        if own:
+            pool = _Pool(task, min(workers, len(todo)), worker_init, mp_context)
+        filled = task.filled if not own else None   # the probe's result, after the pool started
+        pool.map(_worker_make, [(i, filled) for i in todo], done)
+        if own:
+            pool.close()
         return results
     finally:
         bar.close()
-
