@@ -562,10 +562,12 @@ def _fails_on_probe_seeds(seed):
     return _never_below_half(seed)
 
 
-@pytest.mark.parametrize("start", ["spawn", "auto"])
+@pytest.mark.parametrize("start", ["spawn", "fork", "auto"])
 def test_vr_probe_runs_in_the_workers(tmp_path, start):
     """With workers, the probe's candidates are made by the pool (this process renders
     nothing, so "auto" can fork), and the result is the same as in-process, to the byte."""
+    if start == "fork" and not sys.platform.startswith("linux"):
+        pytest.skip("fork start method: Linux only")
     bins = ((0.0, 0.3), (0.5, 0.75), (0.75, 1.0))
     marks = tmp_path / "marks"
     marks.mkdir()
