@@ -20,10 +20,10 @@ import math
 import numpy as np
 from numba import njit
 
-_jit = njit(cache=True, error_model="numpy", nogil=True)
+# the numpy path's tolerances (one copy, in contact.py; numba freezes them when compiling)
+from .contact import _SPHERE_ABS, _SPHERE_SLACK, _TINY
 
-_TINY = 1e-300      # the numpy path's guard against zero denominators
-_SLACK = 1 + 1e-9   # the numpy path's slack on the bounding-sphere test
+_jit = njit(cache=True, error_model="numpy", nogil=True)
 
 
 @_jit
@@ -99,7 +99,8 @@ def signed_distances(points, vertices, faces, face_normals, edge_normals, vertex
             e0 = p[0] - centroid[f, 0]
             e1 = p[1] - centroid[f, 1]
             e2 = p[2] - centroid[f, 2]
-            if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) > reach + rho[f] * _SLACK + 1e-12:
+            far = reach + rho[f] * _SPHERE_SLACK + _SPHERE_ABS
+            if math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) > far:
                 continue
             x0, x1, x2, region = _closest_on_triangle(p, vertices[faces[f, 0]],
                                                       vertices[faces[f, 1]],

@@ -15,6 +15,14 @@ from ..collision._common import _kernels
 
 __all__ = ["closest_points_on_triangles", "mesh_contact", "signed_distance"]
 
+# one copy of the tolerances, read by the numba kernel too (``_contact_numba``)
+_TINY = 1e-300
+"""Guard against zero denominators in the closest-point formulas."""
+_SPHERE_SLACK = 1 + 1e-9
+"""Relative slack of the bounding-sphere test (plus ``_SPHERE_ABS`` metres): a superset of the
+faces that can hold a point's closest surface point, whatever the rounding."""
+_SPHERE_ABS = 1e-12
+
 
 def closest_points_on_triangles(p, a, b, c):
     """Closest points on triangles ``abc`` to points ``p`` (Ericson, *Real-Time Collision
@@ -40,7 +48,7 @@ def closest_points_on_triangles(p, a, b, c):
     va = d3 * d6 - d5 * d4
     vb = d5 * d2 - d1 * d6
     vc = d1 * d4 - d3 * d2
-    tiny = 1e-300
+    tiny = _TINY
     # face interior (default)
     denom = va + vb + vc
     denom = np.where(np.abs(denom) < tiny, tiny, denom)
@@ -136,17 +144,17 @@ class _MeshSDF:
         comes within the point's nearest-vertex distance ``dmin`` (a superset of the faces that
         hold each point's closest surface point)."""
         n = len(p)
-        slack = 1 + 1e-9
+        slack = _SPHERE_SLACK
 
         def reaches(dist, pid, face):   # the bounding sphere comes within dmin of the point
-            return dist <= dmin[pid] + self.rho[face] * slack + 1e-12
+            return dist <= dmin[pid] + self.rho[face] * slack + _SPHERE_ABS
 
         pid_parts, face_parts = [], []
         if len(self.small_ids):
             k = min(self.k, len(self.small_ids))
             dist, idx = self.ctree.query(p, k=k)
             dist, idx = dist.reshape(n, k), idx.reshape(n, k)
-            reach = dmin + self.rho_small * slack + 1e-12
+            reach = dmin + self.rho_small * slack + _SPHERE_ABS
             complete = np.full(n, True) if k == len(self.small_ids) else dist[:, -1] > reach
             pid = np.repeat(np.flatnonzero(complete), k)
             face = self.small_ids[idx[complete].ravel()]
@@ -164,7 +172,8 @@ class _MeshSDF:
         if len(self.big_ids):   # every point against every big face, as one (N, B) matrix
             c = self.centroid[self.big_ids]
             dist = np.sqrt(((p[:, None, :] - c[None]) ** 2).sum(-1))
-            pid, j = np.nonzero(dist <= dmin[:, None] + self.rho[self.big_ids] * slack + 1e-12)
+            reach_big = dmin[:, None] + self.rho[self.big_ids] * slack + _SPHERE_ABS
+            pid, j = np.nonzero(dist <= reach_big)
             pid_parts.append(pid)
             face_parts.append(self.big_ids[j])
         return np.concatenate(pid_parts), np.concatenate(face_parts)
