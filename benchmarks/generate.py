@@ -152,14 +152,15 @@ def kernels(kinds: list[str], n: int) -> None:
         sc = interact.build_scene("hand-hand", 7)
         (va, fa), (vb, fb) = [(b.vertices, b.faces) for b in sc.bodies]
         sdf = _MeshSDF(vb, fb)
-        out = {}
+        dist: dict[str, np.ndarray] = {}
+        per_call: dict[str, list[float]] = {"numpy": [], "numba": []}
         for backend in ("numpy", "numba") * 3:
             t = time.perf_counter()
             for _ in range(20):
-                out.setdefault(backend, sdf(va, backend))
-            out.setdefault(f"{backend}_t", []).append((time.perf_counter() - t) / 20)
-        ref, new = (1e3 * float(np.median(out[f"{b}_t"])) for b in ("numpy", "numba"))
-        same = np.array_equal(np.abs(out["numpy"]), np.abs(out["numba"]))
+                dist[backend] = sdf(va, backend)
+            per_call[backend].append((time.perf_counter() - t) / 20)
+        ref, new = (1e3 * float(np.median(per_call[b])) for b in ("numpy", "numba"))
+        same = np.array_equal(np.abs(dist["numpy"]), np.abs(dist["numba"]))
         print(f"{'hand-hand':12s} signed distance, {len(va)} vertices vs a hand: {ref:.2f} ms "
               f"numpy  {new:.2f} ms numba   RATIO vs numpy: {ref / new:.2f}x   "
               f"(same distances: {same})")

@@ -145,6 +145,7 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
                 continue
             if b >= 0:
                 have[b] += 1
+            tone = scene.body(t).tone
             others = [lab for lab in s["joints"] if lab != t]
             other = (np.asarray(s["joints"][others[0]], np.float32) if others
                      else np.full((21, 3), np.nan, np.float32))
@@ -154,10 +155,10 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
                 joints=np.asarray(s["joints"][t], np.float32), other_joints=other,
                 K=np.asarray(s["K"], np.float64), vr=vr, side=s["sides"][t],
                 other_side=s["sides"][others[0]] if others else "", kind=kind, seed=s_seed,
-                tone=scene.body(t).tone)
+                tone=tone)
             Image.fromarray(s["image"]).save(out / f"{name}.png")
             index.append({"name": name, "kind": kind, "seed": s_seed, "candidate": j, "vr": vr,
-                          "side": s["sides"][t], "tone": scene.body(t).tone})
+                          "side": s["sides"][t], "tone": tone})
             kept += 1
         print(f"{kind}: {kept} scenes from {j + 1} candidates, per VR bin {have} (candidates "
               f"rendered per bin, <0.4 first: {drawn[kind]})"

@@ -74,12 +74,7 @@ class Cylinders:
             raise ValueError(f"radius must have shape ({n},), got {self.radius.shape}")
         if not np.all(np.isfinite(self.radius)) or np.any(self.radius < 0):
             raise ValueError("radius must be finite and non-negative")
-        if not self.names:
-            self.names = _default_names(n)
-        elif not all(type(s) is str for s in self.names):
-            self.names = tuple(str(s) for s in self.names)
-        else:
-            self.names = tuple(self.names)
+        self.names = tuple(map(str, self.names)) if self.names else _default_names(n)
         if len(self.names) != n:
             raise ValueError(f"names must have {n} entries, got {len(self.names)}")
         self.parts = (np.zeros(n, dtype=np.int64) if self.parts is None

@@ -73,8 +73,7 @@ def _init_worker(task: _Task, worker_init: Callable[[], Any] | None,
 
 def _worker_make(index: int, filled: tuple[int, ...] | None = None) -> dict:
     assert _WORKER_TASK is not None, "worker not initialised"
-    if filled is not None:   # the VR probe ran in this pool, after the task was sent
-        _WORKER_TASK.filled = tuple(filled)
+    _WORKER_TASK.filled = None if filled is None else tuple(filled)
     return _make_and_write(_WORKER_TASK, index)
 
 
@@ -237,8 +236,8 @@ def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | Non
         own = pool is None
         if own:
             pool = _Pool(task, min(workers, len(todo)), worker_init, mp_context)
-        filled = task.filled if not own else None   # the probe's result, after the pool started
-        pool.map(_worker_make, [(i, filled) for i in todo], done)
+        # the bins to fill travel with each sample: a probe in the pool ran after it started
+        pool.map(_worker_make, [(i, task.filled) for i in todo], done)
         if own:
             pool.close()
         return results

@@ -7,6 +7,8 @@ Points and vertices in metres; ``mesh_contact`` reports millimetres. Taught in n
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -129,15 +131,24 @@ class _MeshSDF:
         np.add.at(en, inv, np.repeat(fn, 3, axis=0))
         self.edge_of = inv.reshape(-1, 3)
         self.en = en
-        self.tree = cKDTree(v)
         self.centroid = v[f].mean(1)
         self.rho = np.linalg.norm(v[f] - self.centroid[:, None], axis=2).max(1)
         big = self.rho > self.big_face
         self.big_ids = np.flatnonzero(big)
         self.small_ids = np.flatnonzero(~big)
         self.rho_small = float(self.rho[self.small_ids].max()) if len(self.small_ids) else 0.0
-        self.ctree = cKDTree(self.centroid[self.small_ids]) if len(self.small_ids) else None
         self._kernel_args = None   # the numba path's arrays, made on its first call
+
+    # the k-d trees serve the numpy path only: built on its first call
+    @functools.cached_property
+    def tree(self) -> cKDTree:
+        """k-d tree of the vertices."""
+        return cKDTree(self.v)
+
+    @functools.cached_property
+    def ctree(self) -> cKDTree | None:
+        """k-d tree of the small faces' centroids (``None`` when every face is big)."""
+        return cKDTree(self.centroid[self.small_ids]) if len(self.small_ids) else None
 
     def _candidates(self, p: np.ndarray, dmin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(point ids, face ids)`` of every (point, face) pair whose face's bounding sphere
