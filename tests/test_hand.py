@@ -497,3 +497,80 @@ def test_forearm_continues_the_wrist_into_one_closed_surface(side):
     assert both.is_watertight and both.is_winding_consistent and both.volume > 0
     hand_volume = trimesh.Trimesh(v, model.faces, process=False).volume
     assert both.volume > hand_volume + 1e-4                         # the forearm adds >100 cm^3
+
+
+def _posed_hand_and_forearm(side="right"):
+    model = H.HandModel(side)
+    pose = torch.as_tensor(H.example_pose("fist", side=side), dtype=torch.float32)[None]
+    v = model(pose=pose).vertices[0].double().numpy()
+    loop = model.wrist_loop
+    fv, ff = H.forearm_mesh(v[loop], [-1.0, 0.1, 0.0], length=0.25)
+    return model, v, loop, fv, ff
+
+
+def _area_normals_by_loop(v, f):
+    """Area-weighted unit vertex normals, summed face by face (an independent loop)."""
+    n = np.zeros_like(v)
+    for a, b, c in f:
+        fn = np.cross(v[b] - v[a], v[c] - v[a])
+        n[a] += fn
+        n[b] += fn
+        n[c] += fn
+    with np.errstate(invalid="ignore"):     # a vertex no face uses stays NaN
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_wrist_seam_normals_make_hand_and_forearm_one_smooth_surface(side):
+    model, v, loop, fv, ff = _posed_hand_and_forearm(side)
+    cap = model.template.cap_faces
+    hn, fn = H.wrist_seam_normals(v, model.faces, cap, loop, fv, ff)
+    L = len(loop)
+    np.testing.assert_allclose(np.linalg.norm(hn, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(fn, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_array_equal(hn[loop], fn[:L])                  # one normal per rim vertex
+    # each rim normal is the mean of the two sides' own normals
+    skin = _area_normals_by_loop(v, model.faces[~cap])
+    tube = _area_normals_by_loop(fv, ff)
+    mean = skin[loop] + tube[:L]
+    np.testing.assert_allclose(fn[:L], mean / np.linalg.norm(mean, axis=1, keepdims=True),
+                               atol=1e-12)
+    # away from the rim: the skin's normals (the cap counts nowhere) and the tube's
+    away = np.setdiff1d(np.unique(model.faces[~cap]), loop)
+    np.testing.assert_allclose(hn[away], skin[away], atol=1e-12)
+    np.testing.assert_allclose(fn[L:-1], tube[L:-1], atol=1e-12)
+    # rim normals point out of the wrist, across the arm
+    out = v[loop] - v[loop].mean(0)
+    assert (np.sum(fn[:L] * out, 1) > 0).all()
+    # what it fixes: each mesh's own normals (the hand's with its cap) disagree at the rim
+    own_hand = _area_normals_by_loop(v, model.faces)[loop]
+    gap = np.degrees(np.arccos(np.clip(np.sum(own_hand * tube[:L], 1), -1, 1)))
+    assert gap.mean() > 20.0
+    with pytest.raises(ValueError, match="first ring"):
+        H.wrist_seam_normals(v, model.faces, cap, loop, fv + 1e-3, ff)
+    with pytest.raises(ValueError, match="cap_faces"):
+        H.wrist_seam_normals(v, model.faces, cap[:-1], loop, fv, ff)
+
+
+def test_forearm_colors_continue_the_wrist_without_stripes():
+    rng = np.random.default_rng(0)
+    L, rings = 19, 8
+    angle = 2 * np.pi * np.arange(L) / L
+    inner = 0.5 + 0.5 * np.cos(angle)                 # lighter on one side, as a wrist is
+    loop = 0.5 + 0.2 * inner[:, None] * np.array([1.0, 0.8, 0.7])
+    loop[7] += 0.15                                    # a blotch on one rim vertex
+    c = H.forearm_colors(loop, rings=rings)
+    assert c.shape == (L * (rings + 1) + 1, 3)
+    np.testing.assert_array_equal(c[:L], loop)          # no step at the seam
+    ring = c[L:2 * L]
+    for k in range(2, rings + 1):
+        np.testing.assert_array_equal(c[k * L:(k + 1) * L], ring)
+    np.testing.assert_allclose(ring.mean(0), loop.mean(0), atol=1e-12)     # no tint
+    np.testing.assert_allclose(c[-1], loop.mean(0), atol=1e-12)
+    assert ring[7, 0] - ring[[6, 8], 0].mean() < 0.3 * 0.15                 # the blotch fades
+    assert ring[0, 0] > ring[L // 2, 0] + 0.1           # the light side stays light
+    assert H.forearm_colors(rng.uniform(0, 1, (5, 3))).min() >= 0.0
+    with pytest.raises(ValueError, match="loop_colors"):
+        H.forearm_colors(loop[:, :2])
+    with pytest.raises(ValueError, match="smooth"):
+        H.forearm_colors(loop, smooth=0.0)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from scipy.spatial.transform import Rotation
 
 import handmesh_tutorial as hmt
 from handmesh_tutorial import dataset, interact, visibility
@@ -139,6 +140,32 @@ def test_scene_hands_know_their_skin_tone():
     _, obj_scene = interact.make_sample(11, "hand-object", S, return_scene=True)
     assert [b.tone is None for b in obj_scene.bodies] == [b.kind != "hand"
                                                           for b in obj_scene.bodies]
+
+
+@pytest.mark.parametrize("kind", interact.KINDS)
+def test_forearms_continue_their_hands_and_turn_with_the_camera(scenes, kind):
+    scene = scenes[kind]
+    rot = Rotation.from_rotvec([0.3, -0.5, 0.2]).as_matrix()
+    t = np.array([0.01, -0.02, 0.4])
+    meshes = {m[3]: m for m in scene.render_meshes(rot, t)}
+    scenery = {s[3]: s for s in scene.scenery_meshes(rot, t)}
+    for body in scene.bodies:
+        if body.kind != "hand":
+            assert body.forearm is None and body.normals is None and meshes[body.label][4] is None
+            assert body.label not in scenery
+            continue
+        loop = hmt.hand.HandModel(body.side).wrist_loop
+        fv, ff, fc, fn = body.forearm
+        L = len(loop)
+        np.testing.assert_allclose(fv[:L], body.vertices[loop], atol=1e-15)   # glued at the wrist
+        np.testing.assert_array_equal(fc[:L], body.colors[loop])      # no colour step there
+        np.testing.assert_array_equal(fn[:L], body.normals[loop])     # nor a shading step
+        v, _, _, label, n = meshes[body.label]
+        np.testing.assert_allclose(v, body.vertices @ rot.T + t, atol=1e-15)
+        np.testing.assert_allclose(n, body.normals @ rot.T, atol=1e-15)
+        sv, _, _, owner, sn = scenery[body.label]
+        np.testing.assert_allclose(sn[:L], n[loop], atol=1e-15)
+        np.testing.assert_allclose(sv[:L], v[loop], atol=1e-15)
 
 
 def test_signed_distance_backend_is_checked():

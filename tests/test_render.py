@@ -9,6 +9,7 @@ import types
 import numpy as np
 import pytest
 import trimesh
+from scipy.ndimage import binary_erosion
 
 from handmesh_tutorial import render as R
 
@@ -427,3 +428,28 @@ def test_the_same_scene_renders_to_the_same_bytes_every_time():
         again = [interact.make_sample(s, k, 128)["image"] for s, k in scenes]
         for a, b in zip(first, again, strict=True):
             assert np.array_equal(a, b)
+
+
+def test_given_normals_shade_and_only_shade(renderer):
+    """Normals passed with a mesh are what the colour pass shades with (the renderer's own area
+    normals reproduce the default image exactly); masks and depth never depend on them; a
+    normal array of the wrong shape or a zero normal is refused by name."""
+    v, f, c, lab = _sphere((0.0, 0.0, 0.40), 0.035, 1)
+    own = R.renderer._vertex_normals(np.asarray(v, float), np.asarray(f))
+    plain = renderer.render([(v, f, c, lab)], _K())
+    same = renderer.render([R.RenderMesh(v, f, c, lab, own * 3.0)], _K())   # normalised there
+    assert same.image.tobytes() == plain.image.tobytes()
+    flat = np.tile([0.0, 0.0, -1.0], (len(v), 1))      # every normal facing the camera
+    turned = renderer.render([(v, f, c, lab, flat)], _K())
+    np.testing.assert_array_equal(turned.labels, plain.labels)
+    np.testing.assert_array_equal(turned.depth, plain.depth)
+    inside = binary_erosion(plain.labels == 1, iterations=2)       # away from blended edges
+    # a sphere's shading varies across it; with one normal everywhere it is uniform
+    assert plain.image[inside].std(0).max() > 5.0
+    assert turned.image[inside].std(0).max() < 0.5
+    with pytest.raises(ValueError, match=r"meshes\[0\] normals must have shape"):
+        renderer.render([(v, f, c, lab, flat[:-1])], _K())
+    with pytest.raises(ValueError, match=r"meshes\[0\] normals must be finite and non-zero"):
+        renderer.render([(v, f, c, lab, flat * 0.0)], _K())
+    with pytest.raises(ValueError, match=r"occluders\[0\] must be"):
+        renderer.render([(v, f, c, lab)], _K(), occluders=[(v, f, c, 1, flat, 0)])

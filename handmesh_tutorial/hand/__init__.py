@@ -67,7 +67,14 @@ from .joints import (
     MANO_TO_FREIHAND,
     MIRROR_AXIS,
 )
-from .mesh import forearm_mesh, joint_regressor_from_mesh, mesh_checks, self_intersections
+from .mesh import (
+    forearm_colors,
+    forearm_mesh,
+    joint_regressor_from_mesh,
+    mesh_checks,
+    self_intersections,
+    wrist_seam_normals,
+)
 from .model import HandModel, HandOutput
 from .poses import example_pose, flexion_axes, random_pose
 from .skinning import axis_angle_to_matrix, lbs, mirror_axis_angle, mirror_points
@@ -85,6 +92,7 @@ __all__ = [
     "MANO_JOINT_NAMES", "MANO_PARENTS", "FREIHAND_JOINT_NAMES", "FREIHAND_PARENTS",
     "MANO_TO_FREIHAND", "FINGERTIP_NAMES", "FINGER_NAMES", "MIRROR_AXIS", "SHAPE_PARAM_NAMES",
     "SHAPE_SAMPLE_RANGES", "SKIN_TONES", "ASSET_PATH", "random_shape", "forearm_mesh",
+    "forearm_colors", "wrist_seam_normals",
     "HandTemplate", "HandOutput", "HandModel",
     "joint_regressor_from_mesh", "save_template", "load_template",
     "axis_angle_to_matrix", "lbs", "mirror_points", "mirror_axis_angle",

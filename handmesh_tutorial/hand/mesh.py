@@ -18,7 +18,8 @@ import numpy as np
 from ._common import _unit
 from .joints import MANO_PARENTS, MANO_TO_FREIHAND
 
-__all__ = ["joint_regressor_from_mesh", "self_intersections", "mesh_checks", "forearm_mesh"]
+__all__ = ["joint_regressor_from_mesh", "self_intersections", "mesh_checks", "forearm_mesh",
+           "wrist_seam_normals", "forearm_colors"]
 
 
 def joint_regressor_from_mesh(vertices: np.ndarray, weights: np.ndarray, joints: np.ndarray,
@@ -193,3 +194,103 @@ def forearm_mesh(loop: np.ndarray, axis, length: float = 0.25, rings: int = 8,
     faces.append(np.stack([last + idx, last + np.roll(idx, -1), np.full(n, len(v) - 1)], 1))
     return v, np.concatenate(faces).astype(np.int64)
 
+
+
+def _area_normals(v: np.ndarray, f: np.ndarray, n: int) -> np.ndarray:
+    """(n,3) sums of the area-weighted face normals around each vertex (not normalised)."""
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    out = np.zeros((n, 3))
+    for k in range(3):
+        np.add.at(out, f[:, k], fn)
+    return out
+
+
+def _normalised(n: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(norm > 1e-20, n / np.maximum(norm, 1e-20), np.array([0.0, 0.0, 1.0]))
+
+
+def wrist_seam_normals(hand_vertices: np.ndarray, hand_faces: np.ndarray, cap_faces,
+                       loop: np.ndarray, forearm_vertices: np.ndarray,
+                       forearm_faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex normals of a hand and its forearm that agree along the wrist, for rendering.
+
+    A renderer that computes each mesh's normals on its own draws a visible ring at the wrist:
+    there the hand's normals also average the cap's faces (which point along the arm) and the
+    forearm's first ring sees only the tube. Here the wrist loop's vertices (``loop`` on the hand,
+    the first ``len(loop)`` vertices of the forearm, as
+    [`forearm_mesh`][handmesh_tutorial.hand.mesh.forearm_mesh] makes them) get one normal: the
+    mean of the two sides' normals, each side's the area-weighted normal of its own faces next to
+    the vertex (the two sides count equally, since the tube's faces are several times larger
+    than the hand's). The cap's faces count nowhere; with the forearm in place the cap is inside
+    and never seen. Every other vertex gets its area-weighted normal.
+
+    Args:
+        hand_vertices: (V,3) the posed hand, metres (any frame, same as the forearm).
+        hand_faces: (F,3) the hand's faces, cap included.
+        cap_faces: (F,) bool mask of the cap's faces in ``hand_faces``.
+        loop: (L,) the wrist loop's vertex ids on the hand, in the forearm's ring order.
+        forearm_vertices: (N,3) the forearm, whose first L vertices lie on the loop.
+        forearm_faces: (M,3) the forearm's faces.
+
+    Returns:
+        ``(hand normals (V,3), forearm normals (N,3))``, unit length.
+
+    Raises:
+        ValueError: the forearm's first ring is not the hand's wrist loop.
+    """
+    hv = np.asarray(hand_vertices, float)
+    fv = np.asarray(forearm_vertices, float)
+    loop = np.asarray(loop, np.int64)
+    cap = np.asarray(cap_faces, bool)
+    hf = np.asarray(hand_faces, np.int64)
+    if cap.shape != (len(hf),):
+        raise ValueError(f"cap_faces must be a ({len(hf)},) mask, got shape {cap.shape}")
+    L = len(loop)
+    if len(fv) < L or np.abs(fv[:L] - hv[loop]).max() > 1e-9:
+        raise ValueError("the forearm's first ring must be the hand's wrist loop, vertex for "
+                         "vertex (see forearm_mesh)")
+    skin = hf[~cap]
+    hand_n = _area_normals(hv, skin, len(hv))
+    arm_n = _area_normals(fv, np.asarray(forearm_faces, np.int64), len(fv))
+    hand_unit = _normalised(hand_n)
+    # the cap's centre (and any vertex only the cap uses) keeps the cap's own normal
+    only_cap = np.linalg.norm(hand_n, axis=1) <= 1e-20
+    if only_cap.any():
+        hand_unit[only_cap] = _normalised(_area_normals(hv, hf[cap], len(hv)))[only_cap]
+    arm_unit = _normalised(arm_n)
+    rim = _normalised(hand_unit[loop] + arm_unit[:L])
+    hand_unit[loop] = rim
+    arm_unit[:L] = rim
+    return hand_unit, arm_unit
+
+
+def forearm_colors(loop_colors: np.ndarray, rings: int = 8, smooth: float = 2.0) -> np.ndarray:
+    """sRGB colours of a forearm that continue the hand's colours at the wrist.
+
+    The first ring takes the wrist loop's colours as they are (no step at the seam); the further
+    rings take them smoothed around the arm (a circular Gaussian of ``smooth`` loop vertices), so
+    the lighter inner side of the wrist continues along the arm as it does on a real forearm,
+    while a blotch of the hand's skin does not become a stripe. The far end's centre gets the
+    loop's mean. Layout as in [`forearm_mesh`][handmesh_tutorial.hand.mesh.forearm_mesh].
+
+    Args:
+        loop_colors: (L,3) sRGB colours of the wrist loop's vertices, in the forearm's ring order.
+        rings: rings after the first (as in ``forearm_mesh``).
+        smooth: standard deviation of the smoothing around the arm, in loop vertices (> 0).
+
+    Returns:
+        (L*(rings+1)+1, 3) colours in [0,1].
+    """
+    c = np.asarray(loop_colors, float)
+    if c.ndim != 2 or c.shape[1] != 3:
+        raise ValueError(f"loop_colors must have shape (L, 3), got {c.shape}")
+    if not smooth > 0:
+        raise ValueError(f"smooth must be > 0, got {smooth}")
+    L = len(c)
+    d = np.arange(L)[:, None] - np.arange(L)[None, :]
+    d = np.minimum(np.abs(d), L - np.abs(d))          # distance around the loop
+    w = np.exp(-0.5 * (d / smooth) ** 2)
+    smoothed = (w @ c) / w.sum(1, keepdims=True)
+    rows = [c] + [smoothed] * rings + [c.mean(0, keepdims=True)]
+    return np.clip(np.concatenate(rows), 0.0, 1.0)

@@ -402,15 +402,17 @@ class _Generator:
         for b in bodies:
             v, f = meshes[b.label]
             is_hand = b.kind == "hand"
-            forearm = None
+            forearm = normals = None
             if is_hand:
-                from ..hand import forearm_mesh
+                from ..hand import forearm_colors, forearm_mesh, wrist_seam_normals
 
                 loop = b.model.wrist_loop
                 fv, ff = forearm_mesh(v[loop], b.rig.G[0] @ np.array([-1.0, 0.0, 0.0]),
                                       length=FOREARM_LENGTH)
-                skin = np.asarray(b.colors, float)[loop].mean(0)
-                forearm = (fv, ff, np.tile(skin, (len(fv), 1)))
+                # the forearm continues the wrist's colours and shading: no ring at the seam
+                normals, fn = wrist_seam_normals(v, f, b.model.template.cap_faces, loop, fv, ff)
+                fc = forearm_colors(np.asarray(b.colors, float)[loop])
+                forearm = (fv, ff, fc, fn)
             out.append(SceneBody(
                 label=b.label, name=b.name, kind=b.kind, side=b.side if is_hand else None,
                 vertices=v, faces=np.asarray(f, np.int64), colors=np.asarray(b.colors, float),
@@ -418,7 +420,7 @@ class _Generator:
                 pose=b.art.to_pose(b.rig.angles) if is_hand else None,
                 angles=b.rig.angles.copy() if b.rig.num_joints else None,
                 shape=b.shape.copy() if is_hand else None, dynamic=b.dynamic, forearm=forearm,
-                tone=b.tone if is_hand else None))
+                tone=b.tone if is_hand else None, normals=normals))
         return Scene(self.kind, self.seed, out, target, u, stats, self.history)
 
 

@@ -35,13 +35,18 @@ class SceneBody:
             ([`SHAPE_PARAM_NAMES`][handmesh_tutorial.hand.SHAPE_PARAM_NAMES]), else ``None``.
         dynamic: whether step 4 moved its joints.
         forearm: a hand's forearm for rendering,
-            ``(vertices (N,3) world, faces (M,3), colours (N,3))``
+            ``(vertices (N,3) world, faces (M,3), colours (N,3), normals (N,3) world)``
             ([`forearm_mesh`][handmesh_tutorial.hand.forearm_mesh]: scenery, not a body: it occludes
-            but has no label, no annotation and no collision), else ``None``.
+            but has no label, no annotation and no collision; its colours and normals continue
+            the hand's at the wrist), else ``None``.
         tone: a hand's skin tone, an index into
             [`SKIN_TONES`][handmesh_tutorial.hand.appearance.SKIN_TONES] (0 lightest), else
             ``None``. Kept in memory only (the dataset stores the colours it produced, not the
             index): e.g. to break a detector's or a model's scores down by skin tone.
+        normals: (V, 3) unit vertex normals for shading (world), else ``None`` (the renderer's
+            own). A hand's come from
+            [`wrist_seam_normals`][handmesh_tutorial.hand.mesh.wrist_seam_normals], so that the
+            hand and its forearm shade as one surface.
     """
 
     label: int
@@ -59,6 +64,7 @@ class SceneBody:
     dynamic: bool = True
     forearm: tuple | None = None
     tone: int | None = None
+    normals: np.ndarray | None = None
 
 
 @dataclass
@@ -99,7 +105,9 @@ class Scene:
                          f"{[b.label for b in self.bodies]}")
 
     def render_meshes(self, R=None, t=None) -> list[tuple]:
-        """``(vertices, faces, sRGB colors, label)`` per body, optionally moved ``x -> R x + t``.
+        """``(vertices, faces, sRGB colors, label, normals)`` per body, optionally moved
+        ``x -> R x + t`` (normals turned by ``R``; ``None`` where the body has none); the tuples
+        that [`Renderer.render`][handmesh_tutorial.render.renderer.Renderer.render] takes.
 
         Args:
             R: (3, 3) rotation (default identity).
@@ -107,14 +115,15 @@ class Scene:
         """
         R = np.eye(3) if R is None else np.asarray(R, float)
         t = np.zeros(3) if t is None else np.asarray(t, float)
-        return [(b.vertices @ R.T + t, b.faces, b.colors, b.label) for b in self.bodies]
+        return [(b.vertices @ R.T + t, b.faces, b.colors, b.label,
+                 None if b.normals is None else b.normals @ R.T) for b in self.bodies]
 
     def scenery_meshes(self, R=None, t=None) -> list[tuple]:
-        """``(vertices, faces, sRGB colors, owner label)`` of the scenery (the hands' forearms),
-        optionally moved ``x -> R x + t``; see
+        """``(vertices, faces, sRGB colors, owner label, normals)`` of the scenery (the hands'
+        forearms), optionally moved ``x -> R x + t``; see
         [`handmesh_tutorial.render.Renderer.render`][handmesh_tutorial.render.renderer.Renderer.render]'s
         ``occluders``."""
         R = np.eye(3) if R is None else np.asarray(R, float)
         t = np.zeros(3) if t is None else np.asarray(t, float)
-        return [(b.forearm[0] @ R.T + t, b.forearm[1], b.forearm[2], b.label)
-                for b in self.bodies if b.forearm is not None]
+        return [(b.forearm[0] @ R.T + t, b.forearm[1], b.forearm[2], b.label,
+                 b.forearm[3] @ R.T) for b in self.bodies if b.forearm is not None]

@@ -43,7 +43,7 @@ _MAX_LABEL = 2**24 - 1  # labels are encoded in the 24 bits of the RGB segmentat
 
 
 class RenderMesh(NamedTuple):
-    """One body to render (a plain 4-tuple works too).
+    """One body to render (a plain 4- or 5-tuple works too).
 
     Attributes:
         vertices: (V, 3) float, metres, OpenCV camera frame.
@@ -51,12 +51,17 @@ class RenderMesh(NamedTuple):
         colors: (V, 3) or (V, 4) sRGB vertex colours, float in [0, 1] or uint8 in [0, 255]
             (linearised for pyrender by `srgb_to_linear`).
         label: int >= 1, unique in the scene; its value in the label mask.
+        normals: (V, 3) vertex normals for shading (normalised here), or ``None``: the
+            area-weighted normals of ``faces``. Given, they let two meshes that meet (a hand and
+            its forearm) shade as one surface
+            ([`wrist_seam_normals`][handmesh_tutorial.hand.mesh.wrist_seam_normals]).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     colors: np.ndarray
     label: int
+    normals: np.ndarray | None = None
 
 
 @dataclass
@@ -95,8 +100,8 @@ def _as_meshes(meshes: Sequence[Any]) -> list[RenderMesh]:
     out: list[RenderMesh] = []
     seen: set[int] = set()
     for i, m in enumerate(meshes):
-        if len(m) != 4:
-            raise ValueError(f"meshes[{i}] must be (vertices, faces, colors, label), "
+        if len(m) not in (4, 5):
+            raise ValueError(f"meshes[{i}] must be (vertices, faces, colors, label[, normals]), "
                              f"got {len(m)} items")
         v = np.asarray(m[0], dtype=np.float64)
         f = np.asarray(m[1])
@@ -118,7 +123,16 @@ def _as_meshes(meshes: Sequence[Any]) -> list[RenderMesh]:
             raise ValueError(f"duplicate label {label} in meshes")
         seen.add(label)
         c = c[:, :3].astype(np.float64) / 255.0 if c.dtype == np.uint8 else c[:, :3].astype(float)
-        out.append(RenderMesh(v, f.astype(np.int64), np.clip(c, 0.0, 1.0), label))
+        n = None if len(m) == 4 or m[4] is None else np.asarray(m[4], dtype=np.float64)
+        if n is not None:
+            if n.shape != v.shape:
+                raise ValueError(f"meshes[{i}] normals must have shape {v.shape} like its "
+                                 f"vertices, got {n.shape}")
+            length = np.linalg.norm(n, axis=1, keepdims=True)
+            if not (np.isfinite(n).all() and (length > 0).all()):
+                raise ValueError(f"meshes[{i}] normals must be finite and non-zero")
+            n = n / length
+        out.append(RenderMesh(v, f.astype(np.int64), np.clip(c, 0.0, 1.0), label, n))
     return out
 
 
@@ -281,8 +295,9 @@ class Renderer:
 
     def _add_mesh(self, scene, m: RenderMesh, name: str):
         pr = self._pr
+        normals = _vertex_normals(m.vertices, m.faces) if m.normals is None else m.normals
         prim = pr.Primitive(positions=m.vertices.astype(np.float32),
-                            normals=_vertex_normals(m.vertices, m.faces).astype(np.float32),
+                            normals=normals.astype(np.float32),
                             indices=m.faces.astype(np.uint32),
                             color_0=np.concatenate([srgb_to_linear(m.colors),
                                                     np.ones((len(m.colors), 1))],
@@ -324,7 +339,8 @@ class Renderer:
         Args:
             meshes: list of `RenderMesh` or plain ``(vertices, faces, colors, label)``
                 tuples; vertices (V, 3) metres in the OpenCV camera frame, faces (F, 3) int,
-                colors (V, 3) float [0, 1] or uint8, label int >= 1 (unique).
+                colors (V, 3) float [0, 1] or uint8, label int >= 1 (unique); an optional fifth
+                item gives (V, 3) shading normals (``RenderMesh.normals``).
             K: (3, 3) OpenCV intrinsics (pixel centres at integer coordinates).
             lights: lights in the camera frame; ``None`` means `default_lights`.
             background: (H, W, 3) uint8 (or float [0, 1]) image, or an RGB (3,) colour, behind
@@ -334,10 +350,10 @@ class Renderer:
             color: run the colour pass (``False``: masks and depth only, faster).
             alone: also render each body alone and return its mask (the VR denominators).
             alone_images: also return each body alone over the background (implies ``alone``).
-            occluders: scenery ``(vertices, faces, colors, owner)`` tuples (e.g. a hand's
-                forearm): drawn in the image and hiding what is behind them, but label 0 in the
-                masks; an occluder also hides parts of its owner (a body label, or 0 for none)
-                in the owner's *alone* mask, so VR counts only what other bodies hide.
+            occluders: scenery ``(vertices, faces, colors, owner[, normals])`` tuples (e.g. a
+                hand's forearm): drawn in the image and hiding what is behind them, but label 0
+                in the masks; an occluder also hides parts of its owner (a body label, or 0 for
+                none) in the owner's *alone* mask, so VR counts only what other bodies hide.
 
         Returns:
             A `RenderResult`.
@@ -354,10 +370,12 @@ class Renderer:
         scene, nodes = self._scene(ms, K, lights, ambient)
         scenery = []
         for i, occ in enumerate(occluders):
-            if len(occ) != 4:
-                raise ValueError(f"occluders[{i}] must be (vertices, faces, colors, owner), got "
-                                 f"{len(occ)} items")
-            mesh = _as_meshes([(occ[0], occ[1], occ[2], 1)])[0]     # validated, colours in [0,1]
+            if len(occ) not in (4, 5):
+                raise ValueError(f"occluders[{i}] must be (vertices, faces, colors, owner"
+                                 f"[, normals]), got {len(occ)} items")
+            normals = occ[4] if len(occ) == 5 else None
+            # validated, colours in [0,1]
+            mesh = _as_meshes([(occ[0], occ[1], occ[2], 1, normals)])[0]
             scenery.append((self._add_mesh(scene, mesh, name="scenery"), int(occ[3])))
         image = self._color(scene, bg) if color else None
         background_code = _label_color(0)
