@@ -6,7 +6,10 @@
 and [`self_intersections`][handmesh_tutorial.hand.mesh.self_intersections] measure a template's
 topology and quality (used by the build and the tests);
 [`forearm_mesh`][handmesh_tutorial.hand.mesh.forearm_mesh] continues the wrist into a forearm tube
-(scenery for rendering, not part of the model). Vertices in metres, faces (F,3) int.
+(scenery for rendering, not part of the model), and
+[`wrist_seam_normals`][handmesh_tutorial.hand.mesh.wrist_seam_normals] and
+[`forearm_colors`][handmesh_tutorial.hand.mesh.forearm_colors] make the two shade and colour as
+one surface at the wrist. Vertices in metres, faces (F,3) int.
 
 Taught in notebook 01 (the hand model); the forearm appears in notebook 05 (rendering).
 """
