@@ -164,6 +164,7 @@ def test_forearms_continue_their_hands_and_turn_with_the_camera(scenes, kind):
         np.testing.assert_allclose(v, body.vertices @ rot.T + t, atol=1e-15)
         np.testing.assert_allclose(n, body.normals @ rot.T, atol=1e-15)
         sv, _, _, owner, sn = scenery[body.label]
+        assert owner == label == body.label
         np.testing.assert_allclose(sn[:L], n[loop], atol=1e-15)
         np.testing.assert_allclose(sv[:L], v[loop], atol=1e-15)
 

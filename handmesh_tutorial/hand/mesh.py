@@ -198,7 +198,6 @@ def forearm_mesh(loop: np.ndarray, axis, length: float = 0.25, rings: int = 8,
     return v, np.concatenate(faces).astype(np.int64)
 
 
-
 def _area_normals(v: np.ndarray, f: np.ndarray, n: int) -> np.ndarray:
     """(n,3) sums of the area-weighted face normals around each vertex (not normalised)."""
     fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
