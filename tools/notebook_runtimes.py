@@ -84,12 +84,13 @@ TRAINED = {
 #: Where the committed ``default`` run picked up what an earlier run had left in ``notebooks/runs/``
 #: (the notebooks reuse data sets and checkpoints): its time is then less than a first run's.
 REUSED = {
-    "08_training": "the committed run generated its INTER-SH set too (about 3.5 min of the "
+    "08_training": "the committed run generated its INTER-SH set too (about 3 min of the "
                    "total); a later run reuses it from `notebooks/runs/` and only trains",
     "09_evaluation": "reuses notebook 08's data set and checkpoint",
-    "10_ablation": "the committed run evaluated trainings done beforehand in `notebooks/runs/` "
-                   "(one thread each, about 10 min per run on this CPU); a first run also "
-                   "trains the eight runs notebook 08 did not, about an hour",
+    "10_ablation": "reuses notebook 08's data set and its run (multi-path + attention, seed 0); "
+                   "the committed run trained the other eight itself, one after another, about "
+                   "10 min each on a machine that other jobs shared part of the time; a rerun "
+                   "finds them in `notebooks/runs/` and only evaluates",
 }
 
 
