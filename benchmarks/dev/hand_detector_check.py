@@ -226,7 +226,7 @@ def hand_scale_px(joints: np.ndarray, K: np.ndarray) -> float:
 def hand_frame(joints: np.ndarray, side: str) -> np.ndarray:
     """(3,3) rows: the hand's own axes from its 21 joints. x: wrist -> middle MCP; z: the palm
     normal (from the index and little-finger MCPs, pointing out of the palm for both sides);
-    y = z x x (towards the thumb for a right hand)."""
+    y = z x x (across the palm)."""
     x = joints[9] - joints[0]
     x = x / np.linalg.norm(x)
     z = np.cross(joints[5] - joints[0], joints[17] - joints[0])
