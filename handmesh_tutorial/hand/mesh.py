@@ -198,20 +198,6 @@ def forearm_mesh(loop: np.ndarray, axis, length: float = 0.25, rings: int = 8,
     return v, np.concatenate(faces).astype(np.int64)
 
 
-def _area_normals(v: np.ndarray, f: np.ndarray, n: int) -> np.ndarray:
-    """(n,3) sums of the area-weighted face normals around each vertex (not normalised)."""
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    out = np.zeros((n, 3))
-    for k in range(3):
-        np.add.at(out, f[:, k], fn)
-    return out
-
-
-def _normalised(n: np.ndarray) -> np.ndarray:
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.where(norm > 1e-20, n / np.maximum(norm, 1e-20), np.array([0.0, 0.0, 1.0]))
-
-
 def wrist_seam_normals(hand_vertices: np.ndarray, hand_faces: np.ndarray, cap_faces,
                        loop: np.ndarray, forearm_vertices: np.ndarray,
                        forearm_faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -252,16 +238,18 @@ def wrist_seam_normals(hand_vertices: np.ndarray, hand_faces: np.ndarray, cap_fa
     if len(fv) < L or np.abs(fv[:L] - hv[loop]).max() > 1e-9:
         raise ValueError("the forearm's first ring must be the hand's wrist loop, vertex for "
                          "vertex (see forearm_mesh)")
+    from ..render import _vertex_normals  # the renderer's own rule (render imports no hand)
+
     skin = hf[~cap]
-    hand_n = _area_normals(hv, skin, len(hv))
-    arm_n = _area_normals(fv, np.asarray(forearm_faces, np.int64), len(fv))
-    hand_unit = _normalised(hand_n)
+    hand_unit = _vertex_normals(hv, skin)
     # the cap's centre (and any vertex only the cap uses) keeps the cap's own normal
-    only_cap = np.linalg.norm(hand_n, axis=1) <= 1e-20
+    only_cap = np.ones(len(hv), bool)
+    only_cap[skin.ravel()] = False
     if only_cap.any():
-        hand_unit[only_cap] = _normalised(_area_normals(hv, hf[cap], len(hv)))[only_cap]
-    arm_unit = _normalised(arm_n)
-    rim = _normalised(hand_unit[loop] + arm_unit[:L])
+        hand_unit[only_cap] = _vertex_normals(hv, hf[cap])[only_cap]
+    arm_unit = _vertex_normals(fv, np.asarray(forearm_faces, np.int64))
+    rim = hand_unit[loop] + arm_unit[:L]
+    rim /= np.linalg.norm(rim, axis=1, keepdims=True)
     hand_unit[loop] = rim
     arm_unit[:L] = rim
     return hand_unit, arm_unit

@@ -43,8 +43,8 @@ from .backgrounds import (
 from .color import color_temperature, srgb_to_linear
 from .lights import Light, default_lights, random_lights, scene_lights
 
-# _as_meshes, _label_color, _vertex_normals, _check_K: private names that makehuman.py and
-# benchmarks/render.py import from ``render``
+# _as_meshes, _label_color, _vertex_normals, _check_K: private names that makehuman.py,
+# hand/mesh.py and benchmarks/render.py import from ``render``
 from .renderer import (  # noqa: F401
     CV_TO_GL,
     Renderer,
