@@ -147,6 +147,25 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_pretrain(args: argparse.Namespace) -> int:
+    from .pretrained import PretrainedRecipe, build_pretrained
+
+    fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "image_size", "encoder",
+              "recipe", "epochs", "batch_size", "lr", "workers", "loader_workers", "seed",
+              "device", "precision")
+    recipe = PretrainedRecipe(**{k: getattr(args, k) for k in fields
+                                 if getattr(args, k) is not None})
+    res = build_pretrained(args.out, recipe, max_generate_seconds=args.max_generate_seconds,
+                           max_train_seconds=args.max_train_seconds, install=args.install,
+                           progress=not args.no_progress)
+    info = res["info"]
+    print(f"handmesh pretrain: {info['data']['train_scenes']} training scenes, "
+          f"{info['epochs_done']} of {recipe.epochs} epochs on {info['hardware']}, "
+          f"{info['seconds']['generate']:.0f} s generating, {info['seconds']['train']:.0f} s "
+          f"training -> {res['file']}")
+    return 0
+
+
 def _print_skipped(command: str, skipped: list) -> None:
     """The bad samples ``--skip-bad`` left out, one line each (stdout: part of the result)."""
     if not skipped:
@@ -291,9 +310,44 @@ def build_parser() -> argparse.ArgumentParser:
                     help="skip fsync of checkpoints and logs (faster, not safe against power cuts)")
     tr.set_defaults(func=_cmd_train)
 
+    pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
+                         "(a GPU when there is one), export a small int8 file (resumable)")
+    pre.add_argument("--out", default="runs/pretrained",
+                     help="output folder (default: runs/pretrained)")
+    pre.add_argument("--install", action="store_true",
+                     help="copy the result into the package, where hmt.model.pretrained() and "
+                     "--checkpoint pretrained find it")
+    pre.add_argument("--train-scenes", type=int, help="training scenes (default: 40000)")
+    pre.add_argument("--val-scenes", type=int, help="validation scenes (default: 500)")
+    pre.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 100; "
+                     "validation: the next)")
+    pre.add_argument("--render-size", type=int, help="scene image side (default: 224)")
+    pre.add_argument("--image-size", type=int, help="network crop side (default: 128)")
+    pre.add_argument("--encoder", help="image encoder (default: resnet10)")
+    pre.add_argument("--recipe", choices=("cpu", "paper"), help="loss recipe (default: cpu)")
+    pre.add_argument("--epochs", type=int, help="training epochs (default: 24)")
+    pre.add_argument("--batch-size", type=int, help="batch size (default: 128)")
+    pre.add_argument("--lr", type=float, help="Adam learning rate (default: 1e-3)")
+    pre.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")
+    pre.add_argument("--loader-workers", type=int,
+                     help="data-loader processes (default: one per CPU, less one)")
+    pre.add_argument("--seed", type=int, help="initialisation / order / augmentation seed")
+    pre.add_argument("--device", help="auto | cpu | cuda (default: auto)")
+    pre.add_argument("--precision", choices=("float32", "bfloat16"),
+                     help="autocast precision (default: bfloat16)")
+    pre.add_argument("--max-generate-seconds", type=float, default=None,
+                     help="stop generating training scenes when the next shard would end past "
+                     "this budget")
+    pre.add_argument("--max-train-seconds", type=float, default=None,
+                     help="stop training when the next epoch would end past this budget")
+    pre.add_argument("--no-progress", action="store_true", help="no progress bars")
+    pre.set_defaults(func=_cmd_pretrain)
+
     ev = sub.add_parser("evaluate", help="evaluate a checkpoint: FreiHAND-style scores and the "
                         "table per visibility-ratio bin")
-    ev.add_argument("--checkpoint", required=True, help="a checkpoint_*.pt of handmesh train")
+    ev.add_argument("--checkpoint", required=True,
+                    help="a checkpoint_*.pt of handmesh train, or 'pretrained' (the shipped "
+                    "network)")
     ev.add_argument("--data", required=True, help="INTER-SH root (or FreiHAND root)")
     ev.add_argument("--kind", choices=("intersh", "freihand"), default=None,
                     help="data format (default: the checkpoint's training data format)")

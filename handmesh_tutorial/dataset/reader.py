@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .files import _read_json, read_annotation, read_sample
+from .files import _read_json, read_annotation, read_sample, read_target
 from .schema import (
     FORMAT_NAME,
     MAX_SAMPLES,
@@ -133,6 +133,12 @@ class InterSHDataset:
     def annotation(self, i: int) -> dict:
         """Only ``annotation.json`` of sample ``i`` (kind, target, vr, seed, stats...): fast."""
         return read_annotation(self.sample_dir(i))
+
+    def target(self, i: int) -> tuple:
+        """Only what a training crop of sample ``i``'s target hand needs, read without the masks
+        and the other bodies ([`read_target`][handmesh_tutorial.dataset.files.read_target]):
+        ``(image, K, vertices, joints, side, vr)``. ``transform`` is not applied."""
+        return read_target(self.sample_dir(i))
 
     def __getitem__(self, i: int) -> Any:
         d = self.sample_dir(i)

@@ -380,6 +380,8 @@ class InterSHTorchDataset(HandCropDataset):
         return len(self.source)
 
     def load(self, index: int) -> tuple:
+        if isinstance(self.source, InterSHDataset) and self.source.transform is None:
+            return self.source.target(index)  # lean read: no masks, no other bodies
         s = self.source[index]
         t = s["target"]
         if t not in s["meshes"] or t not in s["joints"]:

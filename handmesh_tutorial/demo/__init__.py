@@ -71,7 +71,7 @@ Example::
 The submodules (every name is importable from ``handmesh_tutorial.demo`` itself):
 
 * [`config`][handmesh_tutorial.demo.config]: `DemoConfig`, `RECIPES`, `train_config`.
-* [`run`][handmesh_tutorial.demo.run]: `run_demo`, `generate_data`, `DemoResult`.
+* [`run`][handmesh_tutorial.demo.run]: `run_demo`, `generate_data`, `generate_scenes`, `DemoResult`.
 * [`report`][handmesh_tutorial.demo.report]: the headline table, ``report.md``, `parse_headline`.
 
 The figures (`plot_overlays`, `plot_loss_curves`) live in
@@ -92,8 +92,9 @@ from .report import (
     parse_headline,
     write_report,
 )
-from .run import DemoResult, generate_data, run_demo
+from .run import DemoResult, generate_data, generate_scenes, run_demo
 
-__all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "train_config", "plot_overlays",
-           "plot_loss_curves", "write_report", "headline", "parse_headline", "HEADLINE",
+__all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "generate_scenes",
+           "train_config", "plot_overlays", "plot_loss_curves", "write_report", "headline",
+           "parse_headline", "HEADLINE",
            "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES"]

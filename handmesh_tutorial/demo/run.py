@@ -21,7 +21,7 @@ from ..viz import plot_loss_curves, plot_overlays, save_figure
 from .config import DemoConfig, train_config
 from .report import BASELINE_ROW, MEAN_ROW, write_report
 
-__all__ = ["DemoResult", "run_demo", "generate_data"]
+__all__ = ["DemoResult", "run_demo", "generate_data", "generate_scenes"]
 
 
 @dataclass
@@ -58,21 +58,39 @@ class DemoResult:
     mean_hand_scores: dict | None = None
 
 
-def _generate(root: Path, num: int, seed: int, cfg: DemoConfig, progress: bool, balance: bool):
+def generate_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
+                    workers: int, progress: bool = True, balance: bool = False,
+                    shard: tuple[int, int] | None = None):
+    """Generate (or resume) an INTER-SH root of mixed-kind scenes as the demo makes them.
+
+    Args:
+        root: the dataset folder.
+        num: scenes of the whole set (all shards).
+        seed: the set's seed.
+        render_size: image side, pixels.
+        workers: generator processes.
+        progress: tqdm bar.
+        balance: spread the target VRs over the VR bins.
+        shard: ``(k, n)``: only the k-th of n parts of the set (see
+            [`generate_dataset`][handmesh_tutorial.dataset.generate.generate_dataset]).
+
+    Returns:
+        The [`GenerationSummary`][handmesh_tutorial.dataset.GenerationSummary].
+    """
     from ..dataset import generate_dataset
     from ..interact import KINDS, InteractionConfig, init_worker, make_sample
 
     # a seed whose scene cannot be built raises InteractionError, a SampleRejected: the
     # writer then tries the next attempt's seed
-    fn = functools.partial(make_sample, kind="mixed", image_size=cfg.render_size)
+    fn = functools.partial(make_sample, kind="mixed", image_size=render_size)
     config = {k: (list(v) if isinstance(v, tuple) else v)
               for k, v in asdict(InteractionConfig()).items()}
     params = {"generator": "handmesh_tutorial.interact.make_sample", "kind": "mixed",
               "limits": config["limits"], "config": config}
-    return generate_dataset(root, fn, num, seed, list(KINDS), workers=cfg.workers,
-                            progress=progress, params=params,
-                            image_size=cfg.render_size, balance_vr=balance,
-                            worker_init=functools.partial(init_worker, cfg.render_size))
+    return generate_dataset(root, fn, num, seed, list(KINDS), workers=workers,
+                            progress=progress, params=params, shard=shard,
+                            image_size=render_size, balance_vr=balance,
+                            worker_init=functools.partial(init_worker, render_size))
 
 
 def generate_data(root: str | os.PathLike, config: DemoConfig | None = None, seed: int = 0,
@@ -97,8 +115,10 @@ def generate_data(root: str | os.PathLike, config: DemoConfig | None = None, see
     """
     cfg = config or DemoConfig.from_budget()
     root = Path(root)
-    tr = _generate(root / "train", cfg.train_samples, seed, cfg, progress, cfg.balance_train)
-    te = _generate(root / "test", cfg.test_samples, seed + 1, cfg, progress, True)
+    size = {"render_size": cfg.render_size, "workers": cfg.workers, "progress": progress}
+    tr = generate_scenes(root / "train", cfg.train_samples, seed, balance=cfg.balance_train,
+                         **size)
+    te = generate_scenes(root / "test", cfg.test_samples, seed + 1, balance=True, **size)
     return {"train": root / "train", "test": root / "test", "train_summary": tr,
             "test_summary": te}
 

@@ -1,0 +1,383 @@
+"""The pretrained MSMR-Net that ships with the package: the recipe and the one command that make
+it, the export to a small file, and the loader.
+
+* [`pretrained`][handmesh_tutorial.pretrained.pretrained] (also ``hmt.model.pretrained``) loads the
+  shipped network; ``handmesh evaluate --checkpoint pretrained`` and
+  ``load_checkpoint("pretrained")`` read the same file (``torch.load(weights_only=True)``).
+* [`PretrainedRecipe`][handmesh_tutorial.pretrained.PretrainedRecipe] is the recipe, and
+  [`build_pretrained`][handmesh_tutorial.pretrained.build_pretrained] (``handmesh pretrain``,
+  ``make pretrained``) runs it: generate mixed-kind INTER-SH scenes, train, export.
+* [`export_pretrained`][handmesh_tutorial.pretrained.export_pretrained] turns a training checkpoint
+  into the shipped file: int8 weights per output channel
+  ([`quantize_state_dict`][handmesh_tutorial.train.checkpoints.quantize_state_dict]), no optimiser
+  state, plus what made it (data seeds and counts, recipe, seconds, hardware, commit).
+
+Why a separate recipe from the demo's: a network trained from random weights on a CPU in minutes
+does not learn to read finger poses from synthetic crops (docs page "Training from scratch on a
+CPU", the pose probe). The shipped weights come from tens of thousands of scenes and hundreds of
+thousands of augmented crops, which takes a GPU for minutes or a CPU for hours. The numbers of the
+shipped file and how they were measured are on the docs page "The pretrained model".
+
+Taught in notebook 00 ("Quickstart") and notebook 09 ("Evaluation").
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+import os
+import platform
+import shutil
+import subprocess
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+__all__ = ["PRETRAINED_FILE", "PretrainedRecipe", "pretrained", "pretrained_path",
+           "pretrained_info", "build_pretrained", "export_pretrained", "generate_training_scenes"]
+
+PRETRAINED_FILE = "msmr_net_pretrained.pt"
+"""Name of the shipped file in ``handmesh_tutorial/assets/pretrained/``."""
+
+_ASSET_DIR = Path(__file__).resolve().parent / "assets" / "pretrained"
+
+
+def pretrained_path() -> Path:
+    """Path of the shipped pretrained checkpoint.
+
+    Raises:
+        FileNotFoundError: this installation has no pretrained file (make one with
+            ``make pretrained``).
+    """
+    path = _ASSET_DIR / PRETRAINED_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no pretrained MSMR-Net in this installation; make one "
+                                "with `make pretrained` (handmesh pretrain --install)")
+    return path
+
+
+def pretrained(device: str = "cpu"):
+    """The shipped pretrained MSMR-Net, in eval mode.
+
+    Args:
+        device: ``"cpu"``, ``"cuda"`` or ``"auto"``.
+
+    Returns:
+        The [`MSMRNet`][handmesh_tutorial.model.MSMRNet]; its input is a crop of
+        ``pretrained_info()["config"]["image_size"]`` pixels around one hand, normalised as the
+        training crops are
+        ([`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]).
+    """
+    from .train import load_checkpoint
+
+    net, _ = load_checkpoint(pretrained_path(), device=device)
+    return net
+
+
+def pretrained_info() -> dict:
+    """What made the shipped weights: ``config`` (the training run's), ``pretrained`` (recipe,
+    data seeds and counts, seconds, hardware, commit, date), ``history`` (one row per epoch) and
+    ``weights`` (storage: ``"int8"`` or ``"float16"``)."""
+    from .train.checkpoints import _read_checkpoint
+
+    ck = _read_checkpoint(pretrained_path())
+    return {k: ck.get(k) for k in ("config", "pretrained", "history", "weights", "epoch",
+                                   "step", "template_hash", "torch_version")}
+
+
+@dataclass
+class PretrainedRecipe:
+    """How the shipped network is made (defaults: the shipped file's recipe).
+
+    Attributes:
+        train_scenes: mixed-kind training scenes (hand-hand, hand-object, hand-chain).
+        val_scenes: validation scenes (their own seed), scored after every epoch.
+        data_seed: seed of the training scenes; validation uses ``data_seed + 1``. Evaluate on
+            other seeds (the demo and the notebooks use 0 to 10).
+        render_size: scene image side, pixels (FreiHAND's 224).
+        image_size: network input crop side, pixels.
+        encoder: image encoder; ``resnet10`` keeps the int8 file under 10 MB.
+        recipe: ``"cpu"`` or ``"paper"`` ([`RECIPES`][handmesh_tutorial.demo.config.RECIPES]).
+        epochs: training epochs.
+        batch_size: training batch size.
+        lr: Adam learning rate; multiplied by ``lr_gamma`` after every third of the epochs.
+        lr_gamma: learning-rate decay factor.
+        augment: random rotation, scale, shift and colour of the training crops.
+        precision: ``"bfloat16"`` (autocast; on GPUs and CPUs with bfloat16 units) or
+            ``"float32"``.
+        workers: scene-generator processes (0: one per CPU).
+        loader_workers: data-loader processes while training (0: one per CPU, less one).
+        seed: network initialisation, data order and augmentation seed.
+        device: ``"auto"`` (CUDA when available), ``"cuda"`` or ``"cpu"``.
+    """
+
+    train_scenes: int = 40_000
+    val_scenes: int = 500
+    data_seed: int = 100
+    render_size: int = 224
+    image_size: int = 128
+    encoder: str = "resnet10"
+    recipe: str = "cpu"
+    epochs: int = 24
+    batch_size: int = 128
+    lr: float = 1e-3
+    lr_gamma: float = 0.3
+    augment: bool = True
+    precision: str = "bfloat16"
+    workers: int = 0
+    loader_workers: int = 0
+    seed: int = 0
+    device: str = "auto"
+
+    def __post_init__(self):
+        from .demo.config import RECIPES
+
+        if self.recipe not in RECIPES:
+            raise ValueError(f"recipe must be one of {sorted(RECIPES)}, got {self.recipe!r}")
+        for name in ("train_scenes", "val_scenes", "epochs", "batch_size", "render_size",
+                     "image_size"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        for name in ("workers", "loader_workers"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+
+    def train_config(self, data, val_data, out_dir, progress: bool = True):
+        """The [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] of the training run."""
+        from .demo.config import RECIPES
+        from .train import TrainConfig
+
+        cpus = os.cpu_count() or 1
+        return TrainConfig(
+            data=str(data), val_data=str(val_data), val_fraction=0.0,
+            image_size=self.image_size, epochs=self.epochs, batch_size=self.batch_size,
+            lr=self.lr, lr_step=max(1, math.ceil(self.epochs / 3)), lr_gamma=self.lr_gamma,
+            augment=self.augment, encoder=self.encoder, decoder="multi", attention=True,
+            seed=self.seed, device=self.device, threads=None,
+            num_workers=self.loader_workers or max(0, cpus - 1), cache_data=False,
+            val_batch_size=256, precision=self.precision, out_dir=str(out_dir),
+            progress=progress, **RECIPES[self.recipe])
+
+
+def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
+                             workers: int, max_seconds: float | None = None,
+                             parts: int = 1, progress: bool = True, log=print) -> dict:
+    """Generate up to ``num`` mixed-kind scenes into ``root``, within a time budget if given.
+
+    With ``max_seconds``, the set is made as ``parts`` shards
+    ([`generate_dataset`][handmesh_tutorial.dataset.generate.generate_dataset] ``shard=(k,
+    parts)``) and no new shard is started when the mean time of the shards so far would overrun
+    the budget; the shards made are hard-linked into ``root`` (``merge_shards``), so a set cut
+    short is still a valid root of the scenes it has (``InterSHDataset.missing`` lists the rest).
+
+    Returns:
+        ``{"root": Path, "scenes": int, "seconds": float, "shards": int}``.
+    """
+    from .dataset import InterSHDataset, merge_shards
+    from .demo.run import generate_scenes
+
+    root = Path(root)
+    t0 = time.perf_counter()
+    say = log or (lambda *_: None)
+    if max_seconds is None or parts <= 1:
+        generate_scenes(root, num, seed, render_size=render_size, workers=workers,
+                        progress=progress)
+        return {"root": root, "scenes": len(InterSHDataset(root)),
+                "seconds": time.perf_counter() - t0, "shards": 1}
+    shard_roots = []
+    for k in range(parts):
+        spent = time.perf_counter() - t0
+        if k and spent + spent / k > max_seconds:
+            say(f"      stopping after {k} of {parts} shards: {spent:.0f} s spent, the next "
+                f"would end past the {max_seconds:.0f} s budget")
+            break
+        r = root.parent / f".{root.name}-shards" / f"{k:04d}"
+        generate_scenes(r, num, seed, render_size=render_size, workers=workers,
+                        progress=progress, shard=(k, parts))
+        shard_roots.append(r)
+    merge_shards(shard_roots, root, link=True, progress=False, durable=False)
+    shutil.rmtree(root.parent / f".{root.name}-shards")
+    return {"root": root, "scenes": len(InterSHDataset(root)),
+            "seconds": time.perf_counter() - t0, "shards": len(shard_roots)}
+
+
+def _hardware(device) -> str:
+    import torch
+
+    name = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            name = next(ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    cpu = f"{name}, {os.cpu_count()} CPUs"
+    if str(device).startswith("cuda") and torch.cuda.is_available():
+        return f"{torch.cuda.get_device_name(0)}; {cpu}"
+    return cpu
+
+
+def _commit() -> str | None:
+    """The library's git commit (``HANDMESH_COMMIT`` where the tree has no ``.git``)."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent,
+                             capture_output=True, text=True, timeout=10, check=True)
+        return out.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return os.environ.get("HANDMESH_COMMIT")
+
+
+def export_pretrained(checkpoint: str | os.PathLike, out: str | os.PathLike, *,
+                      weights: str = "int8", info: dict | None = None) -> Path:
+    """Write a training checkpoint as a small, loadable pretrained file (atomically).
+
+    Keeps the config, template hash, epoch, step and history; drops the optimiser, scheduler,
+    random states and per-step losses. ``weights="int8"``: per-channel int8 weights
+    ([`quantize_state_dict`][handmesh_tutorial.train.checkpoints.quantize_state_dict]), about a
+    quarter of float32; ``"float16"``: half. Both load with ``load_checkpoint`` (float32 again).
+
+    Args:
+        checkpoint: a ``checkpoint_*.pt`` of [`train`][handmesh_tutorial.train.loop.train].
+        out: the file to write.
+        weights: ``"int8"`` or ``"float16"``.
+        info: stored as ``pretrained`` (recipe, data, seconds, hardware...).
+
+    Returns:
+        ``out`` as a ``Path``.
+    """
+    import io
+
+    import torch
+
+    from ._io import atomic_write_bytes
+    from .train.checkpoints import _read_checkpoint, quantize_state_dict
+    from .train.config import TrainConfig
+    from .train.templates import build_model_from_config, resolve_template
+
+    if weights not in ("int8", "float16"):
+        raise ValueError(f"weights must be 'int8' or 'float16', got {weights!r}")
+    ck = _read_checkpoint(checkpoint)
+    cfg = TrainConfig.from_dict(ck["config"])
+    net = build_model_from_config(cfg, resolve_template(cfg.template))
+    names = [n for n, _ in net.named_parameters()]
+    if weights == "int8":
+        model, scales = quantize_state_dict(ck["model"], names)
+    else:
+        model = {k: (v.half() if k in set(names) and v.is_floating_point() else v)
+                 for k, v in ck["model"].items()}
+        scales = {}
+    small = {k: ck[k] for k in ("format", "config", "template_hash", "num_vertices", "epoch",
+                                "step", "history", "best", "torch_version")}
+    small.update(model=model, scales=scales, weights=weights, optimizer=None, scheduler=None,
+                 pretrained=dict(info or {}))
+    buf = io.BytesIO()
+    torch.save(small, buf)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out, buf.getvalue(), True)
+    return out
+
+
+class _OutOfTime(Exception):
+    pass
+
+
+def build_pretrained(out: str | os.PathLike = "runs/pretrained",
+                     recipe: PretrainedRecipe | None = None, *,
+                     max_generate_seconds: float | None = None,
+                     max_train_seconds: float | None = None, install: bool = False,
+                     progress: bool = True, log=print) -> dict:
+    """Make the pretrained MSMR-Net: generate the scenes, train, export (``handmesh pretrain``).
+
+    Steps: ``out/data/train`` (``recipe.train_scenes``, seed ``data_seed``) and ``out/data/val``
+    (``val_scenes``, seed ``data_seed + 1``); training in ``out/train`` (a normal run of
+    [`train`][handmesh_tutorial.train.loop.train]); after every epoch the last checkpoint is
+    exported to ``out/msmr_net_pretrained.pt`` (int8) and ``out/msmr_net_float16.pt``, so a run
+    cut short still leaves a usable file. ``install=True`` copies the int8 file into the package
+    (``handmesh_tutorial/assets/pretrained/``), where
+    [`pretrained`][handmesh_tutorial.pretrained.pretrained] finds it.
+
+    Args:
+        out: output folder.
+        recipe: the recipe (default: the shipped file's).
+        max_generate_seconds: stop generating training scenes when the next of 10 shards would
+            end past this budget (``None``: all ``train_scenes``).
+        max_train_seconds: stop training after the epoch that leaves less than one epoch's time
+            in this budget (``None``: all ``epochs``). The learning-rate schedule is the
+            planned one, so a cut run has not decayed as planned; the file records both.
+        install: copy the result into the package.
+        progress: tqdm bars.
+        log: one-line messages (``None``: silent).
+
+    Returns:
+        dict with ``file`` (the int8 export), ``float16``, ``info`` (what the file records) and
+        ``history``.
+    """
+    recipe = recipe or PretrainedRecipe()
+    say = log or (lambda *_: None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cpus = os.cpu_count() or 1
+    workers = recipe.workers or cpus
+    t0 = time.perf_counter()
+    say(f"[1/3] generating up to {recipe.train_scenes} training and {recipe.val_scenes} "
+        f"validation scenes ({recipe.render_size} px, {workers} workers) in {out / 'data'}")
+    val = generate_training_scenes(out / "data" / "val", recipe.val_scenes, recipe.data_seed + 1,
+                                   render_size=recipe.render_size, workers=workers,
+                                   progress=progress, log=log)
+    budget = None if max_generate_seconds is None else max_generate_seconds - val["seconds"]
+    tr = generate_training_scenes(out / "data" / "train", recipe.train_scenes, recipe.data_seed,
+                                  render_size=recipe.render_size, workers=workers,
+                                  max_seconds=budget, parts=10 if budget else 1,
+                                  progress=progress, log=log)
+    t_gen = time.perf_counter() - t0
+    say(f"      {tr['scenes']} training + {val['scenes']} validation scenes in {t_gen:.0f} s")
+
+    # torch only now: the generator's workers fork only from a process without torch
+    import torch
+
+    from .train import train
+
+    config = recipe.train_config(tr["root"], val["root"], out / "train", progress)
+    info = {"recipe": asdict(recipe), "max_generate_seconds": max_generate_seconds,
+            "max_train_seconds": max_train_seconds,
+            "data": {"train_seed": recipe.data_seed, "train_scenes": tr["scenes"],
+                     "val_seed": recipe.data_seed + 1, "val_scenes": val["scenes"],
+                     "kinds": "mixed (hand-hand, hand-object, hand-chain)",
+                     "render_size": recipe.render_size},
+            "seconds": {"generate": round(t_gen, 1)}, "torch": str(torch.__version__),
+            "commit": _commit(), "date": datetime.date.today().isoformat()}
+    files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
+    t_train = time.perf_counter()
+    last = out / "train" / "checkpoint_last.pt"
+
+    def after_epoch(row):
+        spent = time.perf_counter() - t_train
+        info["seconds"]["train"] = round(spent, 1)
+        info["epochs_done"] = int(row["epoch"])
+        info["hardware"] = _hardware(config.device if config.device != "auto" else
+                                     ("cuda" if torch.cuda.is_available() else "cpu"))
+        export_pretrained(last, files["file"], weights="int8", info=info)
+        export_pretrained(last, files["float16"], weights="float16", info=info)
+        say(f"      epoch {row['epoch']}: train loss {1000 * row['train_loss']:.2f} mm, val "
+            f"PA-MPJPE {row.get('val_pa_mpjpe', float('nan')):.2f} mm, {spent:.0f} s")
+        if max_train_seconds is not None and row["epoch"] < config.epochs \
+                and spent * (1 + 1 / row["epoch"]) > max_train_seconds:
+            raise _OutOfTime
+
+    say(f"[2/3] training ({recipe.epochs} epochs, batch {recipe.batch_size}, "
+        f"{recipe.image_size}-px crops, {recipe.encoder}) in {out / 'train'}")
+    resume = last.exists()
+    try:
+        train(config, resume=resume, callback=after_epoch)
+    except _OutOfTime:
+        say(f"      stopped after epoch {info['epochs_done']} of {config.epochs}: the next "
+            f"would end past the {max_train_seconds:.0f} s budget")
+    say(f"[3/3] exported {files['file']} ({files['file'].stat().st_size / 1e6:.1f} MB, int8) and "
+        f"{files['float16'].name}")
+    if install:
+        _ASSET_DIR.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(files["file"], _ASSET_DIR / PRETRAINED_FILE)
+        say(f"      installed as {_ASSET_DIR / PRETRAINED_FILE}")
+    return {**files, "info": info}
