@@ -213,7 +213,7 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     vr = visibility_ratios(out.labels, alone, on_outside="ignore")
     for lab, m in alone.items():
         stray = int(np.count_nonzero((out.labels == lab) & ~m))
-        if stray > max(8, 0.005 * np.count_nonzero(m)):
+        if stray > max(8, 0.03 * np.count_nonzero(m)):
             visibility_ratios(out.labels, {lab: m})  # raises, naming the label and the count
     hands = [b for b in scene.bodies if b.kind == "hand"]
     return {
