@@ -64,15 +64,16 @@ from .blocks import CoarseMeshTransformer, SparseVertexMap
 from .decoder import MultiPathDecoder, SinglePathDecoder, hierarchy_spirals
 from .encoder import build_encoder
 from .keypoints import KeypointEncoder
+from .pretrained import pretrained  # the shipped network: hmt.model.pretrained()
 from .rotation import GlobalRotationHead
 from .sampling import mesh_hierarchy
 from .skinned import SkinnedOutput, skinning_of
 from .surface import smoothing_matrix, smoothing_steps
 
-__all__ = ["MeshTemplate", "as_template", "root_centred_template", "MSMRNet", "build_model",
-           "parameter_counts", "parameter_table", "DEFAULT_SINGLE_CHANNELS",
-           "DEFAULT_MULTI_CHANNELS", "DEFAULT_LATENT_CHANNELS", "DEFAULT_SMOOTHING_LENGTH",
-           "OUTPUTS", "pretrained"]
+__all__ = ["MeshTemplate", "as_template", "root_centred_template", "MSMRNet", "OUTPUTS",
+           "build_model", "parameter_counts", "parameter_table", "pretrained",
+           "DEFAULT_LATENT_CHANNELS", "DEFAULT_SINGLE_CHANNELS", "DEFAULT_MULTI_CHANNELS",
+           "DEFAULT_SMOOTHING_LENGTH"]
 
 DEFAULT_SINGLE_CHANNELS = (32, 32, 64, 64, 128)
 """Per-level decoder channels of the single-path baseline, finest level first."""
@@ -497,18 +498,3 @@ def parameter_table(model: MSMRNet) -> str:
     lines.append(f"{'total':<16}{c['total']:>12,}")
     lines.append(f"FC / decoder = {c['latent_to_mesh'] / max(c['decoder'], 1):.2f}")
     return "\n".join(lines)
-
-
-def pretrained(device: str = "cpu") -> MSMRNet:
-    """The pretrained MSMR-Net shipped with the package, in eval mode (see
-    [`handmesh_tutorial.pretrained`][handmesh_tutorial.pretrained]: how it was made, its scores).
-
-    Args:
-        device: ``"cpu"``, ``"cuda"`` or ``"auto"``.
-
-    Raises:
-        FileNotFoundError: this installation has no pretrained file.
-    """
-    from .pretrained import pretrained as _load
-
-    return _load(device)

@@ -37,9 +37,9 @@ __all__ = ["PRETRAINED_FILE", "PretrainedRecipe", "pretrained", "pretrained_path
            "pretrained_info", "build_pretrained", "export_pretrained", "generate_training_scenes"]
 
 PRETRAINED_FILE = "msmr_net_pretrained.pt"
-"""Name of the shipped file in ``handmesh_tutorial/assets/pretrained/``."""
+"""Name of the shipped file in ``handmesh_tutorial/assets/``."""
 
-_ASSET_DIR = Path(__file__).resolve().parent / "assets" / "pretrained"
+_ASSET_DIR = Path(__file__).resolve().parent / "assets"
 
 
 def pretrained_path() -> Path:
@@ -170,7 +170,7 @@ def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, re
     ([`generate_dataset`][handmesh_tutorial.dataset.generate.generate_dataset] ``shard=(k,
     parts)``) and no new shard is started when the mean time of the shards so far would overrun
     the budget; the shards made are hard-linked into ``root`` (``merge_shards``), so a set cut
-    short is still a valid root of the scenes it has (``InterSHDataset.missing`` lists the rest).
+    short is still a valid root of the scenes it has (``meta.json`` ranges list them).
 
     Returns:
         ``{"root": Path, "scenes": int, "seconds": float, "shards": int}``.
@@ -219,13 +219,16 @@ def _hardware(device) -> str:
 
 
 def _commit() -> str | None:
-    """The library's git commit (``HANDMESH_COMMIT`` where the tree has no ``.git``)."""
+    """The library's git commit: ``HANDMESH_COMMIT`` when set (a copied tree whose ``.git`` is
+    not the code's), else ``git rev-parse HEAD``."""
+    if os.environ.get("HANDMESH_COMMIT"):
+        return os.environ["HANDMESH_COMMIT"]
     try:
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent,
                              capture_output=True, text=True, timeout=10, check=True)
         return out.stdout.strip() or None
     except (OSError, subprocess.SubprocessError):
-        return os.environ.get("HANDMESH_COMMIT")
+        return None
 
 
 def export_pretrained(checkpoint: str | os.PathLike, out: str | os.PathLike, *,
@@ -295,7 +298,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     [`train`][handmesh_tutorial.train.loop.train]); after every epoch the last checkpoint is
     exported to ``out/msmr_net_pretrained.pt`` (int8) and ``out/msmr_net_float16.pt``, so a run
     cut short still leaves a usable file. ``install=True`` copies the int8 file into the package
-    (``handmesh_tutorial/assets/pretrained/``), where
+    (``handmesh_tutorial/assets/``), where
     [`pretrained`][handmesh_tutorial.pretrained.pretrained] finds it.
 
     Args:

@@ -225,6 +225,35 @@ def test_reader_api(tmp_path):
     assert "4 samples" in repr(fewer) and "1 missing" in repr(fewer) and fewer.missing == [3]
 
 
+def test_read_target_equals_the_full_read_and_names_what_is_wrong(tmp_path):
+    gen(tmp_path / "r", num=3)
+    ds = D.InterSHDataset(tmp_path / "r")
+    for i in range(3):
+        full, lean = ds[i], ds.target(i)
+        t = full["target"]
+        want = (full["image"], full["K"], full["meshes"][t][0], full["joints"][t],
+                full["sides"][t], full["vr"][t])
+        for a, b in zip(lean, want, strict=True):
+            if isinstance(a, np.ndarray):
+                assert a.dtype == b.dtype and np.array_equal(a, b)
+            else:
+                assert a == b
+    d = ds.sample_dir(1)
+    t = ds.annotation(1)["target"]
+    with np.load(d / "annotation.npz") as z:
+        arrays = {k: z[k] for k in z.files if k != f"joints_{t}"}
+    np.savez(d / "annotation.npz", **arrays)
+    with pytest.raises(ValueError, match=f"annotation.npz: missing key 'joints_{t}'"):
+        ds.target(1)
+    arrays[f"joints_{t}"] = np.zeros((20, 3), np.float32)
+    np.savez(d / "annotation.npz", **arrays)
+    with pytest.raises(ValueError, match=rf"'joints_{t}' has shape \(20, 3\)"):
+        ds.target(1)
+    (ds.sample_dir(2) / "image.png").unlink()
+    with pytest.raises(FileNotFoundError, match="image.png missing"):
+        ds.target(2)
+
+
 def test_kind_and_image_size_are_checked(tmp_path):
     with pytest.raises(ValueError, match="kind 'hand-object' is not one of"):
         D.generate_dataset(tmp_path / "k", functools.partial(make, kind="hand-object"), 2, 0,

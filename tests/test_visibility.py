@@ -66,6 +66,22 @@ def test_vr_errors():
         V.visibility_ratio(scene, alone, 1, on_outside="clip")
 
 
+def test_vr_stray_pixels_pass_as_jitter_up_to_their_share():
+    """A GPU rasteriser flips some edge pixels between the scene and alone passes: ``stray``
+    lets that share through, counted as hidden; beyond it ``on_outside`` applies."""
+    scene = np.zeros((10, 10), np.int32)
+    alone = np.zeros((10, 10), bool)
+    alone[:5, :] = True  # 50 pixels alone
+    scene[:4, :] = 1  # 40 visible inside
+    scene[5, :2] = 1  # 2 stray pixels: 4 % of 50
+    with pytest.raises(ValueError, match="2 visible scene pixels"):
+        V.visibility_ratio(scene, alone, 1)
+    assert V.visibility_ratio(scene, alone, 1, stray=0.04) == pytest.approx(40 / 50)
+    with pytest.raises(ValueError, match="2 visible scene pixels"):
+        V.visibility_ratio(scene, alone, 1, stray=0.03)
+    assert V.visibility_ratios(scene, {1: alone}, stray=0.05) == {1: pytest.approx(0.8)}
+
+
 def test_vr_bins_edges():
     assert V.VR_BINS == ((0.40, 0.60), (0.60, 0.80), (0.80, 0.95), (0.95, 1.00))
     cases = {0.0: -1, 0.3999: -1, 0.40: 0, 0.5999: 0, 0.60: 1, 0.7999: 1, 0.80: 2, 0.9499: 2,

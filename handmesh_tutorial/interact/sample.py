@@ -208,13 +208,8 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     noise = rng.uniform(0.0, 2.0)
     image = np.clip(out.image + rng.normal(0.0, noise, out.image.shape) + 0.5, 0, 255)
     image = image.astype(np.uint8)
-    # A GPU rasteriser (NVIDIA's EGL) can flip a few edge pixels between the scene pass and a
-    # body's alone pass (Mesa's never does): a handful is jitter, counted as hidden; more is a bug
-    vr = visibility_ratios(out.labels, alone, on_outside="ignore")
-    for lab, m in alone.items():
-        stray = int(np.count_nonzero((out.labels == lab) & ~m))
-        if stray > max(8, 0.03 * np.count_nonzero(m)):
-            visibility_ratios(out.labels, {lab: m})  # raises, naming the label and the count
+    # NVIDIA's EGL flips a few edge pixels between the scene and alone passes (Mesa never does)
+    vr = visibility_ratios(out.labels, alone, stray=0.03)
     hands = [b for b in scene.bodies if b.kind == "hand"]
     return {
         "image": image,

@@ -1,0 +1,185 @@
+"""The pretrained model: int8 storage, export, loading by name, the recipe, time-bounded
+generation, and the shipped file itself."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import handmesh_tutorial as hmt
+from handmesh_tutorial import augment as A
+from handmesh_tutorial import pretrained as P
+from handmesh_tutorial import train as T
+from handmesh_tutorial.cli import main as cli_main
+from handmesh_tutorial.dataset import InterSHDataset
+from handmesh_tutorial.testing import toy_sample
+from handmesh_tutorial.train.checkpoints import dequantize_state_dict, quantize_state_dict
+
+torch.set_num_threads(1)
+
+TINY = {"image_size": 32, "channels": (4, 4, 8, 8, 8), "latent_channels": 8, "threads": 1,
+        "progress": False, "durable": False}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """A two-epoch training run on toy crops: its checkpoint, dataset and model."""
+    out = tmp_path_factory.mktemp("pretrained_run")
+    samples = [toy_sample(i, image_size=64) for i in range(6)]
+    ds = A.InterSHTorchDataset(samples, 32, train=True, augment=False)
+    cfg = T.TrainConfig(out_dir=str(out), epochs=2, batch_size=3, lr=1e-3, **TINY)
+    res = T.train(cfg, dataset=ds)
+    return {"checkpoint": res.checkpoint, "dataset": ds, "model": res.model.eval(), "out": out}
+
+
+def _vertices(model, ds):
+    x = torch.stack([ds[i]["image"] for i in range(len(ds))])
+    with torch.no_grad():
+        return model(x)["vertices"].numpy()
+
+
+def test_quantize_round_trip_is_within_half_a_step_and_keeps_buffers_exact():
+    gen = torch.Generator().manual_seed(0)
+    w = torch.randn(6, 3, 3, 3, generator=gen) * torch.logspace(-3, 0, 6)[:, None, None, None]
+    state = {"conv.weight": w, "conv.bias": torch.randn(6, generator=gen),
+             "buf.template": torch.randn(10, 3, generator=gen, dtype=torch.float64),
+             "bn.num_batches_tracked": torch.tensor(7)}
+    stored, scales = quantize_state_dict(state, ["conv.weight", "conv.bias"])
+    assert stored["conv.weight"].dtype == torch.int8 and set(scales) == {"conv.weight"}
+    assert stored["conv.bias"].dtype == torch.float16
+    assert stored["buf.template"] is not None and torch.equal(stored["buf.template"],
+                                                               state["buf.template"])
+    back = dequantize_state_dict(stored, scales)
+    step = w.abs().reshape(6, -1).amax(1) / 127  # one scale per output channel
+    err = (back["conv.weight"] - w).abs().reshape(6, -1).amax(1)
+    assert torch.all(err <= step / 2 + 1e-7)
+    # per-channel: the smallest channel (1000x smaller) keeps its relative precision
+    rel = err / w.abs().reshape(6, -1).amax(1)
+    assert rel.max() < 0.005
+    assert back["conv.bias"].dtype == torch.float32
+    assert torch.allclose(back["conv.bias"], state["conv.bias"], atol=1e-3)
+    assert back["bn.num_batches_tracked"] == 7
+    with pytest.raises(ValueError, match="conv.weight"):
+        dequantize_state_dict(stored, {"conv.weight": scales["conv.weight"][:3]})
+    with pytest.raises(ValueError, match="not stored"):
+        dequantize_state_dict(stored, {**scales, "gone": torch.ones(2)})
+
+
+def test_export_loads_back_close_to_the_run_and_is_small(run, tmp_path):
+    ref = _vertices(run["model"], run["dataset"])
+    info = {"data": {"train_seed": 5}, "hardware": "test"}
+    f8 = P.export_pretrained(run["checkpoint"], tmp_path / "a.pt", info=info)
+    f16 = P.export_pretrained(run["checkpoint"], tmp_path / "b.pt", weights="float16")
+    full = torch.load(run["checkpoint"], weights_only=True)
+    raw = torch.load(f8, weights_only=True)
+    assert raw["optimizer"] is None and "rng" not in raw and raw["weights"] == "int8"
+    assert raw["pretrained"] == info and raw["epoch"] == full["epoch"] == 2
+    params = dict(run["model"].named_parameters())
+    big = [k for k, v in params.items() if v.ndim >= 2]
+    assert big and all(raw["model"][k].dtype == torch.int8 for k in big)
+    for path, tol in ((f8, 0.5e-3), (f16, 0.1e-3)):  # metres: 0.5 mm and 0.1 mm
+        net, ck = T.load_checkpoint(path)
+        assert not net.training
+        got = _vertices(net, run["dataset"])
+        assert np.abs(got - ref).max() < tol, (path.name, np.abs(got - ref).max())
+    n_float = sum(v.numel() for v in params.values())
+    assert f8.stat().st_size < 0.5 * 4 * n_float + 200_000
+    with pytest.raises(ValueError, match="int8"):
+        P.export_pretrained(run["checkpoint"], tmp_path / "c.pt", weights="int4")
+
+
+def test_pretrained_is_found_by_name_and_missing_says_how_to_make_it(run, tmp_path,
+                                                                     monkeypatch, capsys):
+    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
+    with pytest.raises(FileNotFoundError, match="make pretrained"):
+        hmt.model.pretrained()
+    with pytest.raises(FileNotFoundError, match="make pretrained"):
+        T.load_checkpoint("pretrained")
+    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / P.PRETRAINED_FILE,
+                        info={"data": {"train_seed": 9}})
+    net = hmt.model.pretrained()
+    ref = _vertices(T.load_checkpoint(tmp_path / "assets" / P.PRETRAINED_FILE)[0],
+                    run["dataset"])
+    assert np.array_equal(_vertices(net, run["dataset"]), ref)
+    info = P.pretrained_info()
+    assert info["pretrained"]["data"]["train_seed"] == 9 and info["weights"] == "int8"
+    assert len(info["history"]) == 2
+
+
+def test_recipe_checks_its_values_and_makes_the_training_config(tmp_path):
+    r = P.PretrainedRecipe(epochs=9, loader_workers=3, recipe="paper")
+    cfg = r.train_config(tmp_path / "tr", tmp_path / "va", tmp_path / "out", progress=False)
+    assert cfg.val_fraction == 0.0 and cfg.val_data == str(tmp_path / "va")
+    assert cfg.lr_step == 3 and cfg.lr_gamma == 0.3 and cfg.num_workers == 3
+    assert cfg.keypoint_weight == 0.0  # the paper recipe: L1 only
+    cpu = P.PretrainedRecipe().train_config("a", "b", "c")
+    assert cpu.keypoint_weight > 0 and cpu.model_kwargs["output"] == "skinned"
+    assert cpu.image_size == 128 and cpu.encoder == "resnet10"
+    for bad, match in (({"recipe": "gpu"}, "recipe"), ({"epochs": 0}, "epochs"),
+                       ({"workers": -1}, "workers"), ({"train_scenes": 2.5}, "train_scenes")):
+        with pytest.raises(ValueError, match=match):
+            P.PretrainedRecipe(**bad)
+
+
+def test_time_bounded_generation_keeps_whole_shards_in_a_valid_root(tmp_path, monkeypatch):
+    import handmesh_tutorial.demo.run as demo_run
+    from handmesh_tutorial.dataset import generate_dataset
+
+    def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
+        return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
+                                "hand-hand", shard=shard, progress=False, durable=False)
+
+    monkeypatch.setattr(demo_run, "generate_scenes", toy_scenes)
+    said = []
+    got = P.generate_training_scenes(tmp_path / "train", 12, 3, render_size=32, workers=1,
+                                     max_seconds=0.0, parts=4, log=said.append)
+    # the first shard always runs; with no budget left no second one starts
+    assert got["shards"] == 1 and got["scenes"] == 3
+    ds = InterSHDataset(tmp_path / "train")
+    assert len(ds) == 3 and not ds.missing and ds.meta["ranges"] == [[0, 3]]
+    assert "stopping after 1 of 4 shards" in said[0]
+    assert not (tmp_path / ".train-shards").exists()
+    full = P.generate_training_scenes(tmp_path / "all", 12, 3, render_size=32, workers=1,
+                                      max_seconds=math.inf, parts=4, log=said.append)
+    assert full["shards"] == 4 and full["scenes"] == 12 and not InterSHDataset(full["root"]).missing
+    # the shards hold the same scenes as one unsharded set
+    a, b = InterSHDataset(tmp_path / "train"), InterSHDataset(full["root"])
+    assert np.array_equal(a[2]["image"], b[2]["image"])
+
+
+def test_cli_pretrain_help_and_evaluate_by_name(run, tmp_path, monkeypatch, capsys):
+    with pytest.raises(SystemExit):
+        cli_main(["pretrain", "--help"])
+    assert "--max-train-seconds" in capsys.readouterr().out
+    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
+    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / P.PRETRAINED_FILE)
+    from handmesh_tutorial.dataset import generate_dataset
+
+    root = tmp_path / "toy"
+    generate_dataset(root, lambda s: toy_sample(s, image_size=64), 4, 2, "hand-hand",
+                     progress=False, durable=False)
+    code = cli_main(["evaluate", "--checkpoint", "pretrained", "--data", str(root),
+                     "--no-progress", "--device", "cpu"])
+    assert code == 0 and "PA-MPJPE" in capsys.readouterr().out
+
+
+shipped = pytest.mark.skipif(not (P._ASSET_DIR / P.PRETRAINED_FILE).is_file(),
+                             reason="no pretrained file in this checkout")
+
+
+@shipped
+def test_the_shipped_file_fits_the_template_and_records_how_it_was_made():
+    path = P.pretrained_path()
+    assert path.stat().st_size <= 10_000_000
+    info = P.pretrained_info()
+    made = info["pretrained"]
+    assert info["weights"] == "int8"
+    assert made["data"]["train_scenes"] >= 1000 and made["data"]["train_seed"] not in range(11)
+    assert made["hardware"] and made["seconds"]["train"] > 0 and made["commit"]
+    # a new hand template invalidates the weights: loading checks the template's hash
+    net = hmt.model.pretrained()
+    size = info["config"]["image_size"]
+    out = net(torch.zeros(1, 3, size, size))
+    assert out["vertices"].shape[1] == len(hmt.train.resolve_template(None).vertices)
+    assert torch.isfinite(out["vertices"]).all()
