@@ -40,7 +40,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"held-out: {res.scores['num_samples']} scenes; '{demo.BASELINE_ROW}' = the "
           f"template's open hand and '{demo.MEAN_ROW}' = the Procrustes mean of the training "
           "meshes, each predicted for every image: the bars to clear after alignment")
-    print(demo.headline(res.scores, res.baseline_scores, res.mean_hand_scores))
+    print(demo.headline(res.scores, res.baseline_scores, res.mean_hand_scores,
+                        res.pretrained_scores))
     print(res.comparison or res.table)
     for name in ("overlays", "loss", "pck", "vr", "json"):
         if name in res.files:
@@ -317,15 +318,15 @@ def build_parser() -> argparse.ArgumentParser:
     pre.add_argument("--install", action="store_true",
                      help="copy the result into the package, where hmt.model.pretrained() and "
                      "--checkpoint pretrained find it")
-    pre.add_argument("--train-scenes", type=int, help="training scenes (default: 40000)")
-    pre.add_argument("--val-scenes", type=int, help="validation scenes (default: 500)")
+    pre.add_argument("--train-scenes", type=int, help="training scenes (default: 20000)")
+    pre.add_argument("--val-scenes", type=int, help="validation scenes (default: 300)")
     pre.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 100; "
                      "validation: the next)")
     pre.add_argument("--render-size", type=int, help="scene image side (default: 224)")
     pre.add_argument("--image-size", type=int, help="network crop side (default: 128)")
     pre.add_argument("--encoder", help="image encoder (default: resnet10)")
     pre.add_argument("--recipe", choices=("cpu", "paper"), help="loss recipe (default: cpu)")
-    pre.add_argument("--epochs", type=int, help="training epochs (default: 24)")
+    pre.add_argument("--epochs", type=int, help="training epochs (default: 16)")
     pre.add_argument("--batch-size", type=int, help="batch size (default: 128)")
     pre.add_argument("--lr", type=float, help="Adam learning rate (default: 1e-3)")
     pre.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")

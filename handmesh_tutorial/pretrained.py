@@ -111,14 +111,14 @@ class PretrainedRecipe:
         device: ``"auto"`` (CUDA when available), ``"cuda"`` or ``"cpu"``.
     """
 
-    train_scenes: int = 40_000
-    val_scenes: int = 500
+    train_scenes: int = 20_000
+    val_scenes: int = 300
     data_seed: int = 100
     render_size: int = 224
     image_size: int = 128
     encoder: str = "resnet10"
     recipe: str = "cpu"
-    epochs: int = 24
+    epochs: int = 16
     batch_size: int = 128
     lr: float = 1e-3
     lr_gamma: float = 0.3

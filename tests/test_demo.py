@@ -119,6 +119,35 @@ def test_rest_hand_baseline_row_equals_an_independent_computation(smoke_run):
     assert mean["pa_mpjpe"] == pytest.approx(round(summary["mean_hand_scores"]["pa_mpjpe"], 2))
 
 
+def test_pretrained_row_is_the_shipped_network_on_the_same_scenes(smoke_run):
+    """The report's pretrained row equals an independent evaluation of the shipped file on the
+    demo's test scenes, at the network's own crop size."""
+    out = smoke_run
+    info = hmt.pretrained.pretrained_info()
+    want = hmt.train.evaluate(hmt.model.pretrained(), str(out / "data" / "test"),
+                              image_size=info["config"]["image_size"], baseline=False,
+                              progress=False)["scores"]
+    row = demo.parse_headline((out / "report.md").read_text(), demo.PRETRAINED_ROW)
+    for key, _, fmt in demo.HEADLINE:
+        assert row[key] == pytest.approx(_fmt_round(want[key], fmt), abs=1e-12), key
+    summary = json.loads((out / "demo.json").read_text())
+    assert summary["pretrained_scores"]["pa_mpjpe"] == pytest.approx(want["pa_mpjpe"])
+
+
+def test_demo_without_a_pretrained_file_leaves_its_row_out(tmp_path, monkeypatch):
+    from handmesh_tutorial import pretrained
+
+    monkeypatch.setattr(pretrained, "_ASSET_DIR", tmp_path / "no_assets")
+    said = []
+    cfg = demo.DemoConfig.from_budget(hmt.budget("smoke"), train_samples=4, test_samples=4,
+                                      epochs=1)
+    res = demo.run_demo(tmp_path / "run", seed=5, config=cfg, progress=False, log=said.append)
+    assert res.pretrained_scores is None
+    assert any("no pretrained network" in m for m in said)
+    with pytest.raises(ValueError, match="no row"):
+        demo.parse_headline(res.report.read_text(), demo.PRETRAINED_ROW)
+
+
 def test_demo_resumes(smoke_run):
     out = smoke_run
     before = json.loads((out / "eval" / "eval.json").read_text())["scores"]
@@ -152,6 +181,10 @@ def test_headline_round_trip_and_missing_table():
     with pytest.raises(ValueError, match="no row 'other'"):
         demo.parse_headline(text, "other")
     assert demo.BASELINE_ROW not in demo.headline(scores)
+    four = demo.headline(scores, base, base, {k: 3 * v for k, v in scores.items()})
+    assert [ln.split("|")[1].strip() for ln in four.splitlines()[2:]] == [
+        demo.MODEL_ROW, demo.PRETRAINED_ROW, demo.BASELINE_ROW, demo.MEAN_ROW]
+    assert demo.parse_headline(four, demo.PRETRAINED_ROW)["mpjpe"] == 60.0
     del scores["flipped"]  # a score a row lacks prints as "-" and reads back as NaN
     assert math.isnan(demo.parse_headline(demo.headline(scores))["flipped"])
     with pytest.raises(ValueError, match="no headline table"):

@@ -74,9 +74,10 @@ PREREQS = {
 }
 #: Whether a notebook needs a trained model, and where it gets it.
 TRAINED = {
-    "00_quickstart": "trains a small one itself",
+    "00_quickstart": "trains a small one itself, and loads the shipped pretrained network",
     "08_training": "trains it (this is the training notebook)",
-    "09_evaluation": "yes: notebook 08's checkpoint (`runs/train08_<budget>/`); trains it if absent",
+    "09_evaluation": "yes: notebook 08's checkpoint (`runs/train08_<budget>/`; trains it if "
+                     "absent), and the shipped pretrained network",
     "10_ablation": "trains three variants with three seeds each; reuses notebook 08's run for "
                    "multi-path + attention, seed 0",
 }
@@ -84,9 +85,13 @@ TRAINED = {
 #: Where the committed ``default`` run picked up what an earlier run had left in ``notebooks/runs/``
 #: (the notebooks reuse data sets and checkpoints): its time is then less than a first run's.
 REUSED = {
+    "00_quickstart": "reuses the scenes and the short training run of an earlier execution; "
+                     "its eight fresh scenes for the pretrained network were new",
     "08_training": "the committed run generated its INTER-SH set too (about 3 min of the "
                    "total); a later run reuses it from `notebooks/runs/` and only trains",
-    "09_evaluation": "reuses notebook 08's data set and checkpoint",
+    "09_evaluation": "reuses notebook 08's data set and checkpoint, and section 5's 300 test "
+                     "scenes and 600 training-set scenes, made earlier by the same calls (about "
+                     "5 min more on a first run)",
     "10_ablation": "reuses notebook 08's data set and its run (multi-path + attention, seed 0); "
                    "the committed run trained the other eight itself, one after another, about "
                    "10 min each on a machine that other jobs shared part of the time; a rerun "
@@ -96,9 +101,9 @@ REUSED = {
 
 #: The same, in a few words, for the Learning path table.
 TRAINED_SHORT = {
-    "00_quickstart": "trains a small one",
+    "00_quickstart": "trains a small one; the pretrained one",
     "08_training": "trains it",
-    "09_evaluation": "08's checkpoint",
+    "09_evaluation": "08's checkpoint; the pretrained one",
     "10_ablation": "trains 9 (one is 08's)",
 }
 

@@ -16,7 +16,10 @@ One call runs the whole paper pipeline at laptop scale, on CPU:
    validation PA-MPVPE).
 3. **Evaluation** of the best checkpoint on the test set with
    [`handmesh_tutorial.train.evaluate`][handmesh_tutorial.train.evaluation.evaluate] into
-   ``OUT/eval`` (``eval.json``, ``predictions.npz``, ``pck.png``, ``vr.png``).
+   ``OUT/eval`` (``eval.json``, ``predictions.npz``, ``pck.png``, ``vr.png``), beside the rest
+   hand and the mean training hand; the shipped pretrained network
+   ([`handmesh_tutorial.pretrained`][handmesh_tutorial.pretrained]) is scored on the same scenes
+   when the installation has it.
 4. **Report.** ``OUT/report.md`` with the FreiHAND-style scores, the table per VR bin (the
    paper's Table 2 layout), predicted meshes drawn over held-out images next to the ground truth
    (``overlays.png``), the loss curves (``loss.png``), PCK curves and error vs VR; ``OUT/demo.json``
@@ -88,6 +91,7 @@ from .report import (
     HEADLINE,
     MEAN_ROW,
     MODEL_ROW,
+    PRETRAINED_ROW,
     headline,
     parse_headline,
     write_report,
@@ -96,5 +100,5 @@ from .run import DemoResult, generate_data, generate_scenes, run_demo
 
 __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "generate_scenes",
            "train_config", "plot_overlays", "plot_loss_curves", "write_report", "headline",
-           "parse_headline", "HEADLINE",
+           "parse_headline", "HEADLINE", "PRETRAINED_ROW",
            "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES"]

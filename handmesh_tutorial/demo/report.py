@@ -15,7 +15,7 @@ from .._io import atomic_write_text
 from .config import DemoConfig
 
 __all__ = ["headline", "write_report", "parse_headline", "HEADLINE", "MODEL_ROW", "BASELINE_ROW",
-           "MEAN_ROW"]
+           "MEAN_ROW", "PRETRAINED_ROW"]
 
 MODEL_ROW, BASELINE_ROW, MEAN_ROW = ("MSMR-Net", "rest hand (no network)",
                                      "mean training hand (no network)")
@@ -25,6 +25,9 @@ MODEL_ROW, BASELINE_ROW, MEAN_ROW = ("MSMR-Net", "rest hand (no network)",
 ([`handmesh_tutorial.train.mean_hand`][handmesh_tutorial.train.baselines.mean_hand]), each predicted
 for every image.
 """
+PRETRAINED_ROW = "pretrained MSMR-Net (shipped)"
+"""Row name of the network that ships with the package
+([`handmesh_tutorial.pretrained`][handmesh_tutorial.pretrained]), scored on the same scenes."""
 
 HEADLINE = (("mpjpe", "MPJPE (mm)", "{:.2f}"), ("pa_mpjpe", "PA-MPJPE (mm)", "{:.2f}"),
             ("pa_mpvpe", "PA-MPVPE (mm)", "{:.2f}"),
@@ -35,7 +38,8 @@ HEADLINE = (("mpjpe", "MPJPE (mm)", "{:.2f}"), ("pa_mpjpe", "PA-MPJPE (mm)", "{:
 """Scores in the report's headline table: (eval.json key, column title, format)."""
 
 
-def headline(scores: dict, baseline: dict | None = None, mean: dict | None = None) -> str:
+def headline(scores: dict, baseline: dict | None = None, mean: dict | None = None,
+             pretrained: dict | None = None) -> str:
     """The headline scores as a markdown table (formats of
     [`HEADLINE`][handmesh_tutorial.demo.report.HEADLINE]).
 
@@ -46,13 +50,16 @@ def headline(scores: dict, baseline: dict | None = None, mean: dict | None = Non
             ``baseline.scores``), the row `BASELINE_ROW`.
         mean: optional scores of the mean training hand (``eval.json``
             ``mean_hand_baseline.scores``), the row `MEAN_ROW`.
+        pretrained: optional scores of the shipped pretrained network on the same scenes, the
+            row `PRETRAINED_ROW` (second).
 
     Returns:
         A markdown table.
     """
     head = "| | " + " | ".join(t for _, t, _ in HEADLINE) + " |"
     sep = "|---|" + "---|" * len(HEADLINE)
-    rows = ([(MODEL_ROW, scores)] + ([(BASELINE_ROW, baseline)] if baseline else [])
+    rows = ([(MODEL_ROW, scores)] + ([(PRETRAINED_ROW, pretrained)] if pretrained else [])
+            + ([(BASELINE_ROW, baseline)] if baseline else [])
             + ([(MEAN_ROW, mean)] if mean else []))
     lines = [head, sep] + ["| " + name + " | " + " | ".join(
         f.format(sc[k]) if k in sc else "-" for k, _, f in HEADLINE) + " |" for name, sc in rows]
@@ -62,7 +69,7 @@ def headline(scores: dict, baseline: dict | None = None, mean: dict | None = Non
 def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: DemoConfig,
                  seconds: dict, figures: dict, counts: dict, train_info: dict,
                  baseline: dict | None = None, comparison: str = "",
-                 mean: dict | None = None) -> Path:
+                 mean: dict | None = None, pretrained: dict | None = None) -> Path:
     """Write ``report.md`` (atomically).
 
     Args:
@@ -79,6 +86,8 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         mean: scores of the mean training hand (a third row).
         comparison: model / rest hand / mean hand per VR bin and scene kind (``evaluate``'s
             ``comparison``).
+        pretrained: scores of the shipped pretrained network on the same scenes (a row after
+            the model's).
 
     Returns:
         The report path.
@@ -115,9 +124,12 @@ def write_report(path: str | os.PathLike, *, scores: dict, table: str, config: D
         "pose from its image. (Their MPJPE, without alignment, is not meaningful: they never "
         "turn.) Roughness: mean |dihedral-angle difference| to the true surface over interior "
         "edges (crumpled meshes score tens of degrees); flipped faces: share of faces whose "
-        "normal points against the true one after alignment.",
+        "normal points against the true one after alignment."
+        + (f" The row `{PRETRAINED_ROW}` is the network that ships with the package "
+           "(`hmt.model.pretrained()`), trained on a GPU on 224-px scenes of other seeds; here it "
+           "reads crops of these scenes at its own input size." if pretrained else ""),
         "",
-        headline(scores, baseline, mean),
+        headline(scores, baseline, mean, pretrained),
         "",
         "## Scores per visibility-ratio bin (paper Table 2 layout)",
         "",
@@ -167,7 +179,7 @@ def parse_headline(report: str, row: str = MODEL_ROW) -> dict:
 
     Args:
         report: the text of ``report.md``.
-        row: `MODEL_ROW`, `BASELINE_ROW` or `MEAN_ROW`.
+        row: `MODEL_ROW`, `PRETRAINED_ROW`, `BASELINE_ROW` or `MEAN_ROW`.
 
     Returns:
         {score key: float} for the keys of [`HEADLINE`][handmesh_tutorial.demo.report.HEADLINE].

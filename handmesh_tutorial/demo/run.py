@@ -19,7 +19,7 @@ import numpy as np
 from .._io import write_json
 from ..viz import plot_loss_curves, plot_overlays, save_figure
 from .config import DemoConfig, train_config
-from .report import BASELINE_ROW, MEAN_ROW, write_report
+from .report import BASELINE_ROW, MEAN_ROW, PRETRAINED_ROW, write_report
 
 __all__ = ["DemoResult", "run_demo", "generate_data", "generate_scenes"]
 
@@ -42,6 +42,8 @@ class DemoResult:
         baseline_scores: scores of the rest-hand baseline on the same test scenes.
         comparison: markdown, model / rest hand / mean hand per VR bin, scene kind and overall.
         mean_hand_scores: scores of the mean training hand on the same test scenes.
+        pretrained_scores: scores of the shipped pretrained network on the same test scenes
+            (``None`` when this installation has none).
     """
 
     out_dir: Path
@@ -56,6 +58,7 @@ class DemoResult:
     baseline_scores: dict | None = None
     comparison: str = ""
     mean_hand_scores: dict | None = None
+    pretrained_scores: dict | None = None
 
 
 def generate_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
@@ -190,6 +193,15 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     mean = T.mean_hand(train_ds)  # the data's average articulation: the second constant bar
     ev = T.evaluate(ckpt, str(out / "data" / "test"), out_dir=out / "eval", device="cpu",
                     threads=cfg.threads, progress=progress, mean_hand=mean)
+    pre = None
+    try:  # the shipped network on the same scenes, at its own crop size
+        from ..pretrained import pretrained_info
+
+        pre = T.evaluate("pretrained", str(out / "data" / "test"), device="cpu",
+                         image_size=pretrained_info()["config"]["image_size"],
+                         threads=cfg.threads, progress=False, baseline=False)["scores"]
+    except FileNotFoundError:
+        say("      (no pretrained network in this installation: its row is left out)")
     val_baselines = None if val_ds is None or not len(val_ds) else {
         "rest hand": T.constant_hand_scores(val_ds),
         "mean hand": T.constant_hand_scores(val_ds, mean)}
@@ -239,10 +251,12 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     files["report"] = write_report(out / "report.md", scores=ev["scores"], table=ev["table"],
                                    config=cfg, seconds=seconds, figures=figures, counts=counts,
                                    train_info=train_info, baseline=baseline,
-                                   comparison=ev["comparison"], mean=mean_scores)
+                                   comparison=ev["comparison"], mean=mean_scores,
+                                   pretrained=pre)
     summary = {"config": asdict(cfg), "seed": seed, "scores": ev["scores"],
                "baseline_scores": baseline, "baseline": BASELINE_ROW,
                "mean_hand_scores": mean_scores, "mean_hand": MEAN_ROW,
+               "pretrained_scores": pre, "pretrained": PRETRAINED_ROW,
                "vr_table": ev["vr_table"], "kind_table": ev["kind_table"],
                "baseline_vr_table": ev["baseline"]["vr_table"],
                "baseline_kind_table": ev["baseline"]["kind_table"],
@@ -255,4 +269,5 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     return DemoResult(out_dir=out, report=files["report"], scores=ev["scores"],
                       vr_table=ev["vr_table"], table=ev["table"], files=files, seconds=seconds,
                       config=cfg, train_epochs=res.epochs, baseline_scores=baseline,
-                      comparison=ev["comparison"], mean_hand_scores=mean_scores)
+                      comparison=ev["comparison"], mean_hand_scores=mean_scores,
+                      pretrained_scores=pre)
