@@ -120,7 +120,7 @@ def _channels(text: str) -> tuple[int, ...]:
 _TRAIN_OPTIONS = ("data", "dataset", "val_data", "val_fraction", "epochs", "batch_size",
                   "image_size", "lr", "lr_step", "micro_batches", "encoder", "decoder",
                   "channels", "latent_channels", "template", "seed", "device", "threads",
-                  "num_workers", "val_every", "checkpoint_every", "precision")
+                  "num_workers", "val_every", "checkpoint_every", "precision", "init")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -153,7 +153,7 @@ def _cmd_pretrain(args: argparse.Namespace) -> int:
 
     fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "image_size", "encoder",
               "recipe", "epochs", "batch_size", "lr", "workers", "loader_workers", "seed",
-              "device", "precision")
+              "device", "precision", "init")
     recipe = PretrainedRecipe(**{k: getattr(args, k) for k in fields
                                  if getattr(args, k) is not None})
     res = build_pretrained(args.out, recipe, max_generate_seconds=args.max_generate_seconds,
@@ -296,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--precision", choices=("float32", "bfloat16"),
                     help="bfloat16: autocast forward pass (faster on CPUs with bf16 units)")
     tr.add_argument("--workers", dest="num_workers", type=int, help="DataLoader workers")
+    tr.add_argument("--init", help="start from these weights: a checkpoint, or 'pretrained'")
     tr.add_argument("--val-every", type=int, help="validate every N epochs")
     tr.add_argument("--checkpoint-every", type=int, help="checkpoint every N epochs")
     tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint_last.pt")
@@ -336,6 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
     pre.add_argument("--device", help="auto | cpu | cuda (default: auto)")
     pre.add_argument("--precision", choices=("float32", "bfloat16"),
                      help="autocast precision (default: bfloat16)")
+    pre.add_argument("--init", help="start from these weights: 'pretrained' (the shipped network; "
+                     "use new --data-seed values so each run adds scenes) or a checkpoint")
     pre.add_argument("--max-generate-seconds", type=float, default=None,
                      help="stop generating training scenes when the next shard would end past "
                      "this budget")

@@ -109,6 +109,9 @@ class PretrainedRecipe:
         loader_workers: data-loader processes while training (0: one per CPU, less one).
         seed: network initialisation, data order and augmentation seed.
         device: ``"auto"`` (CUDA when available), ``"cuda"`` or ``"cpu"``.
+        init: start from these weights instead of random ones (``"pretrained"``: the shipped
+            network, so that each run on new seeds adds to the last; or a checkpoint path). The
+            architecture fields above must then be the file's.
     """
 
     train_scenes: int = 20_000
@@ -128,6 +131,7 @@ class PretrainedRecipe:
     loader_workers: int = 0
     seed: int = 0
     device: str = "auto"
+    init: str | None = None
 
     def __post_init__(self):
         from .demo.config import RECIPES
@@ -158,7 +162,7 @@ class PretrainedRecipe:
             seed=self.seed, device=self.device, threads=None,
             num_workers=self.loader_workers or max(0, cpus - 1), cache_data=False,
             val_batch_size=256, precision=self.precision, out_dir=str(out_dir),
-            progress=progress, **RECIPES[self.recipe])
+            progress=progress, init=self.init, **RECIPES[self.recipe])
 
 
 def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
@@ -351,6 +355,10 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
                      "render_size": recipe.render_size},
             "seconds": {"generate": round(t_gen, 1)}, "torch": str(torch.__version__),
             "commit": _commit(), "date": datetime.date.today().isoformat()}
+    if recipe.init is not None:  # the chain of runs: what the starting weights were made of
+        from .train.checkpoints import _read_checkpoint
+
+        info["init_from"] = _read_checkpoint(recipe.init).get("pretrained") or str(recipe.init)
     files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
     t_train = time.perf_counter()
     last = out / "train" / "checkpoint_last.pt"

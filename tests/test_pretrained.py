@@ -107,6 +107,28 @@ def test_pretrained_is_found_by_name_and_missing_says_how_to_make_it(run, tmp_pa
     assert len(info["history"]) == 2
 
 
+def test_init_starts_training_from_given_weights_and_checks_the_architecture(run, tmp_path,
+                                                                             monkeypatch):
+    ds = run["dataset"]
+    want = dict(run["model"].named_parameters())
+
+    def trained(name, **kw):  # one epoch with a vanishing step: the weights stay the start's
+        cfg = T.TrainConfig(out_dir=str(tmp_path / name), epochs=1, batch_size=3, lr=1e-12,
+                            **{**TINY, **kw})
+        return dict(T.train(cfg, dataset=ds).model.named_parameters())
+
+    got = trained("from_ckpt", init=str(run["checkpoint"]))
+    assert all(torch.allclose(got[k], want[k], atol=1e-8) for k in want)
+    fresh = trained("random")
+    assert not all(torch.allclose(fresh[k], want[k], atol=1e-3) for k in want)
+    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
+    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / P.PRETRAINED_FILE)
+    named = trained("from_pretrained", init="pretrained")
+    assert all(torch.allclose(named[k], want[k], atol=0.01) for k in want)  # int8 steps
+    with pytest.raises(ValueError, match="architecture differs"):
+        trained("other", init=str(run["checkpoint"]), channels=(4, 4, 8, 8, 16))
+
+
 def test_recipe_checks_its_values_and_makes_the_training_config(tmp_path):
     r = P.PretrainedRecipe(epochs=9, loader_workers=3, recipe="paper")
     cfg = r.train_config(tmp_path / "tr", tmp_path / "va", tmp_path / "out", progress=False)
@@ -115,7 +137,8 @@ def test_recipe_checks_its_values_and_makes_the_training_config(tmp_path):
     assert cfg.keypoint_weight == 0.0  # the paper recipe: L1 only
     cpu = P.PretrainedRecipe().train_config("a", "b", "c")
     assert cpu.keypoint_weight > 0 and cpu.model_kwargs["output"] == "skinned"
-    assert cpu.image_size == 128 and cpu.encoder == "resnet10"
+    assert cpu.image_size == 128 and cpu.encoder == "resnet10" and cpu.init is None
+    assert P.PretrainedRecipe(init="pretrained").train_config("a", "b", "c").init == "pretrained"
     for bad, match in (({"recipe": "gpu"}, "recipe"), ({"epochs": 0}, "epochs"),
                        ({"workers": -1}, "workers"), ({"train_scenes": 2.5}, "train_scenes")):
         with pytest.raises(ValueError, match=match):
@@ -146,6 +169,35 @@ def test_time_bounded_generation_keeps_whole_shards_in_a_valid_root(tmp_path, mo
     # the shards hold the same scenes as one unsharded set
     a, b = InterSHDataset(tmp_path / "train"), InterSHDataset(full["root"])
     assert np.array_equal(a[2]["image"], b[2]["image"])
+
+
+def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
+    """generate -> train -> export -> install, then a second run that starts from the first."""
+    import handmesh_tutorial.demo.run as demo_run
+    from handmesh_tutorial.dataset import generate_dataset
+
+    def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
+        return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
+                                "hand-hand", shard=shard, progress=False, durable=False)
+
+    monkeypatch.setattr(demo_run, "generate_scenes", toy_scenes)
+    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
+    small = dict(train_scenes=6, val_scenes=3, render_size=64, image_size=32, epochs=2,
+                 batch_size=3, workers=1, loader_workers=1, device="cpu", precision="float32")
+    first = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**small), install=True,
+                               progress=False, log=None)
+    info = P.pretrained_info()
+    made = info["pretrained"]
+    assert made["data"] == {**made["data"], "train_seed": 100, "train_scenes": 6, "val_seed": 101,
+                            "val_scenes": 3}
+    assert made["epochs_done"] == 2 and len(info["history"]) == 2 and made["seconds"]["train"] > 0
+    assert (tmp_path / "assets" / P.PRETRAINED_FILE).read_bytes() == first["file"].read_bytes()
+    assert first["float16"].stat().st_size > first["file"].stat().st_size
+    second = P.build_pretrained(tmp_path / "two", P.PretrainedRecipe(
+        **{**small, "epochs": 1, "data_seed": 200, "init": "pretrained"}), progress=False,
+        log=None)
+    assert second["info"]["init_from"]["data"]["train_seed"] == 100
+    assert second["info"]["data"]["train_seed"] == 200
 
 
 def test_cli_pretrain_help_and_evaluate_by_name(run, tmp_path, monkeypatch, capsys):

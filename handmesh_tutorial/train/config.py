@@ -31,7 +31,7 @@ RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_work
 long, where, how fast, what is logged, whether bad samples are skipped); every other field must
 equal the checkpoint's, so a run never silently mixes data, seeds, batch sizes or learning rates.
 """
-_PATH_KEYS = ("data", "val_data", "template")
+_PATH_KEYS = ("data", "val_data", "template", "init")
 
 
 @dataclass
@@ -96,6 +96,10 @@ class TrainConfig:
             ``torch.autocast`` in bfloat16 (weights, gradients and the optimiser stay float32).
             Faster on CPUs with bfloat16 units (AVX-512 BF16 / AMX), at a measured cost in
             accuracy (``benchmarks/train.py``, docs page "Performance").
+        init: weights to start from instead of random ones: a checkpoint path, or
+            ``"pretrained"`` (the shipped network). Its architecture and template must equal
+            this run's; only the weights are taken (no optimiser state, no epoch count). A
+            resumed run continues from its own checkpoint (``init`` must stay the run's).
     """
 
     data: str | None = None
@@ -136,9 +140,10 @@ class TrainConfig:
     normal_weight: float = 0.0
     skip_bad: bool = False
     precision: str = "float32"
+    init: str | None = None
 
     def __post_init__(self):
-        for name in ("data", "val_data", "template"):
+        for name in ("data", "val_data", "template", "init"):
             v = getattr(self, name)
             if v is not None:
                 setattr(self, name, str(v))

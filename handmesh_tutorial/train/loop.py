@@ -301,7 +301,10 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it
     random.seed(config.seed)
-    net = build_model_from_config(config, tmpl).to(device)
+    net = build_model_from_config(config, tmpl)
+    if ck is None and config.init is not None:
+        _load_init(net, config, t_id)
+    net = net.to(device)
     faces = torch.as_tensor(np.asarray(tmpl.faces), dtype=torch.int64, device=device)
     # fused: one kernel for all parameters instead of ~10 small ops per tensor (about 300
     # tensors here); same update rule (a resumed run keeps the flag saved in its checkpoint)
@@ -423,6 +426,21 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         history=history, step_losses=step_losses, final=dict(history[-1]) if history else {},
         epochs=done, steps=step, seconds=time.perf_counter() - t_start, model=net, rank=rank,
         world_size=world, skipped=skipped)
+
+
+def _load_init(net, config: TrainConfig, t_id: str) -> None:
+    """Start ``net`` from the weights of ``config.init`` (a checkpoint, or ``"pretrained"``)."""
+    init = _read_checkpoint(config.init)
+    if init["template_hash"] != t_id:
+        raise ValueError(f"init {config.init}: trained with template {init['template_hash']}, "
+                         f"this run uses {t_id}")
+    old = TrainConfig.from_dict(init["config"]).architecture()
+    if old != config.architecture():
+        diff = {k: (old[k], config.architecture()[k]) for k in old
+                if old[k] != config.architecture()[k]}
+        raise ValueError(f"init {config.init}: architecture differs from the config (init, "
+                         f"config): {diff}")
+    net.load_state_dict(init["model"])
 
 
 def _skip_bad_items(train_ds, val_ds, progress: bool):
