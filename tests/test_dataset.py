@@ -249,6 +249,9 @@ def test_read_target_equals_the_full_read_and_names_what_is_wrong(tmp_path):
     np.savez(d / "annotation.npz", **arrays)
     with pytest.raises(ValueError, match=rf"'joints_{t}' has shape \(20, 3\)"):
         ds.target(1)
+    (d / "annotation.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="annotation.npz: not a readable npz"):
+        ds.target(1)
     (ds.sample_dir(2) / "image.png").unlink()
     with pytest.raises(FileNotFoundError, match="image.png missing"):
         ds.target(2)

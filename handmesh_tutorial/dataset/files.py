@@ -388,15 +388,14 @@ def read_target(directory: str | os.PathLike) -> tuple:
     keys = ("K", f"vertices_{t}", f"joints_{t}")
     try:
         with np.load(npz_path, allow_pickle=False) as z:
-            missing = [k for k in keys if k not in z.files]
-            if missing:
-                raise ValueError(f"{npz_path}: missing key '{missing[0]}' (annotation.json "
-                                 f"names target {t})")
-            K, verts, joints = (z[k] for k in keys)
-    except ValueError:
-        raise
-    except Exception as e:  # BadZipFile, OSError, ...
+            found = {k: z[k] for k in keys if k in z.files}
+    except Exception as e:  # BadZipFile, ValueError (pickled arrays), OSError, ...
         raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
+    missing = [k for k in keys if k not in found]
+    if missing:
+        raise ValueError(f"{npz_path}: missing key '{missing[0]}' (annotation.json names target "
+                         f"{t})")
+    K, verts, joints = (found[k] for k in keys)
     for key, arr, shape in (("K", K, (3, 3)), (keys[1], verts, None), (keys[2], joints, (21, 3))):
         ok = arr.shape == shape if shape else (arr.ndim == 2 and arr.shape[1] == 3)
         if not ok or not np.all(np.isfinite(arr)):
