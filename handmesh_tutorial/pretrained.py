@@ -294,15 +294,16 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
                      recipe: PretrainedRecipe | None = None, *,
                      max_generate_seconds: float | None = None,
                      max_train_seconds: float | None = None, install: bool = False,
-                     progress: bool = True, log=print) -> dict:
+                     export_every: float = 60.0, progress: bool = True, log=print) -> dict:
     """Make the pretrained MSMR-Net: generate the scenes, train, export (``handmesh pretrain``).
 
     Steps: ``out/data/train`` (``recipe.train_scenes``, seed ``data_seed``) and ``out/data/val``
     (``val_scenes``, seed ``data_seed + 1``); training in ``out/train`` (a normal run of
-    [`train`][handmesh_tutorial.train.loop.train]); after every epoch the last checkpoint is
-    exported to ``out/msmr_net_pretrained.pt`` (int8) and ``out/msmr_net_float16.pt``, so a run
-    cut short still leaves a usable file. ``install=True`` copies the int8 file into the package
-    (``handmesh_tutorial/assets/``), where
+    [`train`][handmesh_tutorial.train.loop.train]); the last checkpoint is exported to
+    ``out/msmr_net_pretrained.pt`` (int8) and ``out/msmr_net_float16.pt`` after the first epoch,
+    then after each epoch that ends ``export_every`` seconds or more after the last export, and
+    after the last epoch, so a run cut short still leaves a usable file. ``install=True`` copies
+    the int8 file into the package (``handmesh_tutorial/assets/``), where
     [`pretrained`][handmesh_tutorial.pretrained.pretrained] finds it.
 
     Args:
@@ -314,6 +315,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
             in this budget (``None``: all ``epochs``). The learning-rate schedule is the
             planned one, so a cut run has not decayed as planned; the file records both.
         install: copy the result into the package.
+        export_every: seconds between exports while training (they cost seconds each).
         progress: tqdm bars.
         log: one-line messages (``None``: silent).
 
@@ -362,19 +364,29 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
     t_train = time.perf_counter()
     last = out / "train" / "checkpoint_last.pt"
+    exported = [-math.inf]  # when the files were last written
 
-    def after_epoch(row):
-        spent = time.perf_counter() - t_train
-        info["seconds"]["train"] = round(spent, 1)
-        info["epochs_done"] = int(row["epoch"])
+    def export(epoch: int) -> None:
+        info["seconds"]["train"] = round(time.perf_counter() - t_train, 1)
+        info["epochs_done"] = int(epoch)
         info["hardware"] = _hardware(config.device if config.device != "auto" else
                                      ("cuda" if torch.cuda.is_available() else "cpu"))
         export_pretrained(last, files["file"], weights="int8", info=info)
         export_pretrained(last, files["float16"], weights="float16", info=info)
+        exported[0] = time.perf_counter()
+
+    def after_epoch(row):
+        spent = time.perf_counter() - t_train
+        final = row["epoch"] >= config.epochs
+        stop = (max_train_seconds is not None and not final
+                and spent * (1 + 1 / row["epoch"]) > max_train_seconds)
+        # exports cost seconds (two files from a checkpoint with optimiser state): not after
+        # every short epoch, but always after the last one and before stopping
+        if final or stop or time.perf_counter() - exported[0] >= export_every:
+            export(row["epoch"])
         say(f"      epoch {row['epoch']}: train loss {1000 * row['train_loss']:.2f} mm, val "
             f"PA-MPJPE {row.get('val_pa_mpjpe', float('nan')):.2f} mm, {spent:.0f} s")
-        if max_train_seconds is not None and row["epoch"] < config.epochs \
-                and spent * (1 + 1 / row["epoch"]) > max_train_seconds:
+        if stop:
             raise _OutOfTime
 
     say(f"[2/3] training ({recipe.epochs} epochs, batch {recipe.batch_size}, "
@@ -385,6 +397,10 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     except _OutOfTime:
         say(f"      stopped after epoch {info['epochs_done']} of {config.epochs}: the next "
             f"would end past the {max_train_seconds:.0f} s budget")
+    if not files["file"].exists():  # a finished run resumed: nothing trained, export it now
+        from .train.checkpoints import _read_checkpoint
+
+        export(int(_read_checkpoint(last)["epoch"]))
     say(f"[3/3] exported {files['file']} ({files['file'].stat().st_size / 1e6:.1f} MB, int8) and "
         f"{files['float16'].name}")
     if install:

@@ -184,15 +184,25 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
     small = dict(train_scenes=6, val_scenes=3, render_size=64, image_size=32, epochs=2,
                  batch_size=3, workers=1, loader_workers=1, device="cpu", precision="float32")
-    first = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**small), install=True,
-                               progress=False, log=None)
+    calls = []
+    real_export = P.export_pretrained
+    monkeypatch.setattr(P, "export_pretrained",
+                        lambda ck, out, **kw: calls.append(kw["info"]["epochs_done"]) or
+                        real_export(ck, out, **kw))
+    first = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**{**small, "epochs": 3}),
+                               install=True, export_every=3600, progress=False, log=None)
+    assert calls == [1, 1, 3, 3]  # int8 and float16 after the first and the last epoch only
     info = P.pretrained_info()
     made = info["pretrained"]
     assert made["data"] == {**made["data"], "train_seed": 100, "train_scenes": 6, "val_seed": 101,
                             "val_scenes": 3}
-    assert made["epochs_done"] == 2 and len(info["history"]) == 2 and made["seconds"]["train"] > 0
+    assert made["epochs_done"] == 3 and len(info["history"]) == 3 and made["seconds"]["train"] > 0
     assert (tmp_path / "assets" / P.PRETRAINED_FILE).read_bytes() == first["file"].read_bytes()
     assert first["float16"].stat().st_size > first["file"].stat().st_size
+    first["file"].unlink()  # a finished run, resumed: nothing to train, exported again
+    again = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**{**small, "epochs": 3}),
+                               progress=False, log=None)
+    assert again["file"].exists() and calls[-1] == 3
     second = P.build_pretrained(tmp_path / "two", P.PretrainedRecipe(
         **{**small, "epochs": 1, "data_seed": 200, "init": "pretrained"}), progress=False,
         log=None)
