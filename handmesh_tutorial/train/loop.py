@@ -282,15 +282,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         resume = False
     if resume:  # check before building anything
         ck = _read_checkpoint(last, map_location=device)
-        if ck["template_hash"] != t_id:
-            raise ValueError(f"{last}: trained with template {ck['template_hash']}, this run "
-                             f"uses {t_id}")
-        old = TrainConfig.from_dict(ck["config"]).architecture()
-        if old != config.architecture():
-            diff = {k: (old[k], config.architecture()[k]) for k in old
-                    if old[k] != config.architecture()[k]}
-            raise ValueError(f"{last}: architecture differs from the config (checkpoint, "
-                             f"config): {diff}")
+        _check_same_network(ck, config, t_id, str(last), "checkpoint")
         changed = changed_settings(ck["config"], config)
         if changed:
             raise ValueError(
@@ -428,18 +420,22 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         world_size=world, skipped=skipped)
 
 
+def _check_same_network(ck: dict, config: TrainConfig, t_id: str, where: str, what: str) -> None:
+    """Raise ``ValueError`` unless checkpoint ``ck`` has this run's template and architecture."""
+    if ck["template_hash"] != t_id:
+        raise ValueError(f"{where}: trained with template {ck['template_hash']}, this run uses "
+                         f"{t_id}")
+    old, new = TrainConfig.from_dict(ck["config"]).architecture(), config.architecture()
+    if old != new:
+        diff = {k: (old[k], new[k]) for k in old if old[k] != new[k]}
+        raise ValueError(f"{where}: architecture differs from the config ({what}, config): "
+                         f"{diff}")
+
+
 def _load_init(net, config: TrainConfig, t_id: str) -> None:
     """Start ``net`` from the weights of ``config.init`` (a checkpoint, or ``"pretrained"``)."""
     init = _read_checkpoint(config.init)
-    if init["template_hash"] != t_id:
-        raise ValueError(f"init {config.init}: trained with template {init['template_hash']}, "
-                         f"this run uses {t_id}")
-    old = TrainConfig.from_dict(init["config"]).architecture()
-    if old != config.architecture():
-        diff = {k: (old[k], config.architecture()[k]) for k in old
-                if old[k] != config.architecture()[k]}
-        raise ValueError(f"init {config.init}: architecture differs from the config (init, "
-                         f"config): {diff}")
+    _check_same_network(init, config, t_id, f"init {config.init}", "init")
     net.load_state_dict(init["model"])
 
 
