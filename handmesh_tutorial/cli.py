@@ -161,7 +161,8 @@ def _cmd_pretrain(args: argparse.Namespace) -> int:
                            progress=not args.no_progress)
     info = res["info"]
     print(f"handmesh pretrain: {info['data']['train_scenes']} training scenes, "
-          f"{info['epochs_done']} of {recipe.epochs} epochs on {info['hardware']}, "
+          f"{info['epochs_done']} of {info.get('epochs_planned', recipe.epochs)} epochs on "
+          f"{info['hardware']}, "
           f"{info['seconds']['generate']:.0f} s generating, {info['seconds']['train']:.0f} s "
           f"training -> {res['file']}")
     return 0
@@ -343,7 +344,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="stop generating training scenes when the next shard would end past "
                      "this budget")
     pre.add_argument("--max-train-seconds", type=float, default=None,
-                     help="stop training when the next epoch would end past this budget")
+                     help="fit training to this budget: the first epoch is timed, then the "
+                     "epochs that fit are planned (learning-rate schedule included)")
     pre.add_argument("--no-progress", action="store_true", help="no progress bars")
     pre.set_defaults(func=_cmd_pretrain)
 

@@ -30,7 +30,7 @@ import platform
 import shutil
 import subprocess
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 __all__ = ["PRETRAINED_FILE", "PretrainedRecipe", "pretrained", "pretrained_path",
@@ -311,9 +311,10 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
         recipe: the recipe (default: the shipped file's).
         max_generate_seconds: stop generating training scenes when the next of 10 shards would
             end past this budget (``None``: all ``train_scenes``).
-        max_train_seconds: stop training after the epoch that leaves less than one epoch's time
-            in this budget (``None``: all ``epochs``). The learning-rate schedule is the
-            planned one, so a cut run has not decayed as planned; the file records both.
+        max_train_seconds: fit the training to this budget (``None``: all ``epochs``). The
+            first epoch is timed alone; then as many epochs as fit (at most ``epochs``) are
+            planned, with the learning-rate schedule of that many (``epochs_planned`` in the
+            file). Training also stops after an epoch that leaves less than one epoch's time.
         install: copy the result into the package.
         export_every: seconds between exports while training (they cost seconds each).
         progress: tqdm bars.
@@ -362,6 +363,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
 
         info["init_from"] = _read_checkpoint(recipe.init).get("pretrained") or str(recipe.init)
     files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
+    plan = {"config": config}  # the run's config; its epochs may be fitted to the time budget
     t_train = time.perf_counter()
     last = out / "train" / "checkpoint_last.pt"
     exported = [-math.inf]  # when the files were last written
@@ -377,7 +379,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
 
     def after_epoch(row):
         spent = time.perf_counter() - t_train
-        final = row["epoch"] >= config.epochs
+        final = row["epoch"] >= plan["config"].epochs
         stop = (max_train_seconds is not None and not final
                 and spent * (1 + 1 / row["epoch"]) > max_train_seconds)
         # exports cost seconds (two files from a checkpoint with optimiser state): not after
@@ -393,10 +395,23 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
         f"{recipe.image_size}-px crops, {recipe.encoder}) in {out / 'train'}")
     resume = last.exists()
     try:
-        train(config, resume=resume, callback=after_epoch)
+        if max_train_seconds is not None and not resume and config.epochs > 1:
+            # One epoch first, to see how many fit the budget; then the learning-rate schedule
+            # is planned for that many (a resumed run may change epochs and lr_step, and it
+            # continues exactly where the first epoch ended).
+            plan["config"] = replace(config, epochs=1)
+            train(plan["config"], callback=after_epoch)
+            per_epoch = time.perf_counter() - t_train
+            fit = max(1, min(config.epochs, int(max_train_seconds // per_epoch)))
+            plan["config"] = replace(config, epochs=fit, lr_step=max(1, math.ceil(fit / 3)))
+            info["epochs_planned"] = fit
+            say(f"      the first epoch took {per_epoch:.0f} s: {fit} of {config.epochs} epochs "
+                f"fit the {max_train_seconds:.0f} s budget, the schedule is planned for {fit}")
+            resume = True
+        train(plan["config"], resume=resume, callback=after_epoch)
     except _OutOfTime:
-        say(f"      stopped after epoch {info['epochs_done']} of {config.epochs}: the next "
-            f"would end past the {max_train_seconds:.0f} s budget")
+        say(f"      stopped after epoch {info['epochs_done']} of {plan['config'].epochs}: the "
+            f"next would end past the {max_train_seconds:.0f} s budget")
     if not files["file"].exists():  # a finished run resumed: nothing trained, export it now
         from .train.checkpoints import _read_checkpoint
 

@@ -203,6 +203,14 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     again = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                progress=False, log=None)
     assert again["file"].exists() and calls[-1] == 3
+    short = P.build_pretrained(tmp_path / "short", P.PretrainedRecipe(**{**small, "epochs": 3}),
+                               max_train_seconds=1e-6, progress=False, log=None)
+    assert short["info"]["epochs_planned"] == 1 and short["info"]["epochs_done"] == 1
+    roomy = P.build_pretrained(tmp_path / "roomy", P.PretrainedRecipe(**{**small, "epochs": 3}),
+                               max_train_seconds=1e6, progress=False, log=None)
+    assert roomy["info"]["epochs_planned"] == 3
+    lrs = [row["lr"] for row in T.load_checkpoint(roomy["file"])[1]["history"]]
+    assert lrs == pytest.approx([1e-3, 3e-4, 9e-5])  # the schedule of three epochs, one decay each
     second = P.build_pretrained(tmp_path / "two", P.PretrainedRecipe(
         **{**small, "epochs": 1, "data_seed": 200, "init": "pretrained"}), progress=False,
         log=None)
