@@ -56,6 +56,26 @@ def test_egl_selected_without_display(renderer):
     assert isinstance(renderer._r._platform, EGLPlatform)
 
 
+def test_headless_pyglet_without_x11_unless_the_user_chose_otherwise():
+    """pyrender imports pyglet's window module; headless, pyglet must not load X11 (a GPU
+    machine without X11 libraries failed there)."""
+    import subprocess
+    import sys
+
+    code = ("from handmesh_tutorial.render.backend import import_pyrender; import_pyrender(); "
+            "import sys, pyglet; print(pyglet.options['headless'], "
+            "'pyglet.libs.x11.xlib' in sys.modules)")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "PYGLET_HEADLESS")}
+
+    def run(**extra):
+        return subprocess.run([sys.executable, "-c", code], env={**env, **extra}, check=True,
+                              capture_output=True, text=True).stdout.split()
+
+    assert run() == ["True", "False"]
+    assert run(PYGLET_HEADLESS="0")[0] == "False"  # a user's explicit choice wins
+
+
 def test_numpy2_fix_formerly_broken_paths(renderer):
     pr = R.import_pyrender()
     tm = trimesh.creation.box(extents=(0.1, 0.2, 0.3))

@@ -25,13 +25,17 @@ def ensure_egl() -> str | None:
 
     Sets ``PYOPENGL_PLATFORM=egl`` with ``os.environ.setdefault`` when ``DISPLAY`` and
     ``WAYLAND_DISPLAY`` are unset, so a user's explicit choice (e.g. ``osmesa``) wins. It must run
-    before PyOpenGL is first imported, which `import_pyrender` guarantees.
+    before PyOpenGL is first imported, which `import_pyrender` guarantees. Also sets
+    ``PYGLET_HEADLESS=1`` the same way: pyrender imports pyglet's window module (for its viewer,
+    which offscreen rendering never opens), and without it pyglet loads X11 libraries that a
+    headless server may not have (a GPU machine of this project's did not).
 
     Returns:
         The value of ``PYOPENGL_PLATFORM`` afterwards (``None`` if unset: a display exists).
     """
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+        os.environ.setdefault("PYGLET_HEADLESS", "1")
     return os.environ.get("PYOPENGL_PLATFORM")
 
 
