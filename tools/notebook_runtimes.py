@@ -90,8 +90,8 @@ REUSED = {
     "08_training": "the committed run generated its INTER-SH set too (about 3 min of the "
                    "total); a later run reuses it from `notebooks/runs/` and only trains",
     "09_evaluation": "reuses notebook 08's data set and checkpoint, and section 5's 300 test "
-                     "scenes and 600 training-set scenes, made earlier by the same calls (about "
-                     "5 min more on a first run)",
+                     "scenes, made earlier by the same calls (about 2 min more on a first run); "
+                     "it made section 5's 600 training-set scenes itself",
     "10_ablation": "reuses notebook 08's data set and its run (multi-path + attention, seed 0); "
                    "the committed run trained the other eight itself, one after another, about "
                    "10 min each on a machine that other jobs shared part of the time; a rerun "
