@@ -194,11 +194,10 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     ev = T.evaluate(ckpt, str(out / "data" / "test"), out_dir=out / "eval", device="cpu",
                     threads=cfg.threads, progress=progress, mean_hand=mean)
     pre = None
-    try:  # the shipped network on the same scenes, at its own crop size
-        from ..pretrained import pretrained_info
-
-        pre = T.evaluate("pretrained", str(out / "data" / "test"), device="cpu",
-                         image_size=pretrained_info()["config"]["image_size"],
+    try:  # the shipped network on the same scenes, at its own crop size (one read of the file)
+        net_pre, ck_pre = T.load_checkpoint("pretrained")
+        pre = T.evaluate(net_pre, str(out / "data" / "test"), device="cpu",
+                         image_size=ck_pre["config"]["image_size"],
                          threads=cfg.threads, progress=False, baseline=False)["scores"]
     except FileNotFoundError:
         say("      (no pretrained network in this installation: its row is left out)")
