@@ -466,3 +466,25 @@ def test_interaction_error_survives_pickling():
     assert isinstance(err, interact.InteractionError)
     assert (err.kind, err.seed, err.reason) == ("hand-chain", 7, "no contact")
     assert "seed 7" in str(err)
+
+
+def test_thumb_zero_elevation_turns_generated_thumbs_towards_the_palm_plane():
+    """The default counts the thumb's angles from a thumb near the palm plane; ``None`` keeps the
+    template's rest thumb (35° out of the palm) as zero, the generator before the option."""
+    def elevations(cfg):
+        out = []
+        for seed in range(6):
+            sc = interact.build_scene("hand-object", seed, cfg, settle=False)
+            for b in sc.bodies:
+                if b.kind == "hand":
+                    out.append(hmt.lcs.thumb_elevation(b.joints, b.side))
+        return np.array(out)
+
+    new = elevations(interact.InteractionConfig())
+    old = elevations(interact.InteractionConfig(thumb_zero_elevation=None))
+    assert len(new) == len(old) == 6
+    # same seeds and targets, only the thumb's zero differs (by 30 degrees; contacts stop the
+    # grasping thumb at other angles, so the measured gap varies from hand to hand)
+    assert np.all(old > new) and 12.0 < np.mean(old - new) < 35.0
+    with pytest.raises(ValueError, match="thumb_zero_elevation"):
+        interact.InteractionConfig(thumb_zero_elevation=90.0)

@@ -281,19 +281,29 @@ def test_positive_flexion_curls_towards_palm(right):
 
 def test_distal_flexion_moves_fingertip_in_plane(right):
     model, art = right
-    tips_rest = np_(model().joints[0])
+    zero = np.zeros((15, 3))
+    out0 = model(pose=torch.as_tensor(art.to_pose(zero))[None])   # the hand at zero angles
+    tips0, joints0 = np_(out0.joints[0]), np_(out0.joints_mano[0])
+    local0 = art.rotations(zero)
+    parents = np.asarray(model.parents)
     # DIP of index, middle, pinky, ring and the thumb's IP (MANO order) -> FreiHAND tip keypoint
     for k, tip_id in ((3, 8), (6, 12), (9, 20), (12, 16), (15, 4)):
-        angles = np.zeros((15, 3))
+        G = np.eye(3)            # the parent's world rotation at zero angles (the thumb's CMC's
+        p = parents[k]           # zero rotation carries its IP's frame along)
+        while p > 0:
+            G = local0[p - 1] @ G
+            p = parents[p]
+        angles = zero.copy()
         angles[k - 1, 1] = np.deg2rad(50)
         out = model(pose=torch.as_tensor(art.to_pose(angles))[None])
         tip = np_(out.joints[0])[tip_id]
-        x, y, _ = art.frames[k - 1].T
-        rest_rel = tips_rest[tip_id] - art.joints[k - 1]
-        rel = tip - art.joints[k - 1]
+        x, y, _ = (G @ art.frames[k - 1]).T
+        rest_rel = tips0[tip_id] - joints0[k]
+        rel = tip - joints0[k]
         assert abs(rel @ y) < 1e-5                   # in the plane ⟂ the flexion axis
-        np.testing.assert_allclose(rel, art.rotations(angles)[k - 1] @ rest_rel, atol=1e-4)
-        moved = (tip - tips_rest[tip_id]) @ x         # towards the flexion side by ~L sin 50°
+        np.testing.assert_allclose(rel, G @ art.rotations(angles)[k - 1] @ G.T @ rest_rel,
+                                   atol=1e-4)
+        moved = (tip - tips0[tip_id]) @ x             # towards the flexion side by ~L sin 50°
         assert moved > 0.9 * np.sin(np.deg2rad(50)) * np.linalg.norm(rest_rel)
 
 
@@ -393,3 +403,74 @@ def test_natural_hand_angles_left_hand_is_the_mirror_image(hand, right, left):
 def test_natural_hand_angles_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         L.natural_hand_angles(0, **kwargs)
+
+
+# ------------------------------------------------------------------ the thumb's zero angles
+def _thumb_dir_and_normal(joints21, side):
+    d = joints21[4] - joints21[1]
+    return d / np.linalg.norm(d), L.palm_normal(joints21, side)
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_zero_angles_put_the_thumb_near_the_palm_plane(hand, side):
+    model = hand.HandModel(side)
+    art = L.hand_lcs(model)
+    rest = np_(model().joints[0])
+    d, n = _thumb_dir_and_normal(rest, side)
+    # the template's rest thumb stands about 35 degrees out of the palm (independent of hand_lcs)
+    assert np.rad2deg(np.arcsin(d @ n)) == pytest.approx(34.6, abs=0.5)
+    pose0 = art.to_pose(np.zeros((15, 3)))
+    assert np.abs(np.delete(pose0, 12, axis=0)).max() == 0.0      # only the thumb's CMC turns
+    zero = np_(model(pose=torch.as_tensor(pose0)[None]).joints[0])
+    d0, n0 = _thumb_dir_and_normal(zero, side)
+    np.testing.assert_allclose(n0, n, atol=1e-6)                   # the palm does not move
+    assert np.rad2deg(np.arcsin(d0 @ n0)) == pytest.approx(L.THUMB_ZERO_ELEVATION_DEG, abs=0.01)
+    # the turn swings the thumb straight towards the palm plane: its axis is d x n, so the
+    # thumb's direction stays in the plane spanned by d and n
+    assert abs(d0 @ np.cross(d, n)) < 1e-6
+    assert L.thumb_elevation(zero, side) == pytest.approx(L.THUMB_ZERO_ELEVATION_DEG, abs=0.01)
+    # the other fingers are where they were
+    np.testing.assert_allclose(zero[5:], rest[5:], atol=1e-6)
+
+
+def test_thumb_zero_elevation_none_keeps_the_rest_pose_as_zero(right):
+    model, art = right
+    plain = L.hand_lcs(model, thumb_zero_elevation=None)
+    assert plain.zero_rotations is None
+    assert np.abs(plain.to_pose(np.zeros((15, 3)))).max() == 0.0
+    np.testing.assert_array_equal(plain.frames, art.frames)        # same rest LCS either way
+    # a custom elevation lands where asked
+    art20 = L.hand_lcs(model, thumb_zero_elevation=20.0)
+    j = np_(model(pose=torch.as_tensor(art20.to_pose(np.zeros((15, 3))))[None]).joints[0])
+    assert L.thumb_elevation(j, "right") == pytest.approx(20.0, abs=0.01)
+
+
+def test_thumb_zero_rotation_is_relative_to_the_rest_thumb(right):
+    """to_pose(a) of the re-based joint is the zero rotation applied after the rest LCS turn."""
+    model, art = right
+    plain = L.hand_lcs(model, thumb_zero_elevation=None)
+    a = L.natural_hand_angles(7)
+    O = art.zero_rotations[12]
+    turned = Rotation.from_matrix(O) * Rotation.from_rotvec(plain.to_pose(a)[12].astype(float))
+    np.testing.assert_allclose(art.to_pose(a)[12], turned.as_rotvec(), atol=1e-6)
+    np.testing.assert_array_equal(art.to_pose(a)[:12], plain.to_pose(a)[:12])
+    np.testing.assert_array_equal(art.to_pose(a)[13:], plain.to_pose(a)[13:])
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_re_based_angles_round_trip_and_agree_with_rotations(hand, side):
+    art = L.hand_lcs(hand.HandModel(side))
+    rng = np.random.default_rng(3)
+    a = np.stack([L.natural_hand_angles(rng, side=side) for _ in range(8)])
+    pose = art.to_pose(a)
+    np.testing.assert_allclose(art.from_pose(pose), a, atol=1e-6)
+    rotvec = Rotation.from_matrix(art.rotations(a).reshape(-1, 3, 3)).as_rotvec()
+    np.testing.assert_allclose(rotvec.reshape(pose.shape), pose, atol=1e-6)
+
+
+def test_re_based_left_hand_is_the_mirror_of_the_right(hand):
+    right_art = L.hand_lcs(hand.HandModel("right"))
+    left_art = L.hand_lcs(hand.HandModel("left"))
+    a = L.natural_hand_angles(11)
+    np.testing.assert_allclose(hand.mirror_axis_angle(right_art.to_pose(a)),
+                               left_art.to_pose(L.mirror_angles(a)), atol=1e-6)

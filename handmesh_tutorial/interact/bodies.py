@@ -12,19 +12,25 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..collision import Cylinders, hand_cylinders
-from ..lcs import DIP_FOLLOWS_PIP, DIP_PIP_RATIO, hand_lcs, palm_normal
+from ..lcs import (
+    DIP_FOLLOWS_PIP,
+    DIP_PIP_RATIO,
+    THUMB_ZERO_ELEVATION_DEG,
+    hand_lcs,
+    palm_normal,
+)
 from .rig import _Rig
 
 __all__ = ["FOREARM_LENGTH"]
 
 
-@functools.lru_cache(maxsize=2)
-def _hand_assets(side: str):
+@functools.lru_cache(maxsize=4)
+def _hand_assets(side: str, thumb_zero_elevation: float | None = THUMB_ZERO_ELEVATION_DEG):
     """(HandModel, Articulation) of one side, built once per process."""
     from ..hand import HandModel
 
     model = HandModel(side)
-    return model, hand_lcs(model, "anatomical")
+    return model, hand_lcs(model, "anatomical", thumb_zero_elevation=thumb_zero_elevation)
 
 
 # rest node of each of the 20 hand cylinders (collision.HAND_CYLINDER_NAMES): phalanx s of finger
@@ -44,11 +50,12 @@ class _Hand:
     """A hand during generation: its rig plus what is needed to produce the mesh."""
 
     def __init__(self, side: str, shape: np.ndarray, limits: str, label: int, colors,
-                 tone: int | None = None):
+                 tone: int | None = None,
+                 thumb_zero_elevation: float | None = THUMB_ZERO_ELEVATION_DEG):
         self.side, self.label, self.kind, self.colors = side, label, "hand", colors
         self.tone = tone   # index into SKIN_TONES (None: colours given some other way)
         self.name = f"{side}_hand"
-        self.model, art = _hand_assets(side)
+        self.model, art = _hand_assets(side, thumb_zero_elevation)
         self.art = art.with_limits(limits)
         self.shape = np.asarray(shape, np.float32)
         import torch
@@ -62,7 +69,8 @@ class _Hand:
         followers = ({dip: (pip, DIP_PIP_RATIO) for dip, pip in DIP_FOLLOWS_PIP.items()}
                      if limits == "anatomical" else None)
         self.rig = _Rig(rest16, self.model.parents, self.art.frames, self.art.lower,
-                        self.art.upper, cyl, _hand_attach(), followers=followers)
+                        self.art.upper, cyl, _hand_attach(), followers=followers,
+                        zero_rotations=self.art.zero_rotations)
         self.dynamic = True
         self.target = None   # natural poses: the LCS angles its joints move towards (step 4)
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..dataset import SampleRejected
+from ..lcs import THUMB_ZERO_ELEVATION_DEG
 
 __all__ = ["STOP_REASONS", "InteractionConfig", "InteractionError"]
 
@@ -84,6 +85,12 @@ class InteractionConfig:
         chain_links: inclusive range of the number of chain links.
         object_kinds: static object kinds to draw from (``None``: all of
             [`objects.OBJECT_KINDS`][handmesh_tutorial.objects.static.OBJECT_KINDS]).
+        thumb_zero_elevation: degrees out of the palm plane that the thumb's zero angles mean
+            (default [`lcs.THUMB_ZERO_ELEVATION_DEG`][handmesh_tutorial.lcs.hands.THUMB_ZERO_ELEVATION_DEG],
+            5°: the joint limits and the pose prior count from a thumb near the palm plane, as
+            anatomical ranges do); ``None`` counts from the MakeHuman template's rest thumb,
+            35° out of the palm (the generator before this option: every thumb about 30° further
+            across the palm). See [`lcs.hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs].
     """
 
     limits: str = "anatomical"
@@ -106,6 +113,7 @@ class InteractionConfig:
     max_attempts: int = 20
     chain_links: tuple[int, int] = (3, 5)
     object_kinds: tuple[str, ...] | None = None
+    thumb_zero_elevation: float | None = THUMB_ZERO_ELEVATION_DEG
 
     def __post_init__(self):
         if self.limits not in ("paper", "anatomical"):
@@ -131,6 +139,11 @@ class InteractionConfig:
         if len(self.axis_weights) != 3 or min(self.axis_weights) < 0:
             raise ValueError(f"axis_weights must be 3 non-negative numbers, got "
                              f"{self.axis_weights}")
+        t = self.thumb_zero_elevation
+        if t is not None and (isinstance(t, bool) or not isinstance(t, int | float)
+                              or not -30.0 <= t <= 60.0):
+            raise ValueError(f"thumb_zero_elevation must be None or degrees in [-30, 60], got "
+                             f"{t!r}")
         lo, hi = self.chain_links
         if not 2 <= lo <= hi:
             raise ValueError(f"chain_links must be (lo, hi) with 2 <= lo <= hi, got "

@@ -57,7 +57,8 @@ class _Generator:
         shape = random_shape(self.rng, 1, self.cfg.shape_scale)[0]
         model, _ = _hand_assets(side)
         colors = model.vertex_colors(tone, rng=int(self.rng.integers(2**31)))
-        return _Hand(side, shape, self.cfg.limits, label, colors, tone=tone)
+        return _Hand(side, shape, self.cfg.limits, label, colors, tone=tone,
+                     thumb_zero_elevation=self.cfg.thumb_zero_elevation)
 
     def _natural_target(self, hand, closure) -> None:
         """Draw the hand's natural target pose (``poses="natural"``): the synergy prior's angles

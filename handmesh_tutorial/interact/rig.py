@@ -24,11 +24,12 @@ class _Rig:
     Articulated node ``k >= 1`` turns by ``F R(a) F^T`` about its rest position relative to its
     parent (the convention of [`handmesh_tutorial.lcs`][handmesh_tutorial.lcs]), so for node ``k``:
     ``G_k = G_parent L_k`` and ``P_k = P_parent + G_parent (rest_k - rest_parent)``; a rest point
-    ``x`` attached to node ``k`` is at ``G_k (x - rest_k) + P_k``.
+    ``x`` attached to node ``k`` is at ``G_k (x - rest_k) + P_k``. With ``zero_rotations``
+    (``Articulation.zero_rotations``) a node turns by ``O F R(a) F^T`` instead.
     """
 
     def __init__(self, rest, parents, frames, lower, upper, cylinders: Cylinders, attach,
-                 root_R=None, root_P=None, followers: dict | None = None):
+                 root_R=None, root_P=None, followers: dict | None = None, zero_rotations=None):
         # followers {node: (leader node, ratio)}: the node's flexion (y) angle is ``ratio`` times
         # its leader's and it has no freedom of its own (a finger's DIP following its PIP)
         self.followers = dict(followers or {})
@@ -41,6 +42,12 @@ class _Rig:
         self.upper = np.asarray(upper, float).reshape(n - 1, 3)
         self.angles = np.zeros((n - 1, 3))
         self.local = np.tile(np.eye(3), (n, 1, 1))
+        # nodes (1..J) whose zero angles are not the rest pose, and their zero rotations
+        self.zero = {}
+        if zero_rotations is not None:
+            z = np.asarray(zero_rotations, float).reshape(n - 1, 3, 3)
+            self.zero = {k + 1: z[k] for k in range(n - 1)
+                         if np.abs(z[k] - np.eye(3)).max() > 0.0}
         self.rest_cyl = cylinders
         self.attach = np.asarray(attach, int)
         self.radius = cylinders.radius.copy()
@@ -88,18 +95,26 @@ class _Rig:
             self.angles[node - 1] = [0.0, ratio * self.angles[lead - 1, 1], 0.0]
         if self.num_joints:
             self.local[1:] = rotation_from_lcs_angles(self.frames, self.angles)
+            for node, z in self.zero.items():
+                self.local[node] = z @ self.local[node]
         self.update()
+
+    def _local(self, node: int, angles) -> np.ndarray:
+        """(K,3,3) local rotations of one node for K angle sets (K,3)."""
+        L = rotation_from_lcs_angles(self.frames[node - 1:node], np.reshape(angles, (-1, 1, 3)))
+        z = self.zero.get(node)
+        return L[:, 0] if z is None else z @ L[:, 0]
 
     def set_joint(self, node: int, angles) -> None:
         """Set the LCS angles (3,) of one articulated node (1..J) and update the pose."""
         a = np.asarray(angles, float).reshape(1, 3)
         self.angles[node - 1] = a[0]
-        self.local[node] = rotation_from_lcs_angles(self.frames[node - 1:node], a)[0]
+        self.local[node] = self._local(node, a)[0]
         if node in self.leads:
             f, ratio = self.leads[node]
             fa = np.array([[0.0, ratio * a[0, 1], 0.0]])
             self.angles[f - 1] = fa[0]
-            self.local[f] = rotation_from_lcs_angles(self.frames[f - 1:f], fa)[0]
+            self.local[f] = self._local(f, fa)[0]
         self.update()
 
     def update(self) -> None:
@@ -136,13 +151,13 @@ class _Rig:
         """World end points (K, Cm, 3) of the cylinders moving with ``node`` for K angle sets."""
         A = np.asarray(angles, float).reshape(-1, 1, 3)
         K = len(A)
-        Lk = rotation_from_lcs_angles(self.frames[node - 1:node], A)[:, 0]  # (K,3,3)
+        Lk = self._local(node, A)  # (K,3,3)
         follower = self.leads.get(node)
         if follower is not None:
             f, ratio = follower
             Af = np.zeros_like(A)
             Af[..., 1] = ratio * A[..., 1]
-            Lf = rotation_from_lcs_angles(self.frames[f - 1:f], Af)[:, 0]
+            Lf = self._local(f, Af)
         G = {}
         P = {}
         for m in self.subtree[node]:

@@ -46,6 +46,18 @@ and (except at the thumb's CMC) almost no twist, rounded from commonly cited ran
 clinical range-of-motion tables such as the AAOS values). They are plausible defaults for sampling,
 not measurements.
 
+**The thumb's zero.** Anatomical ranges count from a neutral joint; for the thumb's CMC that is
+a thumb lying near the palm plane, as in MANO's flat zero pose. The MakeHuman template's rest thumb
+instead stands 35° out of the palm, half opposed, so counting its limits and the pose prior from
+the rest pose put every generated thumb about 30° too far across the palm (measured with a
+real-photo hand detector, docs page *Realistic scenes*). ``hand_lcs`` therefore re-bases that one
+joint: its zero angles mean the rest thumb turned to
+[`THUMB_ZERO_ELEVATION_DEG`][handmesh_tutorial.lcs.hands.THUMB_ZERO_ELEVATION_DEG] (5°) out of the
+palm plane ([`thumb_zero_rotation`][handmesh_tutorial.lcs.hands.thumb_zero_rotation],
+``Articulation.zero_rotations``), and angles turn it from there: ``R_k = O_k F_k R(a) F_k^T``. The
+hand model itself is unchanged: its zero *pose* is still the template's rest hand, so
+``to_pose(zeros)`` is the small rotation ``O_k`` at the thumb and zero elsewhere.
+
 **Left hands.** If the left mesh is the mirror image of the right by a reflection ``M`` (the
 library's hand negates z, [`mirror_points`][handmesh_tutorial.hand.skinning.mirror_points]),
 the rule gives ``F_left = M F_right diag(1, -1, 1)``: ``z`` and ``x`` mirror, ``y`` flips to
@@ -79,7 +91,14 @@ from .angles import (
 )
 from .articulation import Articulation
 from .frames import local_frames, select_flexion_vertices
-from .hands import hand_lcs, palm_normal, random_pose
+from .hands import (
+    THUMB_ZERO_ELEVATION_DEG,
+    hand_lcs,
+    palm_normal,
+    random_pose,
+    thumb_elevation,
+    thumb_zero_rotation,
+)
 from .limits import (
     ANATOMICAL_LIMITS_DEG,
     DIP_FOLLOWS_PIP,
@@ -98,6 +117,7 @@ __all__ = [
     "HAND_JOINT_KINDS",
     "PAPER_LIMIT_DEG",
     "THUMB_JOINTS",
+    "THUMB_ZERO_ELEVATION_DEG",
     "Articulation",
     "clip_angles",
     "forward_kinematics",
@@ -112,5 +132,7 @@ __all__ = [
     "random_pose",
     "rotation_from_lcs_angles",
     "select_flexion_vertices",
+    "thumb_elevation",
+    "thumb_zero_rotation",
     "within_limits",
 ]

@@ -1,6 +1,11 @@
 """[`Articulation`][handmesh_tutorial.lcs.articulation.Articulation]: the rest LCS and per-axis
 limits of J joints, with conversions to pose vectors and uniform random angles inside the limits.
 
+A joint's zero angles need not be its rest pose: ``zero_rotations`` (optional) holds, per joint,
+the local rotation that zero angles mean. The hand's thumb uses it (see
+[`hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs]): the MakeHuman template holds its thumb half
+opposed, and the anatomical limits are measured from a thumb lying near the palm plane.
+
 Taught in notebook 02 (local coordinate systems); the generator (notebook 04) samples poses with it.
 """
 
@@ -9,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .angles import (
     clip_angles,
@@ -38,6 +44,10 @@ class Articulation:
         joint_ids: (J,) index of each joint in its model's kinematic tree (1..15 for a hand).
         side: ``"right"``, ``"left"`` or ``None`` (objects).
         limits_name: ``"paper"``, ``"anatomical"`` or ``"custom"``.
+        zero_rotations: (J,3,3) local rotation (rest axes) that zero angles mean, or ``None``
+            (zero angles = the rest pose). Angles ``a`` then give ``L_k = O_k F_k R(a) F_k^T``:
+            the joint turns about its rest LCS and the whole is then turned by ``O_k``, so the
+            LCS at zero angles is ``O_k F_k`` (it moves with the bone).
     """
 
     names: tuple
@@ -51,6 +61,14 @@ class Articulation:
     joint_ids: np.ndarray | None = None
     side: str | None = None
     limits_name: str = "custom"
+    zero_rotations: np.ndarray | None = None
+
+    def _offset_joints(self) -> np.ndarray:
+        """Indices of the joints whose zero rotation is not the identity."""
+        if self.zero_rotations is None:
+            return np.zeros(0, int)
+        off = np.abs(np.asarray(self.zero_rotations) - np.eye(3)).max(axis=(1, 2))
+        return np.flatnonzero(off > 0.0)
 
     @property
     def num_joints(self) -> int:
@@ -59,14 +77,34 @@ class Articulation:
 
     def rotations(self, angles) -> np.ndarray:
         """(..., J, 3, 3) local rotations (rest axes) of LCS angles (..., J, 3) radians."""
-        return rotation_from_lcs_angles(self.frames, angles)
+        rot = rotation_from_lcs_angles(self.frames, angles)
+        k = self._offset_joints()
+        if len(k):
+            rot[..., k, :, :] = self.zero_rotations[k] @ rot[..., k, :, :]
+        return rot
 
     def to_pose(self, angles) -> np.ndarray:
         """(..., J, 3) float32 axis-angle pose (MANO convention) of LCS angles, radians."""
-        return lcs_angles_to_pose(self.frames, angles).astype(np.float32)
+        pose = lcs_angles_to_pose(self.frames, angles)
+        k = self._offset_joints()
+        if len(k):   # only the offset joints go through matrices (the others keep their bytes)
+            a = np.asarray(angles, dtype=np.float64)[..., k, :]
+            sel = self.zero_rotations[k] @ rotation_from_lcs_angles(self.frames[k], a)
+            pose[..., k, :] = Rotation.from_matrix(sel.reshape(-1, 3, 3)).as_rotvec().reshape(
+                sel.shape[:-1])
+        return pose.astype(np.float32)
 
     def from_pose(self, pose) -> np.ndarray:
         """(..., J, 3) LCS angles (radians) of an axis-angle pose."""
+        pose = np.array(pose, dtype=np.float64)
+        k = self._offset_joints()
+        if len(k):   # undo the zero rotation: F R(a) F^T = O^T L
+            sel = pose[..., k, :]
+            local = Rotation.from_rotvec(sel.reshape(-1, 3)).as_matrix().reshape(
+                *sel.shape, 3)
+            rel = np.swapaxes(self.zero_rotations[k], -1, -2) @ local
+            pose[..., k, :] = Rotation.from_matrix(rel.reshape(-1, 3, 3)).as_rotvec().reshape(
+                sel.shape)
         return pose_to_lcs_angles(self.frames, pose)
 
     def clip(self, angles) -> np.ndarray:

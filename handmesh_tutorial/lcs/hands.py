@@ -13,12 +13,17 @@ Taught in notebook 02 (local coordinate systems); the generator (notebook 04) sa
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .articulation import Articulation
 from .frames import local_frames, select_flexion_vertices
 from .limits import HAND_JOINT_KINDS, _resolve_limits
 
-__all__ = ["palm_normal", "hand_lcs", "random_pose"]
+__all__ = ["THUMB_ZERO_ELEVATION_DEG", "palm_normal", "thumb_elevation", "thumb_zero_rotation",
+           "hand_lcs", "random_pose"]
+
+THUMB_CMC: int = 13
+"""MANO joint number of the thumb's CMC (``thumb1``), the joint whose zero angles are re-based."""
 
 
 def _np(x) -> np.ndarray:
@@ -39,8 +44,53 @@ def palm_normal(joints21, side: str) -> np.ndarray:
     return n if side == "right" else -n
 
 
+THUMB_ZERO_ELEVATION_DEG: float = 5.0
+"""Angle (degrees) between the thumb's CMC-to-tip direction and the palm plane that the thumb's
+zero angles mean in [`hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs]: a thumb lying near the
+palm plane, as in MANO's flat zero pose. The MakeHuman template's rest thumb stands 35° out of the
+palm (half opposed); measured with a real-photo hand detector on renders of the rest hand, its
+thumb tip came out 21 mm dorsal of where the detector put it, and 0.4 mm with the thumb turned
+to about 5° (docs page *Realistic scenes*).
+"""
+
+
+def thumb_elevation(joints21, side: str) -> float:
+    """Angle (degrees) of a hand's thumb out of its palm plane: the CMC-to-tip direction against
+    the palm (positive towards the palmar side).
+
+    Args:
+        joints21: (21,3) FreiHAND-order keypoints (the CMC is keypoint 1, the tip 4).
+        side: ``"right"`` or ``"left"``.
+    """
+    j = _np(joints21)
+    d = j[4] - j[1]
+    d = d / np.linalg.norm(d)
+    return float(np.rad2deg(np.arcsin(np.clip(d @ palm_normal(j, side), -1.0, 1.0))))
+
+
+def thumb_zero_rotation(joints21, side: str,
+                        elevation: float = THUMB_ZERO_ELEVATION_DEG) -> np.ndarray:
+    """(3,3) rotation about the thumb's CMC that turns the thumb to ``elevation`` degrees out of
+    the palm plane, about the axis perpendicular to the thumb and to the palm normal (so the
+    thumb swings straight towards or away from the palm, without turning sideways).
+
+    Args:
+        joints21: (21,3) FreiHAND-order keypoints of the hand in the pose to start from.
+        side: ``"right"`` or ``"left"``.
+        elevation: target angle out of the palm plane, degrees (positive: palmar).
+    """
+    j = _np(joints21)
+    n = palm_normal(j, side)
+    d = (j[4] - j[1]) / np.linalg.norm(j[4] - j[1])
+    axis = np.cross(d, n)
+    axis = axis / np.linalg.norm(axis)     # a turn by +t about d x n moves d towards n
+    turn = np.deg2rad(elevation - thumb_elevation(j, side))
+    return Rotation.from_rotvec(axis * turn).as_matrix()
+
+
 def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
-             slab: float = 0.25) -> Articulation:
+             slab: float = 0.25,
+             thumb_zero_elevation: float | None = THUMB_ZERO_ELEVATION_DEG) -> Articulation:
     """The LCS of the 15 articulated joints of a hand model, in MANO joint order 1..15.
 
     Works for [`HandModel`][handmesh_tutorial.hand.model.HandModel] and
@@ -54,6 +104,12 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
         thumb_flexion_angle: degrees the thumb's flexion direction is turned from the palmar
             normal towards the little finger.
         slab: candidate slab of the vertex rule (fraction of the bone length).
+        thumb_zero_elevation: degrees out of the palm plane that the thumb's zero angles mean
+            ([`THUMB_ZERO_ELEVATION_DEG`][handmesh_tutorial.lcs.hands.THUMB_ZERO_ELEVATION_DEG]):
+            the CMC's ``zero_rotations`` entry turns the rest thumb there
+            ([`thumb_zero_rotation`][handmesh_tutorial.lcs.hands.thumb_zero_rotation]), so its
+            limits and the pose prior count from a thumb near the palm plane, as anatomical
+            ranges do. ``None``: zero angles are the rest pose for every joint.
 
     Returns:
         An [`Articulation`][handmesh_tutorial.lcs.articulation.Articulation] whose ``to_pose``
@@ -85,10 +141,14 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
     frames = local_frames(joints, child_points, verts[ids])
     lower, upper, name = _resolve_limits(limits, None)
     names = tuple(_hand.MANO_JOINT_NAMES[1:16])
+    zero = None
+    if thumb_zero_elevation is not None:
+        zero = np.tile(np.eye(3), (15, 1, 1))
+        zero[THUMB_CMC - 1] = thumb_zero_rotation(j21, side, thumb_zero_elevation)
     return Articulation(names=names, joints=joints, frames=frames, lower=lower, upper=upper,
                         child_points=child_points, flexion_points=verts[ids],
                         flexion_vertex_ids=ids, joint_ids=np.arange(1, 16), side=side,
-                        limits_name=name)
+                        limits_name=name, zero_rotations=zero)
 
 
 def random_pose(model_or_lcs, rng=None, n: int | None = None, limits=None,
