@@ -86,8 +86,9 @@ class InteractionConfig:
         object_kinds: static object kinds to draw from (``None``: all of
             [`objects.OBJECT_KINDS`][handmesh_tutorial.objects.static.OBJECT_KINDS]).
         thumb_zero_elevation: degrees out of the palm plane that the thumb's zero angles mean
-            (default [`lcs.THUMB_ZERO_ELEVATION_DEG`][handmesh_tutorial.lcs.hands.THUMB_ZERO_ELEVATION_DEG],
-            5°: the joint limits and the pose prior count from a thumb near the palm plane, as
+            (default 5°,
+            [`THUMB_ZERO_ELEVATION_DEG`][handmesh_tutorial.lcs.hands.THUMB_ZERO_ELEVATION_DEG]:
+            the joint limits and the pose prior count from a thumb near the palm plane, as
             anatomical ranges do); ``None`` counts from the MakeHuman template's rest thumb,
             35° out of the palm (the generator before this option: every thumb about 30° further
             across the palm). See [`lcs.hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs].
