@@ -18,12 +18,10 @@ from scipy.spatial.transform import Rotation
 from .articulation import Articulation
 from .frames import local_frames, select_flexion_vertices
 from .limits import HAND_JOINT_KINDS, _resolve_limits
+from .synergy import THUMB_JOINTS
 
 __all__ = ["THUMB_ZERO_ELEVATION_DEG", "palm_normal", "thumb_elevation", "thumb_zero_rotation",
            "hand_lcs", "random_pose"]
-
-THUMB_CMC: int = 13
-"""MANO joint number of the thumb's CMC (``thumb1``), the joint whose zero angles are re-based."""
 
 
 def _np(x) -> np.ndarray:
@@ -144,7 +142,7 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
     zero = None
     if thumb_zero_elevation is not None:
         zero = np.tile(np.eye(3), (15, 1, 1))
-        zero[THUMB_CMC - 1] = thumb_zero_rotation(j21, side, thumb_zero_elevation)
+        zero[THUMB_JOINTS[0] - 1] = thumb_zero_rotation(j21, side, thumb_zero_elevation)
     return Articulation(names=names, joints=joints, frames=frames, lower=lower, upper=upper,
                         child_points=child_points, flexion_points=verts[ids],
                         flexion_vertex_ids=ids, joint_ids=np.arange(1, 16), side=side,
