@@ -62,6 +62,16 @@ def _share(text: str) -> tuple[float, float]:
     return _two_numbers(text, ",", float, "--frame-share must look like MIN,MAX (e.g. 0.3,0.5)")
 
 
+def _degrees_or_none(text: str) -> float | None:
+    if text.lower() == "none":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--thumb-zero-elevation must be degrees or 'none', got "
+                                         f"{text!r}") from None
+
+
 def _shard(text: str) -> tuple[int, int]:
     k, n = _two_numbers(text, "/", int, "--shard must look like K/N (e.g. 0/4)")
     if n < 1 or not 0 <= k < n:
@@ -91,7 +101,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,
         workers=args.workers, balance_vr=args.balance_vr, shard=args.shard, limits=args.limits,
         durable=not args.no_fsync, progress=not args.quiet, vr_probe=args.vr_probe,
-        frame_share=args.frame_share)
+        frame_share=args.frame_share, thumb_zero_elevation=args.thumb_zero_elevation)
     print(f"handmesh generate: {s.written} samples written, {s.skipped} already present "
           f"(skipped), {s.attempts} candidates, {s.samples_per_second:.2f} samples/s, "
           f"{s.seconds:.1f} s -> {s.root}")
@@ -250,6 +260,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="share of the image side covered by the target hand's bounding box "
                      "(default: 0.45,0.75, FreiHAND-like crops; smaller shows more arm and "
                      "surroundings)")
+    gen.add_argument("--thumb-zero-elevation", type=_degrees_or_none,
+                     default=5.0, metavar="DEG|none",  # = lcs.THUMB_ZERO_ELEVATION_DEG (tested)
+                     help="degrees out of the palm plane that the thumb's zero angles mean "
+                     "(default: 5, a thumb near the palm plane as anatomical ranges assume; "
+                     "'none': the template's half-opposed rest thumb, the generator before "
+                     "this option)")
     gen.add_argument("--no-fsync", action="store_true",
                      help="skip fsync of every file (faster, not safe against power cuts)")
     gen.add_argument("--verify", action="store_true",

@@ -195,3 +195,37 @@ def test_frame_share_must_be_two_numbers(tmp_path, capsys):
         cli.main(["generate", "--kind", "hand-hand", "--num", "1", "--out", str(tmp_path),
                   "--frame-share", "half"])
     assert e.value.code == 2 and "--frame-share must look like MIN,MAX" in capsys.readouterr().err
+
+
+def test_thumb_zero_elevation_flag_is_recorded_and_none_is_the_earlier_generator(tmp_path, capsys):
+    import handmesh_tutorial as hmt
+
+    gen = cli.build_parser()._subparsers._group_actions[0].choices["generate"]
+    default = next(a.default for a in gen._actions if a.dest == "thumb_zero_elevation")
+    assert default == hmt.lcs.THUMB_ZERO_ELEVATION_DEG
+    args = ["--kind", "hand-object", "--num", "2", "--seed", "4", "--image-size", "64",
+            "--quiet", "--no-fsync"]
+    roots = {}
+    for flag in ("5", "none"):
+        roots[flag] = tmp_path / flag
+        code, _ = _run(capsys, *args, "--out", str(roots[flag]), "--thumb-zero-elevation", flag)
+        assert code == 0
+    meta = {f: dataset.InterSHDataset(r).meta["params"]["config"] for f, r in roots.items()}
+    assert meta["5"]["thumb_zero_elevation"] == 5.0 and meta["none"]["thumb_zero_elevation"] is None
+    # 'none' draws the same scenes with the template's rest thumb as zero: other thumbs
+    new, old = (dataset.InterSHDataset(r) for r in roots.values())
+    for i in range(2):
+        a, b = new[i], old[i]
+        t = a["target"]
+        ea = hmt.lcs.thumb_elevation(a["joints"][t], a["sides"][t])
+        eb = hmt.lcs.thumb_elevation(b["joints"][t], b["sides"][t])
+        assert eb > ea + 5.0
+    # resuming with another thumb zero is refused (one root, one generator)
+    code = cli.main(["generate", *args, "--out", str(roots["5"]), "--thumb-zero-elevation",
+                     "none"])
+    assert code == cli.EXIT_CODES["bad-input"] and "thumb_zero_elevation" in \
+        capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        cli.main(["generate", *args, "--out", str(tmp_path / "x"), "--thumb-zero-elevation",
+                  "flat"])
+    assert e.value.code == 2 and "degrees or 'none'" in capsys.readouterr().err

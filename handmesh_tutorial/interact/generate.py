@@ -12,6 +12,7 @@ from dataclasses import asdict
 import numpy as np
 
 from ..dataset import KINDS, generate_dataset
+from ..lcs import THUMB_ZERO_ELEVATION_DEG
 from .config import InteractionConfig
 from .framing import _check_share
 from .sample import init_worker, make_sample
@@ -33,7 +34,8 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
                           shard: tuple[int, int] | None = None, limits: str = "anatomical",
                           durable: bool = True, progress: bool = True, max_attempts: int = 100,
                           vr_probe: int = 64, mp_context: str = "auto",
-                          frame_share: tuple[float, float] | None = None):
+                          frame_share: tuple[float, float] | None = None,
+                          thumb_zero_elevation: float | None = THUMB_ZERO_ELEVATION_DEG):
     """Generate (or resume) an INTER-SH dataset of rendered interactions on disk.
 
     A thin wrapper of
@@ -65,6 +67,10 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
             (0.45-0.75, FreiHAND-like crops). Smaller shares show more of the arm and the
             surroundings (docs page "Realistic scenes" measures what that does to a real-photo
             hand detector). Stored in ``meta.json`` (``params.frame_share``) when given.
+        thumb_zero_elevation: degrees out of the palm plane that the thumb's zero angles mean
+            ([`InteractionConfig.thumb_zero_elevation`][handmesh_tutorial.interact.config.InteractionConfig]:
+            5° by default; ``None`` = the template's rest thumb, the generator before that option,
+            byte for byte). Stored in ``meta.json`` (``params.config``).
         mp_context: start method of the worker processes: ``"auto"`` (fork where it is safe,
             else spawn; same bytes either way), ``"spawn"`` or ``"fork"`` (see
             [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]).
@@ -81,17 +87,19 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
             or not MIN_IMAGE_SIZE <= image_size <= MAX_IMAGE_SIZE:
         raise ValueError(f"image_size must be an integer in [{MIN_IMAGE_SIZE}, "
                          f"{MAX_IMAGE_SIZE}] pixels, got {image_size!r}")
-    InteractionConfig(limits=limits)  # validates
+    config = InteractionConfig(limits=limits, thumb_zero_elevation=thumb_zero_elevation)  # checks
     extra = {}
     if frame_share is not None:
         extra["share"] = _check_share(frame_share, name="frame_share")
+    if thumb_zero_elevation != THUMB_ZERO_ELEVATION_DEG:
+        extra["config"] = config
     fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits,
                            **extra)
     kinds = list(KINDS) if kind == "mixed" else kind
     params = {"generator": "handmesh_tutorial.interact", "kind": kind, "limits": limits,
               "config": {k: (list(v) if isinstance(v, tuple) else v)
-                         for k, v in asdict(InteractionConfig(limits=limits)).items()}}
-    if extra:  # only when given: roots made before this option keep their meta.json
+                         for k, v in asdict(config).items()}}
+    if "share" in extra:  # only when given: roots made before this option keep their meta.json
         params["frame_share"] = list(extra["share"])
     return generate_dataset(root, fn, int(num), int(seed), kinds, shard=shard, workers=workers,
                             progress=progress, params=params, image_size=int(image_size),
