@@ -95,7 +95,10 @@ REUSED = {
     "10_ablation": "reuses notebook 08's data set and its run (multi-path + attention, seed 0); "
                    "the committed run trained the other eight itself, one after another, about "
                    "10 min each on a machine that other jobs shared part of the time; a rerun "
-                   "finds them in `notebooks/runs/` and only evaluates",
+                   "finds them in `notebooks/runs/` and only evaluates. Its committed outputs "
+                   "predate the thumb's zero (generator of commit ccb88d2, docs page *Realistic "
+                   "scenes*): notebook 08's run that it shows is the earlier one, and a rerun "
+                   "from nothing generates and trains everything anew",
 }
 
 
