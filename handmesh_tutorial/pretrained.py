@@ -14,11 +14,11 @@ it, the export to a small file, and the loader.
 
 Why a separate recipe from the demo's: a network trained from random weights on a CPU in minutes
 does not learn to read finger poses from synthetic crops (docs page "Training from scratch on a
-CPU", the pose probe). The shipped weights come from 30,000 scenes at 224 px and about 260,000
-augmented 128-px crops, in two runs: 4 minutes on a GPU, then 36 minutes on a 2-core CPU starting
-from the first run's weights (``init``). They read the hand's orientation far better than the
-demo's network and some of the finger articulation. The numbers, and how they were measured, are
-on the docs page "The pretrained model".
+CPU", the pose probe). The shipped weights come from 50,000 scenes at 224 px and about 360,000
+augmented 128-px crops, in three runs, each starting from the last one's weights (``init``): 4
+minutes on a GPU, then twice about 35 minutes on a 2-core CPU. They read the hand's orientation
+far better than the demo's network and some of the finger articulation. The numbers, and how they
+were measured, are on the docs page "The pretrained model".
 
 Taught in notebook 00 ("Quickstart") and notebook 09 ("Evaluation").
 """

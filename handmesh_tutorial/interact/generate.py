@@ -91,15 +91,13 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
     extra = {}
     if frame_share is not None:
         extra["share"] = _check_share(frame_share, name="frame_share")
-    if thumb_zero_elevation != THUMB_ZERO_ELEVATION_DEG:
-        extra["config"] = config
-    fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), limits=limits,
+    fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), config=config,
                            **extra)
     kinds = list(KINDS) if kind == "mixed" else kind
     params = {"generator": "handmesh_tutorial.interact", "kind": kind, "limits": limits,
               "config": {k: (list(v) if isinstance(v, tuple) else v)
                          for k, v in asdict(config).items()}}
-    if "share" in extra:  # only when given: roots made before this option keep their meta.json
+    if extra:  # only when given: roots made before this option keep their meta.json
         params["frame_share"] = list(extra["share"])
     return generate_dataset(root, fn, int(num), int(seed), kinds, shard=shard, workers=workers,
                             progress=progress, params=params, image_size=int(image_size),
