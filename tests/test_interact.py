@@ -358,6 +358,23 @@ def test_sample_bytes_are_deterministic(samples):
     assert dataset.encode_sample(other) != dataset.encode_sample(again)
 
 
+def test_photo_prob_changes_only_the_background_draw(samples):
+    base = samples["hand-object"]
+    explicit = interact.make_sample(11, "hand-object", S, photo_prob=0.75)   # render_scene's
+    assert dataset.encode_sample(explicit) == dataset.encode_sample(base)
+    photo = interact.make_sample(11, "hand-object", S, photo_prob=1.0)
+    textures = interact.make_sample(11, "hand-object", S, photo_prob=0.0)
+    assert not np.array_equal(photo["image"], textures["image"])
+    for smp in (photo, textures):   # the same scene, camera and visibility either way
+        assert np.array_equal(smp["scene_mask"], base["scene_mask"])
+        assert np.array_equal(smp["K"], base["K"])
+        for lab in base["joints"]:
+            assert np.array_equal(smp["joints"][lab], base["joints"][lab])
+        assert smp["vr"] == base["vr"]
+    with pytest.raises(ValueError, match="photo_prob"):
+        interact.make_sample(11, "hand-object", S, photo_prob=1.5)
+
+
 @pytest.mark.parametrize("kind", interact.KINDS)
 def test_vr_masks_and_joints(samples, kind, tmp_path):
     smp = samples[kind]

@@ -108,7 +108,8 @@ def vr_bin(vr: float) -> int:
 # generate (project venv)
 # ---------------------------------------------------------------------------------------------
 def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
-             balance: bool, max_candidates: int, share: tuple[float, float] | None = None) -> None:
+             balance: bool, max_candidates: int, share: tuple[float, float] | None = None,
+             photo_prob: float | None = None) -> None:
     """Render ``num`` scenes per kind and write them to ``out`` (see the module docstring)."""
     import torch
     from PIL import Image
@@ -139,7 +140,8 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
             tried += 1
             try:
                 s, scene = interact.make_sample(s_seed, kind=kind, image_size=image_size,
-                                                share=share, return_scene=True)
+                                                share=share, photo_prob=photo_prob,
+                                                return_scene=True)
             except SampleRejected:
                 continue
             t = s["target"]
@@ -170,7 +172,8 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
               + ("" if kept >= num else "  (max_candidates reached)"), flush=True)
     dt = time.perf_counter() - t0
     meta = {"seed": seed, "num_per_kind": num, "kinds": kinds, "image_size": image_size,
-            "balance_vr": balance, "vr_bins": VR_BINS, "kind_stride": KIND_STRIDE,
+            "balance_vr": balance, "frame_share": share, "photo_prob": photo_prob,
+            "vr_bins": VR_BINS, "kind_stride": KIND_STRIDE,
             "seed_rule": "dataset.sample_seed(seed, kind_stride * kind_index + candidate)",
             "handmesh_tutorial": getattr(handmesh_tutorial, "__version__", "?"),
             "git": _git_head(), "seconds": round(dt, 1), "candidates": tried,
@@ -560,6 +563,9 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--image-size", type=int, default=224)
     g.add_argument("--frame-share", default=None, metavar="MIN,MAX",
                    help="target hand's box / image side (default: the generator's 0.45,0.75)")
+    g.add_argument("--photo-prob", type=float, default=None, metavar="P",
+                   help="probability of a photograph as background (default: the generator's "
+                        "0.75; 0 = procedural textures only)")
     g.add_argument("--balance-vr", action=argparse.BooleanOptionalAction, default=True)
     g.add_argument("--max-candidates", type=int, default=None,
                    help="per kind (default 15 x num with --balance-vr, else 3 x num)")
@@ -588,7 +594,7 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"unknown kinds {bad}")
         share = None if a.frame_share is None else tuple(float(x) for x in a.frame_share.split(","))
         generate(a.out, a.num, a.seed, kinds, a.image_size, a.balance_vr, a.max_candidates,
-                 share)
+                 share, a.photo_prob)
     else:
         detect(a.data, [float(c) for c in a.conf.split(",")], a.match, a.pad,
                a.model_complexity, a.sheet, a.json)

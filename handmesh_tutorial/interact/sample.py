@@ -59,7 +59,7 @@ def _choose_kind(seed: int) -> str:
 def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224,
                 renderer=None, config: InteractionConfig | None = None, *,
                 limits: str | None = None, share: tuple[float, float] | None = None,
-                return_scene: bool = False):
+                photo_prob: float | None = None, return_scene: bool = False):
     """One INTER-SH sample: [`build_scene`][handmesh_tutorial.interact.generator.build_scene] then
     [`render_scene`][handmesh_tutorial.interact.sample.render_scene].
 
@@ -82,6 +82,8 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
         share: (min, max) share of the image side covered by the target hand's bounding box;
             ``None`` = [`FRAME_SHARE`][handmesh_tutorial.interact.framing.FRAME_SHARE] (see
             [`render_scene`][handmesh_tutorial.interact.sample.render_scene]).
+        photo_prob: probability of a photograph as background (else a procedural texture);
+            ``None`` = [`render_scene`][handmesh_tutorial.interact.sample.render_scene]'s 0.75.
         return_scene: also return the [`Scene`][handmesh_tutorial.interact.scene.Scene] (what
             the sample does not store, e.g. each hand's skin ``tone``).
 
@@ -106,8 +108,9 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
     except InteractionError as e:
         raise InteractionError(kind, int(sample_seed), e.reason) from None
     scene.seed = int(sample_seed)
+    background = {} if photo_prob is None else {"photo_prob": photo_prob}
     sample = render_scene(scene, np.random.default_rng(view_ss), image_size, renderer,
-                          share=FRAME_SHARE if share is None else share)
+                          share=FRAME_SHARE if share is None else share, **background)
     return (sample, scene) if return_scene else sample
 
 
