@@ -93,12 +93,9 @@ REUSED = {
                      "scenes, made earlier by the same calls (about 2 min more on a first run); "
                      "it made section 5's 600 training-set scenes itself",
     "10_ablation": "reuses notebook 08's data set and its run (multi-path + attention, seed 0); "
-                   "the committed run trained the other eight itself, one after another, about "
-                   "10 min each on a machine that other jobs shared part of the time; a rerun "
-                   "finds them in `notebooks/runs/` and only evaluates. Its committed outputs "
-                   "predate the thumb's zero (generator of commit ccb88d2, docs page *Realistic "
-                   "scenes*): notebook 08's run that it shows is the earlier one, and a rerun "
-                   "from nothing generates and trains everything anew",
+                   "the committed run trained the other eight itself, one after another, 5-11 "
+                   "min each on a machine that other jobs shared part of the time; a rerun "
+                   "finds them in `notebooks/runs/` and only evaluates",
 }
 
 
