@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..dataset import KINDS
+from ..render.backgrounds import PHOTO_PROB
 from ..render.lights import scene_lights
 from ..visibility import visibility_ratios
 from .bodies import _hand_assets
@@ -83,7 +84,7 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
             ``None`` = [`FRAME_SHARE`][handmesh_tutorial.interact.framing.FRAME_SHARE] (see
             [`render_scene`][handmesh_tutorial.interact.sample.render_scene]).
         photo_prob: probability of a photograph as background (else a procedural texture);
-            ``None`` = [`render_scene`][handmesh_tutorial.interact.sample.render_scene]'s 0.75.
+            ``None`` = [`PHOTO_PROB`][handmesh_tutorial.render.backgrounds.PHOTO_PROB] (0.75).
         return_scene: also return the [`Scene`][handmesh_tutorial.interact.scene.Scene] (what
             the sample does not store, e.g. each hand's skin ``tone``).
 
@@ -108,16 +109,16 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
     except InteractionError as e:
         raise InteractionError(kind, int(sample_seed), e.reason) from None
     scene.seed = int(sample_seed)
-    background = {} if photo_prob is None else {"photo_prob": photo_prob}
     sample = render_scene(scene, np.random.default_rng(view_ss), image_size, renderer,
-                          share=FRAME_SHARE if share is None else share, **background)
+                          share=FRAME_SHARE if share is None else share,
+                          photo_prob=PHOTO_PROB if photo_prob is None else photo_prob)
     return (sample, scene) if return_scene else sample
 
 
 def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
                  occluder_view: float = 0.4, *, share: tuple[float, float] = FRAME_SHARE,
                  focal: tuple[float, float] = FRAME_FOCAL, margin: float = FRAME_MARGIN,
-                 photo_prob: float = 0.75) -> dict:
+                 photo_prob: float = PHOTO_PROB) -> dict:
     """Step 6: place a camera, render a scene and measure visibility; the dataset sample dict.
 
     **Camera** ([`frame_camera`][handmesh_tutorial.interact.framing.frame_camera]): it looks at the

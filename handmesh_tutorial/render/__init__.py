@@ -33,6 +33,7 @@ from ..camera import project_checked as project
 from .backend import ensure_egl, gl_opened, import_pyrender, patch_pyrender_numpy2
 from .backgrounds import (
     BACKGROUND_PHOTOS,
+    PHOTO_PROB,
     BackgroundPhoto,
     photo_background,
     photo_pixels,
@@ -57,6 +58,7 @@ from .renderer import (  # noqa: F401
 
 __all__ = [
     "BACKGROUND_PHOTOS",
+    "PHOTO_PROB",
     "CV_TO_GL",
     "BackgroundPhoto",
     "Light",

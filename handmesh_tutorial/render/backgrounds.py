@@ -24,6 +24,7 @@ import numpy as np
 __all__ = [
     "BACKGROUND_PHOTOS",
     "BackgroundPhoto",
+    "PHOTO_PROB",
     "photo_background",
     "photo_pixels",
     "random_background",
@@ -291,8 +292,13 @@ def photo_background(rng: np.random.Generator | int | None, H: int, W: int | Non
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
+PHOTO_PROB: float = 0.75
+"""The generator's share of photograph backgrounds (`scene_background`); the rest are muted
+procedural textures."""
+
+
 def scene_background(rng: np.random.Generator | int | None, H: int, W: int | None = None,
-                     photo_prob: float = 0.75) -> np.ndarray:
+                     photo_prob: float = PHOTO_PROB) -> np.ndarray:
     """The generator's background: a `photo_background` with probability ``photo_prob``, else a
     procedural `random_background` with its colours muted (saturation x0.3-0.8: the random
     colours of the procedural textures are far more vivid than real surroundings).
