@@ -192,6 +192,10 @@ def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, re
                         progress=progress)
         return {"root": root, "scenes": len(InterSHDataset(root)),
                 "seconds": time.perf_counter() - t0, "shards": 1}
+    unmerged = root.parent / f".{root.name}-shards"  # there until the shards are merged
+    if (root / "meta.json").exists() and not unmerged.exists():
+        # a rerun of the same build: keep the shards the first run made
+        return _reuse_sharded_root(root, num, seed, render_size, parts, t0, say)
     shard_roots = []
     for k in range(parts):
         spent = time.perf_counter() - t0
@@ -199,14 +203,44 @@ def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, re
             say(f"      stopping after {k} of {parts} shards: {spent:.0f} s spent, the next "
                 f"would end past the {max_seconds:.0f} s budget")
             break
-        r = root.parent / f".{root.name}-shards" / f"{k:04d}"
+        r = unmerged / f"{k:04d}"
         generate_scenes(r, num, seed, render_size=render_size, workers=workers,
                         progress=progress, shard=(k, parts))
         shard_roots.append(r)
     merge_shards(shard_roots, root, link=True, progress=False, durable=False)
-    shutil.rmtree(root.parent / f".{root.name}-shards")
+    shutil.rmtree(unmerged)
     return {"root": root, "scenes": len(InterSHDataset(root)),
             "seconds": time.perf_counter() - t0, "shards": len(shard_roots)}
+
+
+def _reuse_sharded_root(root: Path, num: int, seed: int, render_size: int, parts: int,
+                        t0: float, say) -> dict:
+    """The scenes that an earlier run of the same time-bounded generation left in ``root``.
+
+    A time budget decides how many shards a run makes, so a rerun with another budget (or on a
+    faster machine) would make a different number and could not merge with the first; the first
+    run's shards are kept instead and training resumes on them.
+    """
+    from .dataset import InterSHDataset, read_meta
+
+    meta = read_meta(root)
+    want = {"seed": seed, "num_samples": num}
+    if meta.get("image_size") is not None:  # the generator's scenes record it
+        want["image_size"] = [render_size, render_size]
+    differ = {k: (meta.get(k), v) for k, v in want.items() if meta.get(k) != v}
+    if differ:
+        raise ValueError(
+            f"{root / 'meta.json'}: these scenes are not this build's (on disk, asked): {differ}; "
+            "use another --out, or delete the folder to generate anew")
+    ds = InterSHDataset(root)
+    if ds.missing:
+        raise ValueError(f"{root}: {len(ds.missing)} of its scenes are missing; delete the "
+                         "folder to generate anew")
+    shards = round(len(ds) * parts / num)
+    say(f"      reusing the {len(ds)} scenes ({shards} of {parts} shards) that an earlier run "
+        f"left in {root}")
+    return {"root": root, "scenes": len(ds), "seconds": time.perf_counter() - t0,
+            "shards": shards}
 
 
 def _hardware(device) -> str:

@@ -171,6 +171,42 @@ def test_time_bounded_generation_keeps_whole_shards_in_a_valid_root(tmp_path, mo
     assert np.array_equal(a[2]["image"], b[2]["image"])
 
 
+def test_a_rerun_keeps_the_shards_of_the_first_and_refuses_other_scenes(tmp_path, monkeypatch):
+    """A time budget decides how many shards a run makes: a rerun with another budget (a run
+    resumed on a GPU machine after a failure did this) must train on the first run's shards,
+    not generate a different number that cannot merge with them."""
+    import handmesh_tutorial.demo.run as demo_run
+    from handmesh_tutorial.dataset import generate_dataset
+
+    made = []
+
+    def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
+        made.append(shard)
+        return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
+                                "hand-hand", shard=shard, progress=False, durable=False)
+
+    monkeypatch.setattr(demo_run, "generate_scenes", toy_scenes)
+    said = []
+    first = P.generate_training_scenes(tmp_path / "train", 12, 3, render_size=32, workers=1,
+                                       max_seconds=math.inf, parts=4, log=said.append)
+    assert first["shards"] == 4 and made == [(0, 4), (1, 4), (2, 4), (3, 4)]
+    again = P.generate_training_scenes(tmp_path / "train", 12, 3, render_size=32, workers=1,
+                                       max_seconds=0.0, parts=4, log=said.append)
+    assert made == [(0, 4), (1, 4), (2, 4), (3, 4)]  # nothing generated the second time
+    assert again["scenes"] == 12 and again["shards"] == 4
+    assert "reusing the 12 scenes (4 of 4 shards)" in said[-1]
+    with pytest.raises(ValueError, match=r"meta\.json.*not this build's.*'seed': \(3, 4\)"):
+        P.generate_training_scenes(tmp_path / "train", 12, 4, render_size=32, workers=1,
+                                   max_seconds=math.inf, parts=4, log=None)
+    with pytest.raises(ValueError, match="num_samples"):
+        P.generate_training_scenes(tmp_path / "train", 16, 3, render_size=32, workers=1,
+                                   max_seconds=math.inf, parts=4, log=None)
+    (tmp_path / "train" / "samples" / "000005").rename(tmp_path / "gone")
+    with pytest.raises(ValueError, match="1 of its scenes are missing"):
+        P.generate_training_scenes(tmp_path / "train", 12, 3, render_size=32, workers=1,
+                                   max_seconds=math.inf, parts=4, log=None)
+
+
 def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     """generate -> train -> export -> install, then a second run that starts from the first."""
     import handmesh_tutorial.demo.run as demo_run

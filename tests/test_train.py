@@ -6,6 +6,7 @@ import functools
 import json
 import math
 import os
+import random
 import socket
 import subprocess
 import sys
@@ -641,3 +642,31 @@ def test_bfloat16_precision_trains_close_to_float32(samples, tmp_path):
     assert all(p.dtype == torch.float32 for p in runs["bfloat16"].model.parameters())
     assert np.isfinite(b16).all() and b16[-1] < 0.97 * b16[0], b16
     np.testing.assert_allclose(b16, f32, rtol=0.05)
+
+
+class _DeviceTensor(torch.Tensor):
+    """Stands in for a CUDA tensor on a CPU-only machine: ``.numpy()`` refuses, ``.cpu()``
+    gives a plain tensor (what torch.load(map_location="cuda") hands a resumed GPU run)."""
+
+    def numpy(self, *args, **kwargs):
+        raise TypeError("can't convert cuda:0 device type tensor to numpy")
+
+    def cpu(self, *args, **kwargs):
+        return self.as_subclass(torch.Tensor)
+
+
+def test_random_states_restore_from_tensors_on_the_training_device():
+    from handmesh_tutorial.train.checkpoints import _rng_state, _set_rng_state
+
+    def on_device(x):
+        if isinstance(x, torch.Tensor):
+            return x.clone().as_subclass(_DeviceTensor)
+        if isinstance(x, dict):
+            return {k: on_device(v) for k, v in x.items()}
+        return x
+
+    state = on_device(_rng_state())
+    want = (np.random.rand(3), torch.rand(3), random.random())  # noqa: NPY002
+    _set_rng_state(state)
+    got = (np.random.rand(3), torch.rand(3), random.random())  # noqa: NPY002
+    assert np.array_equal(want[0], got[0]) and torch.equal(want[1], got[1]) and want[2] == got[2]

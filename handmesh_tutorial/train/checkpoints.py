@@ -61,8 +61,9 @@ def _rng_state() -> dict:
 def _set_rng_state(s: Mapping) -> None:
     torch.set_rng_state(s["torch"].cpu())
     n = s["numpy"]
-    np.random.set_state((n["name"], n["keys"].numpy().astype(np.uint32), n["pos"],  # noqa: NPY002
-                         n["has_gauss"], n["cached_gaussian"]))
+    keys = n["keys"].cpu().numpy().astype(np.uint32)  # on the GPU when read with map_location
+    np.random.set_state((n["name"], keys, n["pos"], n["has_gauss"],  # noqa: NPY002
+                         n["cached_gaussian"]))
     p = s["python"]
     random.setstate((p["version"], tuple(int(x) for x in p["state"].tolist()), p["gauss_next"]))
     if "cuda" in s and torch.cuda.is_available() and len(s["cuda"]) == torch.cuda.device_count():
