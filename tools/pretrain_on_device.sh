@@ -12,9 +12,15 @@
 #     pyrender==0.1.45 pyglet==2.1.19 trimesh==5.2.0 rtree==1.4.1 manifold3d==3.5.4 \
 #     freetype-py==2.5.1
 #   .venv/bin/pip wheel --no-deps -w .whl PyOpenGL==3.1.0      # sdist only: build the wheel here
-# The shipped run:
+# The shipped file's GPU runs (docs page "The pretrained model"), run 1 from random weights:
 #   HANDMESH_COMMIT=<commit> tools/pretrain_on_device.sh --train-scenes 20000 --val-scenes 300 \
 #     --epochs 16 --batch-size 128 --max-generate-seconds 150 --max-train-seconds 230
+# and run 4, continuing the shipped weights on new scenes (the commit must hold the shipped file):
+#   HANDMESH_COMMIT=<commit> tools/pretrain_on_device.sh --init pretrained --data-seed 400 \
+#     --lr 3e-4 --train-scenes 40000 --val-scenes 300 --epochs 16 --batch-size 128 \
+#     --max-generate-seconds 240 --max-train-seconds 240
+# On a machine that stays warm between calls, /tmp/pt survives: running the same line again
+# resumes (the scenes are kept, training continues from its last checkpoint).
 set -e
 for f in .gl/*.deb; do dpkg -x "$f" /; done
 ldconfig
