@@ -16,9 +16,9 @@ Why a separate recipe from the demo's: a network trained from random weights on 
 does not learn to read finger poses from synthetic crops (docs page "Training from scratch on a
 CPU", the pose probe). The shipped weights come from 66,000 scenes at 224 px and about 490,000
 augmented 128-px crops, in four runs, each starting from the last one's weights (``init``): 4
-minutes on a GPU, twice about 35 minutes on a 2-core CPU, then 3 minutes on a GPU. They read the hand's orientation
-far better than the demo's network and some of the finger articulation. The numbers, and how they
-were measured, are on the docs page "The pretrained model".
+minutes on a GPU, twice about 35 minutes on a 2-core CPU, then 3 minutes on a GPU. They read the
+hand's orientation far better than the demo's network and some of the finger articulation. The
+numbers, and how they were measured, are on the docs page "The pretrained model".
 
 Taught in notebook 00 ("Quickstart") and notebook 09 ("Evaluation").
 """
@@ -243,6 +243,27 @@ def _reuse_sharded_root(root: Path, num: int, seed: int, render_size: int, parts
             "shards": shards}
 
 
+def _resumed_plan(saved: dict, history: list, epochs: int,
+                  max_train_seconds: float) -> tuple[int, int]:
+    """``(epochs, lr_step)`` for resuming a time-budgeted run from its checkpoint.
+
+    A run's first epoch is timed alone (its checkpoint says ``epochs=1``); the run then plans the
+    epochs that fit and continues, and every later checkpoint holds that plan, which a resume
+    keeps. A run stopped before its second epoch wrote a checkpoint plans now, from the first
+    epoch's training seconds in ``history`` (validation not included: the plan may be an epoch
+    long, and the budget check after each epoch still stops it in time).
+
+    Args:
+        saved: the checkpoint's config (a dict). history: its rows (``seconds`` per epoch).
+        epochs: the recipe's epochs, the most a plan may give. max_train_seconds: the budget.
+    """
+    if int(saved["epochs"]) > 1 or epochs == 1:
+        return int(saved["epochs"]), int(saved["lr_step"])
+    per_epoch = max(float(history[0]["seconds"]), 1e-9)
+    fit = max(1, min(epochs, int(max_train_seconds // per_epoch)))
+    return fit, max(1, math.ceil(fit / 3))
+
+
 def _hardware(device) -> str:
     import torch
 
@@ -342,6 +363,11 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     the int8 file into the package (``handmesh_tutorial/assets/``), where
     [`pretrained`][handmesh_tutorial.pretrained.pretrained] finds it.
 
+    Calling it again with the same ``out`` resumes: the scenes already generated are kept (also
+    under another ``max_generate_seconds``; other seeds or counts are refused), and training
+    continues from ``out/train/checkpoint_last.pt`` with the epochs and schedule planned for it
+    (``_resumed_plan``); the training budget counts from the resumed call.
+
     Args:
         out: output folder.
         recipe: the recipe (default: the shipped file's).
@@ -430,6 +456,15 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     say(f"[2/3] training ({recipe.epochs} epochs, batch {recipe.batch_size}, "
         f"{recipe.image_size}-px crops, {recipe.encoder}) in {out / 'train'}")
     resume = last.exists()
+    if resume and max_train_seconds is not None:  # keep the plan of the run being resumed
+        from .train.checkpoints import _read_checkpoint
+
+        ck = _read_checkpoint(last)
+        fit, lr_step = _resumed_plan(ck["config"], ck["history"], config.epochs,
+                                     max_train_seconds)
+        plan["config"] = replace(config, epochs=fit, lr_step=lr_step)
+        info["epochs_planned"] = fit
+        say(f"      resuming after epoch {int(ck['epoch'])} of the {fit} planned")
     try:
         if max_train_seconds is not None and not resume and config.epochs > 1:
             # One epoch first, to see how many fit the budget; then the learning-rate schedule

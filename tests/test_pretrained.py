@@ -242,6 +242,13 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     short = P.build_pretrained(tmp_path / "short", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                max_train_seconds=1e-6, progress=False, log=None)
     assert short["info"]["epochs_planned"] == 1 and short["info"]["epochs_done"] == 1
+    # resumed with a budget that fits three: its one-epoch plan is made again, and training goes
+    # on from epoch 2 with the schedule of three
+    resumed = P.build_pretrained(tmp_path / "short", P.PretrainedRecipe(**{**small, "epochs": 3}),
+                                 max_train_seconds=1e6, progress=False, log=None)
+    assert resumed["info"]["epochs_planned"] == 3 and resumed["info"]["epochs_done"] == 3
+    lrs = [row["lr"] for row in T.load_checkpoint(resumed["file"])[1]["history"]]
+    assert lrs == pytest.approx([1e-3, 3e-4, 9e-5])
     roomy = P.build_pretrained(tmp_path / "roomy", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                max_train_seconds=1e6, progress=False, log=None)
     assert roomy["info"]["epochs_planned"] == 3
@@ -252,6 +259,16 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
         log=None)
     assert second["info"]["init_from"]["data"]["train_seed"] == 100
     assert second["info"]["data"]["train_seed"] == 200
+
+
+def test_a_resumed_run_keeps_its_plan_or_makes_it_from_the_first_epoch():
+    # a checkpoint after the plan: its epochs and schedule stay, whatever the budget now
+    assert P._resumed_plan({"epochs": 8, "lr_step": 2}, [{"seconds": 30.0}], 16, 1.0) == (8, 2)
+    # stopped after the timed first epoch: 240 s / 30 s per epoch -> 8 epochs, decays every 3
+    assert P._resumed_plan({"epochs": 1, "lr_step": 6}, [{"seconds": 30.0}], 16, 240) == (8, 3)
+    assert P._resumed_plan({"epochs": 1, "lr_step": 6}, [{"seconds": 30.0}], 5, 240) == (5, 2)
+    assert P._resumed_plan({"epochs": 1, "lr_step": 6}, [{"seconds": 30.0}], 16, 10) == (1, 1)
+    assert P._resumed_plan({"epochs": 1, "lr_step": 1}, [{"seconds": 30.0}], 1, 1e6) == (1, 1)
 
 
 def test_cli_pretrain_help_and_evaluate_by_name(run, tmp_path, monkeypatch, capsys):
