@@ -259,8 +259,13 @@ def _resumed_plan(saved: dict, history: list, epochs: int,
     """
     if int(saved["epochs"]) > 1 or epochs == 1:
         return int(saved["epochs"]), int(saved["lr_step"])
-    per_epoch = max(float(history[0]["seconds"]), 1e-9)
-    fit = max(1, min(epochs, int(max_train_seconds // per_epoch)))
+    return _plan(epochs, float(history[0]["seconds"]), max_train_seconds)
+
+
+def _plan(epochs: int, per_epoch: float, max_train_seconds: float) -> tuple[int, int]:
+    """``(epochs, lr_step)`` that fit the budget at ``per_epoch`` seconds each: at least one, at
+    most ``epochs``, the learning rate decayed after every third of them."""
+    fit = max(1, min(epochs, int(max_train_seconds // max(per_epoch, 1e-9))))
     return fit, max(1, math.ceil(fit / 3))
 
 
@@ -410,6 +415,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     import torch
 
     from .train import train
+    from .train.checkpoints import _read_checkpoint
 
     config = recipe.train_config(tr["root"], val["root"], out / "train", progress)
     info = {"recipe": asdict(recipe), "max_generate_seconds": max_generate_seconds,
@@ -421,8 +427,6 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
             "seconds": {"generate": round(t_gen, 1)}, "torch": str(torch.__version__),
             "commit": _commit(), "date": datetime.date.today().isoformat()}
     if recipe.init is not None:  # the chain of runs: what the starting weights were made of
-        from .train.checkpoints import _read_checkpoint
-
         info["init_from"] = _read_checkpoint(recipe.init).get("pretrained") or str(recipe.init)
     files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
     plan = {"config": config}  # the run's config; its epochs may be fitted to the time budget
@@ -457,8 +461,6 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
         f"{recipe.image_size}-px crops, {recipe.encoder}) in {out / 'train'}")
     resume = last.exists()
     if resume and max_train_seconds is not None:  # keep the plan of the run being resumed
-        from .train.checkpoints import _read_checkpoint
-
         ck = _read_checkpoint(last)
         fit, lr_step = _resumed_plan(ck["config"], ck["history"], config.epochs,
                                      max_train_seconds)
@@ -473,8 +475,8 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
             plan["config"] = replace(config, epochs=1)
             train(plan["config"], callback=after_epoch)
             per_epoch = time.perf_counter() - t_train
-            fit = max(1, min(config.epochs, int(max_train_seconds // per_epoch)))
-            plan["config"] = replace(config, epochs=fit, lr_step=max(1, math.ceil(fit / 3)))
+            fit, lr_step = _plan(config.epochs, per_epoch, max_train_seconds)
+            plan["config"] = replace(config, epochs=fit, lr_step=lr_step)
             info["epochs_planned"] = fit
             say(f"      the first epoch took {per_epoch:.0f} s: {fit} of {config.epochs} epochs "
                 f"fit the {max_train_seconds:.0f} s budget, the schedule is planned for {fit}")
@@ -484,8 +486,6 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
         say(f"      stopped after epoch {info['epochs_done']} of {plan['config'].epochs}: the "
             f"next would end past the {max_train_seconds:.0f} s budget")
     if not files["file"].exists():  # a finished run resumed: nothing trained, export it now
-        from .train.checkpoints import _read_checkpoint
-
         export(int(_read_checkpoint(last)["epoch"]))
     say(f"[3/3] exported {files['file']} ({files['file'].stat().st_size / 1e6:.1f} MB, int8) and "
         f"{files['float16'].name}")
