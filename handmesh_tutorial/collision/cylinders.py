@@ -87,6 +87,26 @@ class Cylinders:
             raise ValueError(f"adjacent holds indices outside [0, {n})")
         self.adjacent = np.unique(np.sort(adj, axis=1), axis=0) if adj.size else adj
 
+    @classmethod
+    def _unchecked(cls, p0: np.ndarray, p1: np.ndarray, radius: np.ndarray,
+                   names: tuple[str, ...] = (), parts: np.ndarray | None = None,
+                   adjacent: np.ndarray | None = None) -> Cylinders:
+        """A body from arrays already in canonical form, without the checks of the constructor.
+
+        For hot internal loops (the generator's rigs build a body per collision query, some
+        hundred per scene, and the checks cost more than the query). The caller guarantees what
+        ``__post_init__`` would establish: ``p0, p1`` (N, 3) finite float64, ``radius`` (N,)
+        non-negative float64, ``names`` empty or N strings, ``parts`` (N,) int64 or None,
+        ``adjacent`` (M, 2) int64, sorted and unique, or None. The arrays are not copied.
+        """
+        n = len(p0)
+        body = cls.__new__(cls)
+        body.p0, body.p1, body.radius = p0, p1, radius
+        body.names = names if names else _default_names(n)
+        body.parts = np.zeros(n, dtype=np.int64) if parts is None else parts
+        body.adjacent = np.zeros((0, 2), dtype=np.int64) if adjacent is None else adjacent
+        return body
+
     def __len__(self) -> int:
         return len(self.p0)
 

@@ -108,21 +108,37 @@ def labelled_skin_colors(vertices: np.ndarray, faces: np.ndarray, rest_joints: n
     Raises:
         ValueError: bad tone index or triple.
     """
+    layout = _skin_layout(vertices, faces, rest_joints, palmar)
+    return _layout_skin_colors(layout, palmar, nail, tone, rng, variation)
+
+
+def _skin_layout(vertices: np.ndarray, faces: np.ndarray, rest_joints: np.ndarray,
+                 palmar: np.ndarray) -> tuple:
+    """The per-mesh part of `labelled_skin_colors`: ``(knuckle weights (V,1), vertex adjacency
+    (V,V) sparse, vertex degrees (V,))``. It depends on the rest mesh only, so a model computes it
+    once (`HandModel.vertex_colors`) instead of at every hand of every scene."""
+    k = knuckle_weights(vertices, rest_joints, palmar)[:, None]
+    adj = _adjacency(faces, len(vertices))
+    deg = np.asarray(adj.sum(1)).ravel()
+    return k, adj, deg
+
+
+def _layout_skin_colors(layout: tuple, palmar: np.ndarray, nail: np.ndarray, tone,
+                        rng: np.random.Generator | int | None, variation: float) -> np.ndarray:
+    """`labelled_skin_colors` from a precomputed `_skin_layout`."""
+    k, adj, deg = layout
     base, gen = skin_tone(tone, rng)
-    num_vertices = len(vertices)
+    num_vertices = len(palmar)
     palm = base + (1.0 - base) * np.array([0.30, 0.26, 0.24])            # palm lighter
     palm = palm * np.array([1.0, 0.97, 0.97])                            # and a bit pinker
     nail_rgb = base + (1.0 - base) * np.array([0.45, 0.30, 0.30])
     p = palmar[:, None]
     col = (1 - p) * base + p * palm
     # knuckles: the skin over the finger joints on the back of the hand is darker and redder
-    k = knuckle_weights(vertices, rest_joints, palmar)[:, None]
     col = col * (1.0 - 0.12 * k * np.array([1.0, 1.3, 1.35]))
     n = nail[:, None]
     col = (1 - n) * col + n * nail_rgb
     noise = gen.standard_normal(num_vertices)
-    adj = _adjacency(faces, num_vertices)
-    deg = np.asarray(adj.sum(1)).ravel()
     for _ in range(4):                       # smooth the noise into soft blotches
         noise = 0.5 * noise + 0.5 * (adj @ noise) / deg
     noise /= noise.std() + 1e-12

@@ -27,7 +27,7 @@ from ._common import (
     _rest_keypoints,
     _translate,
 )
-from .appearance import knuckle_weights, labelled_skin_colors
+from .appearance import _layout_skin_colors, _skin_layout, knuckle_weights
 from .joints import MANO_PARENTS, MANO_TO_FREIHAND
 from .skinning import axis_angle_to_matrix, lbs
 from .template import SHAPE_PARAM_NAMES, HandTemplate, load_template
@@ -214,5 +214,9 @@ class HandModel(nn.Module):
         Raises:
             ValueError: bad tone index or triple.
         """
-        return labelled_skin_colors(self.template_vertices, self.faces, self.rest_joints,
-                                    self.palmar, self.template.nail, tone, rng, variation)
+        layout = self.__dict__.get("_skin_layout")
+        if layout is None:   # the rest mesh's part, made once per model (not per hand drawn)
+            layout = _skin_layout(self.template_vertices, self.faces, self.rest_joints,
+                                  self.palmar)
+            self.__dict__["_skin_layout"] = layout
+        return _layout_skin_colors(layout, self.palmar, self.template.nail, tone, rng, variation)

@@ -82,6 +82,31 @@ def closest_points_on_triangles(p, a, b, c):
     return q, region
 
 
+def _sum_rows_by(index: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
+    """(n, 3): ``out[index[k]] += rows[k]`` for k in order (``np.add.at``'s result, faster)."""
+    if len(index) == 0:
+        return np.zeros((n, 3))
+    return np.stack([np.bincount(index, rows[:, a], minlength=n) for a in range(3)], 1)
+
+
+@functools.lru_cache(maxsize=32)   # hands, objects, chain links: a few layouts
+def _edge_ids_cached(key: bytes, shape: tuple, num_vertices: int) -> tuple[np.ndarray, int]:
+    f = np.frombuffer(key, np.int64).reshape(shape)
+    e = np.sort(np.stack([f[:, [1, 2]], f[:, [2, 0]], f[:, [0, 1]]], 1), axis=2)
+    _, inv = np.unique(e[..., 0] * num_vertices + e[..., 1], return_inverse=True)
+    inv = inv.reshape(-1)
+    inv.setflags(write=False)
+    return inv, int(inv.max()) + 1 if inv.size else 0
+
+
+def _edge_ids(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, int]:
+    """``(edge id of each face's edges (3F,), number of edges)``; edge ``i`` of a face is
+    opposite its corner ``i``. Topology only: computed once per mesh layout (the generator's hands
+    share two), read-only."""
+    f = np.ascontiguousarray(faces, np.int64)
+    return _edge_ids_cached(f.tobytes(), f.shape, int(num_vertices))
+
+
 class _MeshSDF:
     """Signed distance to a closed triangle mesh with angle-weighted pseudo-normals.
 
@@ -114,23 +139,22 @@ class _MeshSDF:
         fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
         fn /= np.linalg.norm(fn, axis=1, keepdims=True) + 1e-30
         self.fn = fn
-        vn = np.zeros_like(v)  # angle-weighted vertex normals
+        # angle-weighted vertex normals: the three corners' contributions summed per vertex in
+        # the order corner 0 of every face, corner 1, corner 2 (one bincount per axis adds in
+        # input order, as three np.add.at calls did, so the sums are bitwise the same)
+        weighted = []
         for i in range(3):
             e1 = v[f[:, (i + 1) % 3]] - v[f[:, i]]
             e2 = v[f[:, (i + 2) % 3]] - v[f[:, i]]
             cosang = (e1 * e2).sum(1) / (np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
                                          + 1e-30)
-            np.add.at(vn, f[:, i], np.arccos(np.clip(cosang, -1, 1))[:, None] * fn)
-        self.vn = vn
+            weighted.append(np.arccos(np.clip(cosang, -1, 1))[:, None] * fn)
+        self.vn = _sum_rows_by(f.T.reshape(-1), np.concatenate(weighted), len(v))
         # edge pseudo-normals (sum of the two adjacent face normals); edge i of a face is
         # opposite its corner i
-        e = np.sort(np.stack([f[:, [1, 2]], f[:, [2, 0]], f[:, [0, 1]]], 1), axis=2)
-        _, inv = np.unique(e[..., 0] * len(v) + e[..., 1], return_inverse=True)
-        inv = inv.reshape(-1)
-        en = np.zeros((inv.max() + 1, 3))
-        np.add.at(en, inv, np.repeat(fn, 3, axis=0))
+        inv, num_edges = _edge_ids(f, len(v))
         self.edge_of = inv.reshape(-1, 3)
-        self.en = en
+        self.en = _sum_rows_by(inv, np.repeat(fn, 3, axis=0), num_edges)
         self.centroid = v[f].mean(1)
         self.rho = np.linalg.norm(v[f] - self.centroid[:, None], axis=2).max(1)
         big = self.rho > self.big_face

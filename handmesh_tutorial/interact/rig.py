@@ -17,6 +17,51 @@ from ..lcs import rotation_from_lcs_angles
 __all__: list[str] = []  # the rig is internal to the generator
 
 
+_TREE_TABLES: dict = {}
+
+
+def _tree_tables(parents: np.ndarray, attach: np.ndarray, adjacent: np.ndarray):
+    """Per node: its subtree (node ids, breadth first), the cylinders that move with it, and the
+    non-adjacent (moved, static) cylinder pairs whose intersection is a self-collision.
+
+    Depends only on the tree and the cylinders' attachment, so it is made once per layout and
+    shared (read-only) by every rig of that layout: the generator builds two or three rigs per
+    scene, and these Python loops cost about a millisecond each time.
+    """
+    key = (parents.tobytes(), attach.tobytes(), np.asarray(adjacent, np.int64).tobytes())
+    tables = _TREE_TABLES.get(key)
+    if tables is not None:
+        return tables
+    n = len(parents)
+    children = [[] for _ in range(n)]
+    for k in range(1, n):
+        children[parents[k]].append(k)
+    subtree = []
+    for k in range(n):
+        order, stack = [], [k]
+        while stack:
+            m = stack.pop(0)
+            order.append(m)
+            stack.extend(children[m])
+        subtree.append(np.array(order))
+    adj = {(int(i), int(j)) for i, j in adjacent}
+    moved, self_pairs = [], []
+    for k in range(n):
+        mv = np.flatnonzero(np.isin(attach, subtree[k]))
+        st = np.setdiff1d(np.arange(len(attach)), mv)
+        pairs = [(a, b) for a in mv for b in st if (min(a, b), max(a, b)) not in adj]
+        p = np.array(pairs, int).reshape(-1, 2)
+        pos = {int(c): i for i, c in enumerate(mv)}
+        moved.append(mv)
+        self_pairs.append((np.array([pos[a] for a in p[:, 0]], int), p[:, 1]))
+    for a in [*subtree, *moved, *(x for pair in self_pairs for x in pair)]:
+        a.setflags(write=False)
+    if len(_TREE_TABLES) >= 64:   # a handful of layouts per process; never grow without bound
+        _TREE_TABLES.clear()
+    tables = _TREE_TABLES[key] = (subtree, moved, self_pairs)
+    return tables
+
+
 class _Rig:
     """A body as a kinematic tree of nodes carrying rigid cylinders (numpy, fast).
 
@@ -53,30 +98,8 @@ class _Rig:
         self.radius = cylinders.radius.copy()
         self.off0 = cylinders.p0 - self.rest[self.attach]
         self.off1 = cylinders.p1 - self.rest[self.attach]
-        children = [[] for _ in range(n)]
-        for k in range(1, n):
-            children[self.parents[k]].append(k)
-        self.subtree = []
-        for k in range(n):
-            order, stack = [], [k]
-            while stack:
-                m = stack.pop(0)
-                order.append(m)
-                stack.extend(children[m])
-            self.subtree.append(np.array(order))
-        # per node: the cylinders that move with it, and the non-adjacent (moved, static) pairs
-        # whose intersection is a self-collision
-        adj = {(int(i), int(j)) for i, j in cylinders.adjacent}
-        self.moved = []
-        self.self_pairs = []
-        for k in range(n):
-            mv = np.flatnonzero(np.isin(self.attach, self.subtree[k]))
-            st = np.setdiff1d(np.arange(len(self.attach)), mv)
-            pairs = [(a, b) for a in mv for b in st if (min(a, b), max(a, b)) not in adj]
-            p = np.array(pairs, int).reshape(-1, 2)
-            pos = {int(c): i for i, c in enumerate(mv)}
-            self.moved.append(mv)
-            self.self_pairs.append((np.array([pos[a] for a in p[:, 0]], int), p[:, 1]))
+        self.subtree, self.moved, self.self_pairs = _tree_tables(self.parents, self.attach,
+                                                                 cylinders.adjacent)
         self.root_R = np.eye(3) if root_R is None else np.asarray(root_R, float)
         self.root_P = self.rest[0].copy() if root_P is None else np.asarray(root_P, float)
         self.update()
@@ -139,9 +162,9 @@ class _Rig:
         self.p1 = self.p1 + d
 
     def cylinders(self) -> Cylinders:
-        c = self.rest_cyl
-        return Cylinders(self.p0.copy(), self.p1.copy(), self.radius.copy(), c.names, c.parts,
-                         c.adjacent)
+        c = self.rest_cyl   # its names, parts and adjacency are already checked
+        return Cylinders._unchecked(self.p0.copy(), self.p1.copy(), self.radius.copy(), c.names,
+                                    c.parts.copy(), c.adjacent.copy())
 
     def to_world(self, points, node: int = 0) -> np.ndarray:
         """Rest points attached to ``node`` -> world."""
@@ -184,5 +207,5 @@ class _Rig:
     def collides(self, other: _Rig) -> bool:
         """Does any cylinder of this rig meet any cylinder of ``other``?"""
         # bare bodies (no names, no adjacency): this runs at every step of the approach
-        return bodies_collide(Cylinders(self.p0, self.p1, self.radius),
-                              Cylinders(other.p0, other.p1, other.radius))
+        return bodies_collide(Cylinders._unchecked(self.p0, self.p1, self.radius),
+                              Cylinders._unchecked(other.p0, other.p1, other.radius))
