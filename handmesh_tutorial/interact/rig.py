@@ -9,15 +9,14 @@ interactions").
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..collision import Cylinders, bodies_collide, self_collisions
 from ..lcs import rotation_from_lcs_angles
 
 __all__: list[str] = []  # the rig is internal to the generator
-
-
-_TREE_TABLES: dict = {}
 
 
 def _tree_tables(parents: np.ndarray, attach: np.ndarray, adjacent: np.ndarray):
@@ -28,10 +27,16 @@ def _tree_tables(parents: np.ndarray, attach: np.ndarray, adjacent: np.ndarray):
     shared (read-only) by every rig of that layout: the generator builds two or three rigs per
     scene, and these Python loops cost about a millisecond each time.
     """
-    key = (parents.tobytes(), attach.tobytes(), np.asarray(adjacent, np.int64).tobytes())
-    tables = _TREE_TABLES.get(key)
-    if tables is not None:
-        return tables
+    return _tree_tables_cached(np.asarray(parents, np.int64).tobytes(),
+                               np.asarray(attach, np.int64).tobytes(),
+                               np.asarray(adjacent, np.int64).reshape(-1, 2).tobytes())
+
+
+@functools.lru_cache(maxsize=64)   # a handful of layouts per process (hands, objects, chains)
+def _tree_tables_cached(parents_key: bytes, attach_key: bytes, adjacent_key: bytes):
+    parents = np.frombuffer(parents_key, np.int64)
+    attach = np.frombuffer(attach_key, np.int64)
+    adjacent = np.frombuffer(adjacent_key, np.int64).reshape(-1, 2)
     n = len(parents)
     children = [[] for _ in range(n)]
     for k in range(1, n):
@@ -56,10 +61,7 @@ def _tree_tables(parents: np.ndarray, attach: np.ndarray, adjacent: np.ndarray):
         self_pairs.append((np.array([pos[a] for a in p[:, 0]], int), p[:, 1]))
     for a in [*subtree, *moved, *(x for pair in self_pairs for x in pair)]:
         a.setflags(write=False)
-    if len(_TREE_TABLES) >= 64:   # a handful of layouts per process; never grow without bound
-        _TREE_TABLES.clear()
-    tables = _TREE_TABLES[key] = (subtree, moved, self_pairs)
-    return tables
+    return subtree, moved, self_pairs
 
 
 class _Rig:
