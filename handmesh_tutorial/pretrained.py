@@ -17,9 +17,9 @@ does not learn to read finger poses from synthetic crops (docs page "Training fr
 CPU", the pose probe). The shipped weights come from 104,000 scenes at 224 px and about 660,000
 augmented 128-px crops, in six runs, each starting from the last one's weights (``init``): 4
 minutes on a GPU, twice about 35 minutes on a 2-core CPU, 3 minutes on a GPU, then twice about
-33 minutes on the CPU. They read the
-hand's orientation far better than the demo's network and some of the finger articulation. The
-numbers, and how they were measured, are on the docs page "The pretrained model".
+33 minutes on the CPU. They read the hand's orientation far better than the demo's network and
+some of the finger articulation. The numbers, and how they were measured, are on the docs page
+"The pretrained model".
 
 Taught in notebook 00 ("Quickstart") and notebook 09 ("Evaluation").
 """
