@@ -14,10 +14,10 @@ it, the export to a small file, and the loader.
 
 Why a separate recipe from the demo's: a network trained from random weights on a CPU in minutes
 does not learn to read finger poses from synthetic crops (docs page "Training from scratch on a
-CPU", the pose probe). The shipped weights come from 104,000 scenes at 224 px and about 660,000
-augmented 128-px crops, in six runs, each starting from the last one's weights (``init``): 4
-minutes on a GPU, twice about 35 minutes on a 2-core CPU, 3 minutes on a GPU, then twice about
-33 minutes on the CPU. They read the hand's orientation far better than the demo's network and
+CPU", the pose probe). The shipped weights come from 122,000 scenes at 224 px and about 750,000
+augmented 128-px crops, in seven runs, each starting from the last one's weights (``init``): 4
+minutes on a GPU, twice about 35 minutes on a 2-core CPU, 3 minutes on a GPU, then three times
+33-36 minutes on the CPU. They read the hand's orientation far better than the demo's network and
 some of the finger articulation. The numbers, and how they were measured, are on the docs page
 "The pretrained model".
 
