@@ -178,6 +178,28 @@ def _cmd_pretrain(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
+    from .train.pose_pretraining import PosePretrainConfig, build_pretrained_encoder
+
+    fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "backbone", "batch_size",
+              "lr", "max_steps", "seed", "device", "workers")
+    kw = {k: getattr(args, k) for k in fields if getattr(args, k) is not None}
+    if args.image_sizes:
+        kw["image_sizes"] = tuple(int(s) for s in args.image_sizes.split(","))
+    if args.init is not None:
+        kw["init"] = None if args.init == "none" else args.init
+    res = build_pretrained_encoder(args.out, PosePretrainConfig(**kw),
+                                   max_generate_seconds=args.max_generate_seconds,
+                                   max_train_seconds=args.max_train_seconds,
+                                   install=args.install, progress=not args.no_progress)
+    last = res["history"][-1]
+    print(f"handmesh pretrain-encoder: {res['info']['data']['train_scenes']} training scenes, "
+          f"{last['step']} steps on {res['info']['hardware']}; val PA-MPJPE "
+          f"{last['64']['pa_mpjpe']:.2f} mm at 64 px (mean training hand "
+          f"{last['mean training hand']['pa_mpjpe']:.2f}) -> {res['file']}")
+    return 0
+
+
 def _print_skipped(command: str, skipped: list) -> None:
     """The bad samples ``--skip-bad`` left out, one line each (stdout: part of the result)."""
     if not skipped:
@@ -364,6 +386,39 @@ def build_parser() -> argparse.ArgumentParser:
                      "epochs that fit are planned (learning-rate schedule included)")
     pre.add_argument("--no-progress", action="store_true", help="no progress bars")
     pre.set_defaults(func=_cmd_pretrain)
+
+    pe = sub.add_parser("pretrain-encoder", help="make the pretrained hand image encoder: generate "
+                        "scenes, train on 2D keypoints and 3D joints (no mesh decoder), export a "
+                        "small int8 file (resumable)")
+    pe.add_argument("--out", default="runs/pretrained_encoder",
+                    help="output folder (default: runs/pretrained_encoder)")
+    pe.add_argument("--install", action="store_true",
+                    help="copy the result into the package, where "
+                    "hmt.pose_encoder.pretrained_encoder() finds it")
+    pe.add_argument("--train-scenes", type=int, help="training scenes (default: 40000)")
+    pe.add_argument("--val-scenes", type=int, help="validation scenes (default: 400)")
+    pe.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 900; "
+                    "validation: the next)")
+    pe.add_argument("--render-size", type=int, help="scene image side (default: 224)")
+    pe.add_argument("--image-sizes", help="crop sides trained on, comma-separated (default: "
+                    "64,96,128)")
+    pe.add_argument("--backbone", help="ResNet (default: resnet10)")
+    pe.add_argument("--batch-size", type=int, help="batch size (default: 256)")
+    pe.add_argument("--lr", type=float, help="AdamW peak learning rate (default: 2e-3)")
+    pe.add_argument("--max-steps", type=int, help="the most training steps (default: 60000)")
+    pe.add_argument("--init", help="start from: none (random weights, the default), network (the "
+                    "encoder of the shipped MSMR-Net) or a pose-encoder file")
+    pe.add_argument("--seed", type=int, help="initialisation / order / augmentation seed")
+    pe.add_argument("--device", help="auto | cpu | cuda (default: auto)")
+    pe.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")
+    pe.add_argument("--max-generate-seconds", type=float, default=None,
+                    help="stop generating training scenes when the next shard would end past "
+                    "this budget")
+    pe.add_argument("--max-train-seconds", type=float, default=None,
+                    help="training budget: the first steps are timed and the steps that fit are "
+                    "planned (learning-rate schedule included)")
+    pe.add_argument("--no-progress", action="store_true", help="no progress bars")
+    pe.set_defaults(func=_cmd_pretrain_encoder)
 
     ev = sub.add_parser("evaluate", help="evaluate a checkpoint: FreiHAND-style scores and the "
                         "table per visibility-ratio bin")
