@@ -17,8 +17,8 @@ __version__ = "0.1.0"
 _SUBMODULES = (
     "augment", "blocks", "budget", "camera", "cli", "collision", "dataset", "decoder", "demo",
     "encoder", "fit", "freihand", "hand", "interact", "keypoints", "lcs", "losses", "makehuman",
-    "mano", "metrics", "model", "objects", "pretrained", "render", "rotation", "sampling",
-    "skinned", "spiral", "surface", "testing", "train", "visibility", "viz",
+    "mano", "metrics", "model", "objects", "pose_encoder", "pretrained", "render", "rotation",
+    "sampling", "skinned", "spiral", "surface", "testing", "train", "visibility", "viz",
 )
 
 __all__ = ["Budget", "budget", "__version__", *_SUBMODULES]

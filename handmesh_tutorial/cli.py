@@ -21,6 +21,7 @@ import traceback
 import zipfile
 from pathlib import Path
 
+from ._cli_pretrain import add_pretrain_commands
 from .budget import budget
 
 __all__ = ["EXIT_CODES", "build_parser", "main", "error_kind", "error_message"]
@@ -33,7 +34,8 @@ EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found":
 def _cmd_demo(args: argparse.Namespace) -> int:
     from . import demo
 
-    cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe)
+    init = None if args.init_encoder == "none" else args.init_encoder
+    cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe, init_encoder=init)
     res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress)
     print(f"handmesh demo: report written to {res.report} ({res.seconds['total'] / 60:.1f} min "
           f"this run; budget tier {cfg.budget})")
@@ -130,7 +132,8 @@ def _channels(text: str) -> tuple[int, ...]:
 _TRAIN_OPTIONS = ("data", "dataset", "val_data", "val_fraction", "epochs", "batch_size",
                   "image_size", "lr", "lr_step", "micro_batches", "encoder", "decoder",
                   "channels", "latent_channels", "template", "seed", "device", "threads",
-                  "num_workers", "val_every", "checkpoint_every", "precision", "init")
+                  "num_workers", "val_every", "checkpoint_every", "precision", "init",
+                  "init_encoder", "freeze_encoder", "encoder_lr_scale")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -140,6 +143,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     overrides.update(out_dir=args.out, attention=not args.no_attention,
                      augment=not args.no_augment, progress=not args.no_progress,
                      durable=not args.no_fsync, skip_bad=args.skip_bad)
+    from .demo.config import RECIPES
+
+    for k, v in RECIPES[args.recipe].items():
+        overrides.setdefault(k, v)
     cfg = train.TrainConfig.from_budget(budget(args.budget), **overrides)
     res = train.train(cfg, resume=args.resume, overwrite=args.overwrite)
     if res.rank != 0:
@@ -155,48 +162,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
         print(f"best checkpoint (val PA-MPVPE): {res.best_checkpoint}")
     print(f"metrics: {res.metrics_csv}")
     _print_skipped("train", res.skipped)
-    return 0
-
-
-def _cmd_pretrain(args: argparse.Namespace) -> int:
-    from .pretrained import PretrainedRecipe, build_pretrained
-
-    fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "image_size", "encoder",
-              "recipe", "epochs", "batch_size", "lr", "workers", "loader_workers", "seed",
-              "device", "precision", "init")
-    recipe = PretrainedRecipe(**{k: getattr(args, k) for k in fields
-                                 if getattr(args, k) is not None})
-    res = build_pretrained(args.out, recipe, max_generate_seconds=args.max_generate_seconds,
-                           max_train_seconds=args.max_train_seconds, install=args.install,
-                           progress=not args.no_progress)
-    info = res["info"]
-    print(f"handmesh pretrain: {info['data']['train_scenes']} training scenes, "
-          f"{info['epochs_done']} of {info.get('epochs_planned', recipe.epochs)} epochs on "
-          f"{info['hardware']}, "
-          f"{info['seconds']['generate']:.0f} s generating, {info['seconds']['train']:.0f} s "
-          f"training -> {res['file']}")
-    return 0
-
-
-def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
-    from .train.pose_pretraining import PosePretrainConfig, build_pretrained_encoder
-
-    fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "backbone", "batch_size",
-              "lr", "max_steps", "seed", "device", "workers")
-    kw = {k: getattr(args, k) for k in fields if getattr(args, k) is not None}
-    if args.image_sizes:
-        kw["image_sizes"] = tuple(int(s) for s in args.image_sizes.split(","))
-    if args.init is not None:
-        kw["init"] = None if args.init == "none" else args.init
-    res = build_pretrained_encoder(args.out, PosePretrainConfig(**kw),
-                                   max_generate_seconds=args.max_generate_seconds,
-                                   max_train_seconds=args.max_train_seconds,
-                                   install=args.install, progress=not args.no_progress)
-    last = res["history"][-1]
-    print(f"handmesh pretrain-encoder: {res['info']['data']['train_scenes']} training scenes, "
-          f"{last['step']} steps on {res['info']['hardware']}; val PA-MPJPE "
-          f"{last['64']['pa_mpjpe']:.2f} mm at 64 px (mean training hand "
-          f"{last['mean training hand']['pa_mpjpe']:.2f}) -> {res['file']}")
     return 0
 
 
@@ -253,6 +218,10 @@ def build_parser() -> argparse.ArgumentParser:
                       help="training recipe: 'cpu' (default: 2D keypoint head, global-rotation "
                       "head, keypoint and aligned-joint losses beside L1) or 'paper' (L1 vertex "
                       "loss only)")
+    demo.add_argument("--init-encoder", default="pretrained", metavar="pretrained|none|FILE",
+                      help="where the encoder starts: the shipped pretrained hand encoder "
+                      "(default, the paper's protocol), none (random weights) or a "
+                      "pose-encoder file; the rest of the network starts from random weights")
     demo.add_argument("--no-progress", action="store_true", help="no progress bars")
     demo.set_defaults(func=_cmd_demo)
 
@@ -336,6 +305,16 @@ def build_parser() -> argparse.ArgumentParser:
                     help="bfloat16: autocast forward pass (faster on CPUs with bf16 units)")
     tr.add_argument("--workers", dest="num_workers", type=int, help="DataLoader workers")
     tr.add_argument("--init", help="start from these weights: a checkpoint, or 'pretrained'")
+    tr.add_argument("--recipe", choices=("paper", "cpu"), default="paper",
+                    help="loss terms and heads (default: paper, the L1 vertex loss; cpu: the "
+                    "demo's keypoint encoder, rotation head, skinned output and extra losses)")
+    tr.add_argument("--init-encoder", metavar="pretrained|FILE",
+                    help="start the encoder from the shipped pretrained hand encoder or a "
+                    "pose-encoder file (needs --recipe cpu --encoder resnet10)")
+    tr.add_argument("--freeze-encoder", type=int, metavar="EPOCHS",
+                    help="keep the encoder fixed for the first EPOCHS epochs (default: 0)")
+    tr.add_argument("--encoder-lr-scale", type=float,
+                    help="the encoder's learning rate as a share of --lr (default: 1)")
     tr.add_argument("--val-every", type=int, help="validate every N epochs")
     tr.add_argument("--checkpoint-every", type=int, help="checkpoint every N epochs")
     tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint_last.pt")
@@ -351,74 +330,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="skip fsync of checkpoints and logs (faster, not safe against power cuts)")
     tr.set_defaults(func=_cmd_train)
 
-    pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
-                         "(a GPU when there is one), export a small int8 file (resumable)")
-    pre.add_argument("--out", default="runs/pretrained",
-                     help="output folder (default: runs/pretrained)")
-    pre.add_argument("--install", action="store_true",
-                     help="copy the result into the package, where hmt.model.pretrained() and "
-                     "--checkpoint pretrained find it")
-    pre.add_argument("--train-scenes", type=int, help="training scenes (default: 20000)")
-    pre.add_argument("--val-scenes", type=int, help="validation scenes (default: 300)")
-    pre.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 100; "
-                     "validation: the next)")
-    pre.add_argument("--render-size", type=int, help="scene image side (default: 224)")
-    pre.add_argument("--image-size", type=int, help="network crop side (default: 128)")
-    pre.add_argument("--encoder", help="image encoder (default: resnet10)")
-    pre.add_argument("--recipe", choices=("cpu", "paper"), help="loss recipe (default: cpu)")
-    pre.add_argument("--epochs", type=int, help="training epochs (default: 16)")
-    pre.add_argument("--batch-size", type=int, help="batch size (default: 128)")
-    pre.add_argument("--lr", type=float, help="Adam learning rate (default: 1e-3)")
-    pre.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")
-    pre.add_argument("--loader-workers", type=int,
-                     help="data-loader processes (default: one per CPU, less one)")
-    pre.add_argument("--seed", type=int, help="initialisation / order / augmentation seed")
-    pre.add_argument("--device", help="auto | cpu | cuda (default: auto)")
-    pre.add_argument("--precision", choices=("float32", "bfloat16"),
-                     help="autocast precision (default: bfloat16)")
-    pre.add_argument("--init", help="start from these weights: 'pretrained' (the shipped network; "
-                     "use new --data-seed values so each run adds scenes) or a checkpoint")
-    pre.add_argument("--max-generate-seconds", type=float, default=None,
-                     help="stop generating training scenes when the next shard would end past "
-                     "this budget")
-    pre.add_argument("--max-train-seconds", type=float, default=None,
-                     help="fit training to this budget: the first epoch is timed, then the "
-                     "epochs that fit are planned (learning-rate schedule included)")
-    pre.add_argument("--no-progress", action="store_true", help="no progress bars")
-    pre.set_defaults(func=_cmd_pretrain)
-
-    pe = sub.add_parser("pretrain-encoder", help="make the pretrained hand image encoder: generate "
-                        "scenes, train on 2D keypoints and 3D joints (no mesh decoder), export a "
-                        "small int8 file (resumable)")
-    pe.add_argument("--out", default="runs/pretrained_encoder",
-                    help="output folder (default: runs/pretrained_encoder)")
-    pe.add_argument("--install", action="store_true",
-                    help="copy the result into the package, where "
-                    "hmt.pose_encoder.pretrained_encoder() finds it")
-    pe.add_argument("--train-scenes", type=int, help="training scenes (default: 40000)")
-    pe.add_argument("--val-scenes", type=int, help="validation scenes (default: 400)")
-    pe.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 900; "
-                    "validation: the next)")
-    pe.add_argument("--render-size", type=int, help="scene image side (default: 224)")
-    pe.add_argument("--image-sizes", help="crop sides trained on, comma-separated (default: "
-                    "64,96,128)")
-    pe.add_argument("--backbone", help="ResNet (default: resnet10)")
-    pe.add_argument("--batch-size", type=int, help="batch size (default: 256)")
-    pe.add_argument("--lr", type=float, help="AdamW peak learning rate (default: 2e-3)")
-    pe.add_argument("--max-steps", type=int, help="the most training steps (default: 60000)")
-    pe.add_argument("--init", help="start from: none (random weights, the default), network (the "
-                    "encoder of the shipped MSMR-Net) or a pose-encoder file")
-    pe.add_argument("--seed", type=int, help="initialisation / order / augmentation seed")
-    pe.add_argument("--device", help="auto | cpu | cuda (default: auto)")
-    pe.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")
-    pe.add_argument("--max-generate-seconds", type=float, default=None,
-                    help="stop generating training scenes when the next shard would end past "
-                    "this budget")
-    pe.add_argument("--max-train-seconds", type=float, default=None,
-                    help="training budget: the first steps are timed and the steps that fit are "
-                    "planned (learning-rate schedule included)")
-    pe.add_argument("--no-progress", action="store_true", help="no progress bars")
-    pe.set_defaults(func=_cmd_pretrain_encoder)
+    add_pretrain_commands(sub)
 
     ev = sub.add_parser("evaluate", help="evaluate a checkpoint: FreiHAND-style scores and the "
                         "table per visibility-ratio bin")

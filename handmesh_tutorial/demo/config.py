@@ -54,6 +54,12 @@ class DemoConfig:
             aligned-joint losses beside the paper's L1) or ``"paper"`` (L1 vertex loss only,
             global-pooling encoder).
         balance_train: VR-balance the training scenes too (about 5x slower to generate).
+        init_encoder: where the encoder starts: ``"pretrained"`` (the shipped hand encoder,
+            [`pretrained_encoder`][handmesh_tutorial.pose_encoder.pretrained_encoder]; the
+            paper's protocol with our stand-in for ImageNet weights), a pose-encoder file, or
+            ``None`` (random weights). The rest of the network always starts from random weights.
+        freeze_encoder: epochs at the start with the encoder's weights and statistics fixed.
+        encoder_lr_scale: the encoder's learning rate as a share of ``lr`` after that.
         threads: torch threads.
         workers: data-generation processes.
         overlays: held-out samples drawn in ``overlays.png``.
@@ -73,6 +79,9 @@ class DemoConfig:
     augment: bool = False
     recipe: str = "cpu"
     balance_train: bool = False
+    init_encoder: str | None = "pretrained"
+    freeze_encoder: int = 10
+    encoder_lr_scale: float = 0.1
     threads: int = 2
     workers: int = 2
     overlays: int = 8
@@ -134,6 +143,9 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
               lr=config.lr, lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
               encoder=config.encoder, decoder=config.decoder, attention=config.attention,
               seed=seed, device="cpu", threads=config.threads, cache_data=True,
-              progress=progress, **RECIPES[config.recipe])
+              progress=progress, init_encoder=config.init_encoder,
+              freeze_encoder=config.freeze_encoder if config.init_encoder else 0,
+              encoder_lr_scale=config.encoder_lr_scale if config.init_encoder else 1.0,
+              **RECIPES[config.recipe])
     kw.update(overrides)
     return TrainConfig(**kw)

@@ -31,7 +31,7 @@ RESUMABLE_KEYS = ("epochs", "lr_step", "out_dir", "device", "threads", "num_work
 long, where, how fast, what is logged, whether bad samples are skipped); every other field must
 equal the checkpoint's, so a run never silently mixes data, seeds, batch sizes or learning rates.
 """
-_PATH_KEYS = ("data", "val_data", "template", "init")
+_PATH_KEYS = ("data", "val_data", "template", "init", "init_encoder")
 
 
 @dataclass
@@ -100,6 +100,15 @@ class TrainConfig:
             ``"pretrained"`` (the shipped network). Its architecture and template must equal
             this run's; only the weights are taken (no optimiser state, no epoch count). A
             resumed run continues from its own checkpoint (``init`` must stay the run's).
+        init_encoder: start only the encoder from pretrained weights: ``"pretrained"`` (the
+            shipped hand encoder, [`pretrained_encoder`][
+            handmesh_tutorial.pose_encoder.pretrained_encoder]) or the path of a pose-encoder
+            file; the rest of the network starts from random weights (the paper's protocol). Needs
+            ``model_kwargs={"keypoints": True}`` and a ``resnet10`` encoder; not with ``init``.
+        freeze_encoder: epochs at the start during which the encoder's weights and BatchNorm
+            statistics stay fixed (0: trained from the first step; ``>= epochs``: frozen
+            throughout).
+        encoder_lr_scale: the encoder's learning rate as a share of ``lr`` once it trains.
     """
 
     data: str | None = None
@@ -141,9 +150,12 @@ class TrainConfig:
     skip_bad: bool = False
     precision: str = "float32"
     init: str | None = None
+    init_encoder: str | None = None
+    freeze_encoder: int = 0
+    encoder_lr_scale: float = 1.0
 
     def __post_init__(self):
-        for name in ("data", "val_data", "template", "init"):
+        for name in ("data", "val_data", "template", "init", "init_encoder"):
             v = getattr(self, name)
             if v is not None:
                 setattr(self, name, str(v))
@@ -172,6 +184,18 @@ class TrainConfig:
         if self.keypoint_weight and not self.model_kwargs.get("keypoints", False):
             raise ValueError("keypoint_weight > 0 needs model_kwargs={'keypoints': True} (a "
                              "model with a 2D keypoint head)")
+        if self.init_encoder is not None and self.init is not None:
+            raise ValueError("init and init_encoder exclude each other: init starts the whole "
+                             "network from a checkpoint, init_encoder only its encoder")
+        if self.init_encoder is not None and not self.model_kwargs.get("keypoints", False):
+            raise ValueError("init_encoder needs model_kwargs={'keypoints': True}: the pretrained "
+                             "hand encoder is a KeypointEncoder (the CPU recipe, --recipe cpu)")
+        if isinstance(self.freeze_encoder, bool) or not isinstance(self.freeze_encoder, int) \
+                or self.freeze_encoder < 0:
+            raise ValueError(f"freeze_encoder must be an integer >= 0 (epochs), got "
+                             f"{self.freeze_encoder!r}")
+        if not self.encoder_lr_scale >= 0:
+            raise ValueError(f"encoder_lr_scale must be >= 0, got {self.encoder_lr_scale}")
         if self.num_workers < 0:
             raise ValueError(f"num_workers must be >= 0, got {self.num_workers}")
 

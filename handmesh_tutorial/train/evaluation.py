@@ -29,6 +29,7 @@ from ..surface import flipped_face_fraction, roughness_deg
 from ._distributed import _resolve_device
 from .baselines import MEAN_HAND, REST_HAND, _rest_template, constant_hand_predictions
 from .checkpoints import load_checkpoint
+from .features import model_outputs
 from .templates import resolve_template
 
 __all__ = ["predict", "validate", "evaluate"]
@@ -88,7 +89,7 @@ def _run_dataset(model: nn.Module, dataset, batch_size: int, device: torch.devic
     try:
         with torch.no_grad():
             for batch in progress_bar(loader, desc=desc, disable=not progress, leave=False):
-                out = model(batch["image"].to(device))
+                out = model_outputs(model, batch, device)
                 acc["pred_vertices"].append(out["vertices"].float().cpu())
                 acc["pred_joints"].append(out["joints"].float().cpu())
                 for k in keys:

@@ -76,6 +76,7 @@ from .checkpoints import (
 from .config import RESUMABLE_KEYS, TrainConfig, changed_settings
 from .data import EpochBatchSampler, make_datasets
 from .evaluation import validate
+from .features import EncodedDataset, is_deterministic, model_outputs
 from .templates import build_model_from_config, resolve_template, template_hash
 
 __all__ = ["TrainResult", "train", "training_loss"]
@@ -183,8 +184,7 @@ def _train_step(net, batch: dict, chunks: int, device: torch.device, ddp: bool,
 
     Returns the mean chunk L1 vertex loss (metres; comparable across recipes), or NaN when the
     objective was not finite."""
-    images = batch["image"]
-    n = images.shape[0]
+    n = len(batch["joints"])
     if n % chunks:
         raise RuntimeError(f"batch of {n} not divisible into {chunks} micro-batches")
     per = n // chunks
@@ -197,7 +197,7 @@ def _train_step(net, batch: dict, chunks: int, device: torch.device, ddp: bool,
         half = config.precision == "bfloat16"
         with ctx:
             with torch.autocast(device.type, dtype=torch.bfloat16, enabled=half):
-                out = net(images[sl].to(device, non_blocking=True))
+                out = model_outputs(net, batch, device, sl)
                 if half:  # the losses (Procrustes, keypoints) in float32
                     out = {k: v.float() for k, v in out.items()}
             part = {k: batch[k][sl].to(device, non_blocking=True) for k in keys if k in batch}
@@ -296,12 +296,16 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
     net = build_model_from_config(config, tmpl)
     if ck is None and config.init is not None:
         _load_init(net, config, t_id)
+    if ck is None and config.init_encoder is not None:
+        from ..pose_encoder import load_pretrained_encoder
+
+        load_pretrained_encoder(net, config.init_encoder)
     net = net.to(device)
     faces = torch.as_tensor(np.asarray(tmpl.faces), dtype=torch.int64, device=device)
     # fused: one kernel for all parameters instead of ~10 small ops per tensor (about 300
     # tensors here); same update rule (a resumed run keeps the flag saved in its checkpoint)
-    opt = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay,
-                           fused=device.type in ("cpu", "cuda"))
+    opt = torch.optim.Adam(_param_groups(net, config), lr=config.lr,
+                           weight_decay=config.weight_decay, fused=device.type in ("cpu", "cuda"))
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=config.lr_step, gamma=config.lr_gamma)
 
     start_epoch, step, history, step_losses, best = 0, 0, [], [], math.inf
@@ -329,6 +333,12 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         train_ds, val_ds, skipped = _skip_bad_items(train_ds, val_ds, config.progress and is_main)
         if is_main:
             write_json(out / "skipped.json", {"skipped": skipped})
+    if config.freeze_encoder >= config.epochs and world == 1 and is_deterministic(train_ds) \
+            and (val_ds is None or is_deterministic(val_ds)):
+        # frozen throughout and no augmentation: each crop's features are the same every epoch
+        kw = dict(batch_size=config.val_batch_size or 64, progress=config.progress and is_main)
+        train_ds = EncodedDataset(train_ds, net.encoder, **kw)
+        val_ds = None if val_ds is None else EncodedDataset(val_ds, net.encoder, **kw)
     n_vert = int(net.joint_regressor.shape[1])
     got = tuple(train_ds[0]["vertices"].shape)
     if got != (n_vert, 3):
@@ -359,6 +369,12 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
             pin_memory=device.type == "cuda",
             generator=torch.Generator().manual_seed(config.seed * 100003 + epoch))
         model.train()
+        frozen = epoch < config.freeze_encoder
+        if config.freeze_encoder:
+            # frozen: no gradients (Adam skips the weights) and fixed BatchNorm statistics
+            net.encoder.requires_grad_(not frozen)
+            if frozen:
+                net.encoder.eval()
         lr = opt.param_groups[0]["lr"]
         losses = []
         bar = progress_bar(loader, desc=f"epoch {epoch + 1}/{config.epochs}", per="epoch",
@@ -418,6 +434,17 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         history=history, step_losses=step_losses, final=dict(history[-1]) if history else {},
         epochs=done, steps=step, seconds=time.perf_counter() - t_start, model=net, rank=rank,
         world_size=world, skipped=skipped)
+
+
+def _param_groups(net: nn.Module, config: TrainConfig) -> list[dict]:
+    """One group of all weights, or the encoder's apart when it has its own rate or a frozen
+    start (the group's ``lr`` is ``encoder_lr_scale * lr``)."""
+    if config.encoder_lr_scale == 1.0 and not config.freeze_encoder:
+        return [{"params": list(net.parameters())}]
+    enc = {id(p) for p in net.encoder.parameters()}
+    return [{"params": [p for p in net.parameters() if id(p) not in enc]},
+            {"params": list(net.encoder.parameters()),
+             "lr": config.lr * config.encoder_lr_scale}]
 
 
 def _check_same_network(ck: dict, config: TrainConfig, t_id: str, where: str, what: str) -> None:
