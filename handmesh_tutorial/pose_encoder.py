@@ -229,12 +229,14 @@ def pretrained_encoder_info() -> dict:
 
 
 def load_pretrained_encoder(model: nn.Module, source: str | os.PathLike = "pretrained") -> dict:
-    """Copy pretrained encoder weights into ``model.encoder`` (an MSMR-Net built with
-    ``keypoints=True``, or a bare ``KeypointEncoder``).
+    """Copy pretrained encoder weights into ``model.encoder``.
+
+    An MSMR-Net built with ``keypoints=True`` (the CPU recipe) gets the whole
+    [`KeypointEncoder`][handmesh_tutorial.keypoints.KeypointEncoder]; one with the paper's plain
+    ResNet encoder (global pooling) gets the ResNet part only, as ImageNet weights would be loaded.
 
     Args:
-        model: the network whose ``encoder`` (or itself, for a ``KeypointEncoder``) receives the
-            weights.
+        model: the network whose ``encoder`` (or itself, for a bare encoder) receives the weights.
         source: ``"pretrained"`` (the shipped file) or the path of an
             [`export_pose_encoder`][handmesh_tutorial.pose_encoder.export_pose_encoder] file.
 
@@ -243,19 +245,26 @@ def load_pretrained_encoder(model: nn.Module, source: str | os.PathLike = "pretr
         [`read_pose_encoder`][handmesh_tutorial.pose_encoder.read_pose_encoder]).
 
     Raises:
-        ValueError: the model's encoder is not a ``KeypointEncoder`` of the file's shape.
+        ValueError: the model's encoder has other shapes than the file's (e.g. another ResNet).
     """
+    from .encoder import ResNet
+
     path = pretrained_encoder_path() if str(source) == "pretrained" else Path(source)
     net, meta = read_pose_encoder(path)
-    target = model if isinstance(model, KeypointEncoder) else getattr(model, "encoder", None)
-    if not isinstance(target, KeypointEncoder):
-        raise ValueError(f"{path}: the model's encoder is {type(target).__name__}, the file holds "
-                         "a KeypointEncoder (build the model with keypoints=True, the CPU recipe)")
+    target = model if isinstance(model, KeypointEncoder | ResNet) else getattr(model, "encoder",
+                                                                               None)
+    if isinstance(target, KeypointEncoder):
+        src = net.encoder
+    elif isinstance(target, ResNet):
+        src = net.encoder.backbone
+    else:
+        raise ValueError(f"{path}: the model's encoder is {type(target).__name__}; the file holds "
+                         "a ResNet with a keypoint head (KeypointEncoder or its ResNet)")
     mine = {k: tuple(v.shape) for k, v in target.state_dict().items()}
-    theirs = {k: tuple(v.shape) for k, v in net.encoder.state_dict().items()}
+    theirs = {k: tuple(v.shape) for k, v in src.state_dict().items()}
     if mine != theirs:
         diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
         raise ValueError(f"{path}: encoder shapes differ from the model's at {diff[:5]} "
                          f"(file backbone {meta['architecture']['backbone']})")
-    target.load_state_dict(net.encoder.state_dict())
+    target.load_state_dict(src.state_dict())
     return meta

@@ -195,9 +195,15 @@ def test_config_from_budget_sizes():
     b = hmt.budget("default")
     c = demo.DemoConfig.from_budget(b)
     assert (c.train_samples, c.test_samples) == (5 * b.samples, b.eval_samples // 2)
-    assert c.image_size == b.image_size // 2 and c.render_size == b.image_size
+    assert c.image_size == b.image_size and c.render_size == b.image_size
     assert (c.epochs, c.batch_size) == (b.epochs // 2, b.batch_size)
     assert (c.encoder, c.augment, c.balance_train) == ("resnet10", False, False)
+    # the paper's protocol: the pretrained encoder, frozen for the whole run
+    assert c.init_encoder == "pretrained" and c.freeze_encoder >= c.epochs
+    t = demo.train_config(c, "data", "out")
+    assert (t.init_encoder, t.freeze_encoder) == ("pretrained", c.freeze_encoder)
+    r = demo.train_config(demo.DemoConfig.from_budget(b, init_encoder=None), "data", "out")
+    assert (r.init_encoder, r.freeze_encoder, r.encoder_lr_scale) == (None, 0, 1.0)
     f, full = demo.DemoConfig.from_budget(hmt.budget("full")), hmt.budget("full")
     assert f.augment and (f.train_samples, f.epochs) == (full.samples, full.epochs)
     assert demo.DemoConfig.from_budget(b, epochs=3).epochs == 3

@@ -44,8 +44,6 @@ def _run(samples, out, **kw):
 def test_config_checks():
     with pytest.raises(ValueError, match="exclude each other"):
         T.TrainConfig(init="pretrained", init_encoder="pretrained")
-    with pytest.raises(ValueError, match="keypoints"):
-        T.TrainConfig(init_encoder="pretrained")
     with pytest.raises(ValueError, match="freeze_encoder"):
         T.TrainConfig(freeze_encoder=-1)
     with pytest.raises(ValueError, match="encoder_lr_scale"):

@@ -141,8 +141,12 @@ def test_load_into_msmr_net_copies_the_encoder_only(tmp_path):
         assert torch.equal(model.encoder.state_dict()[k], v)
     for k, v in dec_before.items():
         assert torch.equal(model.decoder.state_dict()[k], v)
-    with pytest.raises(ValueError, match="keypoints=True"):
-        PE.load_pretrained_encoder(hmt.model.build_model("resnet10"), path)
+    plain = hmt.model.build_model("resnet10")  # the paper's encoder: the ResNet part only
+    PE.load_pretrained_encoder(plain, path)
+    for k, v in src.encoder.backbone.state_dict().items():
+        assert torch.equal(plain.encoder.state_dict()[k], v)
+    with pytest.raises(ValueError, match="HRNet"):
+        PE.load_pretrained_encoder(hmt.model.build_model("hrnet18"), path)
     with pytest.raises(ValueError, match="shapes differ"):
         PE.load_pretrained_encoder(hmt.model.build_model("resnet18", keypoints=True), path)
 

@@ -39,31 +39,24 @@ choices, made so that the ``default`` tier finishes in about twelve minutes on a
   workers at 128 px on a 2-core CPU) and VR-balanced test scenes = 1/2 of
   ``budget.eval_samples`` (``default``: 100; balancing rejects candidates, about 5 renders per
   kept scene). Training needs *many different* scenes far more than it needs balanced ones;
-* network crop = 1/2 of ``budget.image_size`` (``default``: 64 px; images are rendered at
-  ``budget.image_size``, where the target hand spans 45-75 % of the side; the network's crop is
-  cut around it), batch ``budget.batch_size`` (``default``: 16), ``budget.epochs / 2`` epochs
-  (``default``: 10, about 1,700 steps), learning rate ``1e-3`` (as MobRecon/HandMesh; the
-  paper's ``1e-4`` is for 200 epochs with a pretrained encoder), halved once, after three
-  quarters of the run;
-* **ResNet-10** instead of the paper's ImageNet-pretrained ResNet-50 / HRNet, **no augmentation**
-  below the ``full`` tier, and the **CPU recipe**
-  ([`RECIPES`][handmesh_tutorial.demo.config.RECIPES]): a 2D keypoint head whose features are pooled
-  at the joints, a global-rotation head, the skinned decoder output (the decoder's field read as
-  joint rotations and shape, then skinning: smooth hand surfaces), and keypoint and aligned-joint
-  losses beside the paper's L1. With the paper's recipe (``recipe="paper"``) a from-scratch network
-  stays for thousands of steps on a plateau of the L1 loss (about 28 mm) where it predicts one
-  average mesh for every image. The docs page "Training from scratch on a CPU" has the measurements
-  behind every choice.
+* network crop = ``budget.image_size`` (``default``: 128 px, cut around the target hand, which
+  spans 45-75 % of the rendered image), batch ``budget.batch_size`` (``default``: 16),
+  ``budget.epochs / 2`` epochs (``default``: 10, about 1,700 steps), learning rate ``1e-3``,
+  halved after three quarters of the run;
+* **the paper's protocol**: the encoder starts from the shipped pretrained hand encoder
+  ([`pretrained_encoder`][handmesh_tutorial.pose_encoder.pretrained_encoder], a ResNet-10 with a
+  2D keypoint head; our stand-in for ImageNet weights) and stays frozen; everything after it
+  trains from random weights. Frozen, with no augmentation below the ``full`` tier, each crop's
+  features are computed once ([`EncodedDataset`][handmesh_tutorial.train.features.EncodedDataset]).
+  ``DemoConfig(init_encoder=None)`` (``handmesh demo --init-encoder none``) trains from random
+  weights instead;
+* the **CPU recipe** ([`RECIPES`][handmesh_tutorial.demo.config.RECIPES]): pose pooling at the
+  2D keypoints, a global-rotation head, the skinned decoder output (smooth hand surfaces), and
+  keypoint and aligned-joint losses beside the paper's L1 (``recipe="paper"``: L1 only).
 
-The ``full`` tier is the paper's scale instead: ``budget.samples`` training scenes (40,000),
-``budget.epochs`` epochs (200), augmentation on.
-
-What to expect at the ``default`` size (measured on a 2-core CPU, seed 0, 2026-11-25, 12.4 min in
-all: 5.5 min generating, 6.8 min training): on the 100 held-out scenes MPJPE 37.2 mm, PA-MPJPE
-10.35 mm, PA-MPVPE 9.5 mm, roughness 3.9 degrees, 1.0% flipped faces. The rest hand (the
-template's open hand for every image) scores PA-MPJPE 13.1 mm, the mean training hand
-([`mean_hand`][handmesh_tutorial.train.baselines.mean_hand]) 10.3 mm: the network has learnt the
-hand's orientation and the data's average articulation, not yet each hand's finger pose.
+Why these choices, and what the run scores beside the two constant hands: docs page "Why the paper
+starts from pretrained weights". The ``full`` tier is the paper's scale instead:
+``budget.samples`` training scenes (40,000), ``budget.epochs`` epochs (200), augmentation on.
 
 Example::
 
@@ -85,6 +78,7 @@ The figures (`plot_overlays`, `plot_loss_curves`) live in
 from __future__ import annotations
 
 from ..viz import plot_loss_curves, plot_overlays
+from . import ablation
 from .config import RECIPES, DemoConfig, train_config
 from .report import (
     BASELINE_ROW,
@@ -101,4 +95,4 @@ from .run import DemoResult, generate_data, generate_scenes, run_demo
 __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "generate_scenes",
            "train_config", "plot_overlays", "plot_loss_curves", "write_report", "headline",
            "parse_headline", "HEADLINE", "PRETRAINED_ROW",
-           "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES"]
+           "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES", "ablation"]

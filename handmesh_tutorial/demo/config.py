@@ -69,7 +69,7 @@ class DemoConfig:
     train_samples: int = 3000
     test_samples: int = 100
     render_size: int = 128
-    image_size: int = 64
+    image_size: int = 128
     epochs: int = 10
     batch_size: int = 16
     lr: float = 1e-3
@@ -104,7 +104,7 @@ class DemoConfig:
         sized = dict(train_samples=budget.samples if full else max(8, 5 * budget.samples),
                      test_samples=max(4, budget.eval_samples // 2),
                      render_size=budget.image_size,
-                     image_size=max(32, budget.image_size // 2),
+                     image_size=budget.image_size,
                      epochs=budget.epochs if full else max(1, budget.epochs // 2),
                      batch_size=max(2, budget.batch_size), augment=full,
                      threads=budget.threads, workers=min(2, budget.threads),

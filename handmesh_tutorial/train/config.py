@@ -104,7 +104,8 @@ class TrainConfig:
             shipped hand encoder, [`pretrained_encoder`][
             handmesh_tutorial.pose_encoder.pretrained_encoder]) or the path of a pose-encoder
             file; the rest of the network starts from random weights (the paper's protocol). Needs
-            ``model_kwargs={"keypoints": True}`` and a ``resnet10`` encoder; not with ``init``.
+            a ``resnet10`` encoder (with ``model_kwargs={"keypoints": True}`` it gets the keypoint
+            head too, else the ResNet only); not with ``init``.
         freeze_encoder: epochs at the start during which the encoder's weights and BatchNorm
             statistics stay fixed (0: trained from the first step; ``>= epochs``: frozen
             throughout).
@@ -187,9 +188,6 @@ class TrainConfig:
         if self.init_encoder is not None and self.init is not None:
             raise ValueError("init and init_encoder exclude each other: init starts the whole "
                              "network from a checkpoint, init_encoder only its encoder")
-        if self.init_encoder is not None and not self.model_kwargs.get("keypoints", False):
-            raise ValueError("init_encoder needs model_kwargs={'keypoints': True}: the pretrained "
-                             "hand encoder is a KeypointEncoder (the CPU recipe, --recipe cpu)")
         if isinstance(self.freeze_encoder, bool) or not isinstance(self.freeze_encoder, int) \
                 or self.freeze_encoder < 0:
             raise ValueError(f"freeze_encoder must be an integer >= 0 (epochs), got "
