@@ -19,7 +19,7 @@ Pass ``config=HRNET_W18`` for the full W18 layout.
 ResNet-10 (ResNet-18 with one basic block per stage instead of two; not a torchvision network,
 so there are no torchvision weights for it) is the CPU choice: without pretrained weights it
 leaves the "mean hand" plateau of from-scratch training in fewer steps than ResNet-18 and each
-step costs less (docs page "Training from scratch on a CPU", ``benchmarks/model.py``).
+step costs less (docs page "Why the paper starts from pretrained weights", ``benchmarks/model.py``).
 
 Taught in notebook 08 ("Training").
 

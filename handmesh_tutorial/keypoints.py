@@ -7,9 +7,9 @@ an encoder that ends in global average pooling learns the hand's position and 3D
 first and sits for thousands of steps on a plateau where it predicts one mean hand for every
 image; finger articulation, a few pixels per finger in a 64-px crop, is lost in the pooled
 vector. A 2D keypoint loss tells the encoder *where* each joint is, and features taken *at*
-the joints carry what the fingers look like there. Measured on 4,000 INTER-SH scenes, 2,000
-steps of 16 crops at 64 px (docs page "Training from scratch on a CPU"): global pooling stayed
-on the plateau (28 mm training L1), pose pooling left it after about 300 steps.
+the joints carry what the fingers look like there: global pooling stayed on the plateau, pose
+pooling left it after about 300 steps (docs page "Why the paper starts from pretrained
+weights").
 
 [`KeypointEncoder`][handmesh_tutorial.keypoints.KeypointEncoder] wraps a
 [`ResNet`][handmesh_tutorial.encoder.ResNet]:

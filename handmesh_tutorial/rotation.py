@@ -6,9 +6,8 @@ small errors in a large rotation then show up as a crumpled surface. With this h
 predicts one rotation ``R`` from the image features (the continuous 6D representation of Zhou
 et al., CVPR 2019: two 3D vectors, Gram-Schmidt orthonormalised) and the decoder's mesh is
 rotated by it about the root (joint 9, the origin of the network frame), so the decoder is left
-with the hand's articulation. Measured with the CPU recipe on 4,000 INTER-SH scenes, 2,000
-steps (docs page "Training from scratch on a CPU"): held-out PA-MPVPE 11.6 -> 9.5 mm, roughness
-19.5 -> 10.0 degrees, flipped faces 4.4 -> 1.6%.
+with the hand's articulation; it halves the surface roughness (docs page "Why the paper starts
+from pretrained weights").
 
 The head starts at the identity (zero weights, bias = the 6D code of ``I``), so an untrained
 model still outputs the template. Taught in notebook 08 ("Training").

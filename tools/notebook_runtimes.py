@@ -51,8 +51,8 @@ LEARN = {
                                          "up-sampling) and SpiralConv",
     "07_multi_path_decoder": "single- vs multi-path spiral decoders, multi-resolution fusion, and "
                              "the fit test of the mesh decoder",
-    "08_training": "a full MSMR-Net training run on the CPU: loss curves, checkpoints, predictions "
-                   "through training",
+    "08_training": "a full MSMR-Net training run on the CPU with the paper's protocol (pretrained "
+                   "encoder, decoder from scratch): loss curves, checkpoints, predictions",
     "09_evaluation": "FreiHAND-exact metrics (Procrustes with and without reflection, F-scores, "
                      "PCK/AUC) and the per-VR-bin table of a trained model",
     "10_ablation": "the paper's Table 3 ablation at equal depth: single path, multi-path, "
@@ -78,8 +78,7 @@ TRAINED = {
     "08_training": "trains it (this is the training notebook)",
     "09_evaluation": "yes: notebook 08's checkpoint (`runs/train08_<budget>/`; trains it if "
                      "absent), and the shipped pretrained network",
-    "10_ablation": "trains three variants with three seeds each; reuses notebook 08's run for "
-                   "multi-path + attention, seed 0",
+    "10_ablation": "trains three variants with three seeds each from the pretrained encoder",
 }
 
 #: Where the committed ``default`` run picked up what an earlier run had left in ``notebooks/runs/``
@@ -92,9 +91,8 @@ REUSED = {
     "09_evaluation": "reuses notebook 08's data set and checkpoint, and section 5's 300 test "
                      "scenes, made earlier by the same calls (about 2 min more on a first run); "
                      "it made section 5's 600 training-set scenes itself",
-    "10_ablation": "reuses notebook 08's data set and its run (multi-path + attention, seed 0); "
-                   "the committed run trained the other eight itself, one after another, 5-11 "
-                   "min each on a machine that other jobs shared part of the time; a rerun "
+    "10_ablation": "reuses notebook 08's data set; the committed run trained all nine runs "
+                   "itself (the frozen encoder's features computed once for all nine); a rerun "
                    "finds them in `notebooks/runs/` and only evaluates",
 }
 
@@ -104,7 +102,7 @@ TRAINED_SHORT = {
     "00_quickstart": "trains a small one; the pretrained one",
     "08_training": "trains it",
     "09_evaluation": "08's checkpoint; the pretrained one",
-    "10_ablation": "trains 9 (one is 08's)",
+    "10_ablation": "trains 9",
 }
 
 

@@ -1,7 +1,7 @@
 """Pose probe: how many numbers a hand pose needs; does a CNN trained from scratch read them?
 
-Why the CPU models tie the mean training hand (docs page "Training from scratch on a CPU", section
-"A pose probe"). Two measurements on INTER-SH roots:
+Why the CPU models tie the mean training hand (docs page "Why the paper starts from pretrained
+weights", "Where the articulation is lost"). Two measurements on INTER-SH roots:
 
 1. **PCA oracle.** The target joints of the training scenes, aligned to their generalised
    Procrustes mean (rotation, translation, scale; no reflection), are summarised by a PCA. For

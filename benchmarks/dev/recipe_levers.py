@@ -7,7 +7,7 @@ root with ``hmt.train.evaluate`` beside the rest hand and the mean training hand
 compare). Writes ``OUT/levers.json`` and prints one line.
 
 Dev-only (not run by ``make benchmarks``): each run takes 10-30 CPU minutes. The numbers on the
-docs page "Training from scratch on a CPU" came from runs of this script, e.g.::
+docs page "Why the paper starts from pretrained weights" came from runs of this script, e.g.::
 
     handmesh generate --kind mixed --num 4000 --seed 100 --image-size 224 --out D/train
     handmesh generate --kind mixed --num 200 --seed 101 --image-size 224 --balance-vr --out D/test

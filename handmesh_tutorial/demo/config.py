@@ -3,8 +3,8 @@ run-size tier), the training recipes, and the training config of the demo and of
 ([`train_config`][handmesh_tutorial.demo.config.train_config]).
 
 Why these values: the docstring of [`handmesh_tutorial.demo`][handmesh_tutorial.demo] and the docs
-page "Training from scratch on a CPU". Taught in notebook 00 ("Quickstart") and notebook 08
-("Training").
+page "Why the paper starts from pretrained weights". Taught in notebook 00 ("Quickstart") and
+notebook 08 ("Training").
 """
 
 from __future__ import annotations

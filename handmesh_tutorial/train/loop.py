@@ -345,6 +345,12 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         raise ValueError(f"training targets have vertices {got}, the template has ({n_vert}, 3):"
                          " train with the template of the data (TrainConfig.template)")
 
+    if config.freeze_encoder >= config.epochs:  # before DDP: it then syncs the trained part only
+        net.encoder.requires_grad_(False)
+    elif world > 1 and config.freeze_encoder:
+        raise ValueError(f"freeze_encoder={config.freeze_encoder} of {config.epochs} epochs: under "
+                         "DDP the encoder is either frozen for the whole run or trained throughout "
+                         "(a DDP model's set of trained weights cannot change)")
     model = net
     if world > 1:
         from torch.nn.parallel import DistributedDataParallel as DDP  # noqa: N817
