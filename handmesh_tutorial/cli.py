@@ -338,8 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a checkpoint_*.pt of handmesh train, or 'pretrained' (the shipped "
                     "network)")
     ev.add_argument("--data", required=True, help="INTER-SH root (or FreiHAND root)")
-    ev.add_argument("--kind", choices=("intersh", "freihand"), default=None,
-                    help="data format (default: the checkpoint's training data format)")
+    ev.add_argument("--kind", "--dataset", dest="kind", choices=("intersh", "freihand"),
+                    default=None, help="data format (default: the checkpoint's training data "
+                    "format); --dataset is the same option, spelt as in handmesh train")
     ev.add_argument("--split", default="evaluation", help="FreiHAND split (default: evaluation)")
     ev.add_argument("--out", default=None, help="write eval.json, predictions.npz and figures")
     ev.add_argument("--image-size", type=int, default=None, help="default: the checkpoint's")

@@ -312,12 +312,23 @@ def write_predictions(path: str | os.PathLike, joints, vertices) -> Path:
     Args:
         path: output file, conventionally ``pred.json``; written atomically.
         joints: (N,21,3) predicted keypoints, metres, FreiHAND order; numpy or torch.
-        vertices: (N,V,3) predicted vertices, metres (V = 778 for the official mesh metrics).
+        vertices: (N,778,3) predicted vertices, metres, in MANO's topology (the official
+            evaluation compares them vertex by vertex with MANO meshes).
 
     Returns:
         The path written.
+
+    Raises:
+        ValueError: bad shapes, sample counts that differ, NaN or inf, or a vertex count other
+            than 778 (e.g. the library's 779-vertex hand: FreiHAND's evaluation could not score
+            the file; predict with a MANO template instead). Nothing is written then.
     """
     j, v = _check_predictions(joints, vertices)
+    if v.shape[1] != NUM_VERTICES:
+        raise ValueError(
+            f"vertices has {v.shape[1]} vertices per sample, but FreiHAND's evaluation expects "
+            f"MANO's {NUM_VERTICES} (it compares the meshes vertex by vertex) and could not score "
+            "this file; predict with a MANO-topology template")
     payload = [j.tolist(), v.tolist()]  # float64 -> shortest round-trip decimal
     return atomic_write_with(path, lambda fh: json.dump(payload, fh), binary=False)
 

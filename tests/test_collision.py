@@ -287,6 +287,89 @@ def test_special_cases(name):
             assert (hi[0] <= MUST_TRUE) if expected else (lo[0] > 0.9e-3), (name, lo, hi)
 
 
+def _axis_aligned_layouts():
+    """B (radius RB, length LB) along x, y (both perpendicular to A) or z (parallel / coaxial),
+    its centre on grids within a few mm of contact with A (the z axis from 0 to L, radius RA):
+    over and beside A's top cap, beside A's side, stacked cap on cap. Exact axis alignment, so
+    a line parallel to a cap plane meets the trust-region step with kappa == 0 exactly."""
+    layouts = []
+    ys = np.arange(0.0, 0.0201, 0.001)
+    for axis in ((1.0, 0, 0), (0, 1.0, 0)):   # perpendicular: over / beside the top cap
+        for cx in (0.0, 0.012):
+            for cy in ys:
+                for cz in L + np.arange(-0.004, 0.0101, 0.0005):
+                    layouts.append((axis, (cx, cy, cz)))
+    for cy in ys:                              # perpendicular, crossing beside the side
+        layouts.append(((1.0, 0, 0), (0.0, RA + RB + 0.0005, L / 2)))
+        layouts.append(((1.0, 0, 0), (0.0, cy, -RB - 0.0003)))   # under the bottom cap
+    for cy in ys:                              # parallel, coaxial (cy = 0), cap on cap
+        for cz in L + LB / 2 + np.arange(-0.003, 0.0031, 0.0005):
+            layouts.append(((0, 0, 1.0), (0.0, cy, cz)))
+        layouts.append(((0, 0, 1.0), (0.0, cy, L / 2)))          # side by side
+    out = []
+    for axis, c in layouts:
+        c, w = np.asarray(c, float), np.asarray(axis)
+        out.append((c - 0.5 * LB * w, c + 0.5 * LB * w))
+    b0, b1 = (np.array(x) for x in zip(*out, strict=True))
+    return b0, b1
+
+
+def test_axis_aligned_layouts_agree_with_fcl():
+    """Perpendicular, parallel and coaxial axis-aligned pairs against python-fcl (an independent
+    GJK implementation). Only layouts whose fcl answer is the same with both cylinders grown and
+    shrunk by 0.05 mm (radius and each end) are compared, so the separation or overlap is clear
+    of fcl's own contact tolerance. Both backends must give fcl's answer (and each other's)."""
+    fcl = pytest.importorskip("fcl")
+    b0, b1 = _axis_aligned_layouts()
+    n = len(b0)
+    a0, a1 = np.zeros((n, 3)), np.tile([0.0, 0.0, L], (n, 1))
+
+    def obj(p0, p1, r, grow):
+        d = p1 - p0
+        length = np.linalg.norm(d)
+        rot = Rotation.align_vectors([d / length], [[0.0, 0.0, 1.0]])[0].as_matrix()
+        return fcl.CollisionObject(fcl.Cylinder(r + grow, length + 2 * grow),
+                                   fcl.Transform(rot, 0.5 * (p0 + p1)))
+
+    def collide(k, grow):
+        return fcl.collide(obj(a0[k], a1[k], RA, grow), obj(b0[k], b1[k], RB, grow),
+                           fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+
+    expected = np.array([collide(k, 0.0) for k in range(n)])
+    clear = np.array([collide(k, 5e-5) == expected[k] == collide(k, -5e-5) for k in range(n)])
+    assert clear.sum() > 0.9 * n and 0.2 < expected[clear].mean() < 0.8  # both answers, many
+    for backend in BACKENDS:
+        got = C.cylinders_intersect(a0, a1, RA, b0, b1, RB, backend=backend)
+        swapped = C.cylinders_intersect(b0, b1, RB, a0, a1, RA, backend=backend)
+        for res in (got, swapped):
+            bad = np.flatnonzero(clear & (res != expected))
+            assert bad.size == 0, (backend, [(b0[k], b1[k], expected[k]) for k in bad[:5]])
+    if len(BACKENDS) == 2:
+        np.testing.assert_array_equal(
+            C.cylinders_intersect(a0, a1, RA, b0, b1, RB, backend="numpy"),
+            C.cylinders_intersect(a0, a1, RA, b0, b1, RB, backend="numba"))
+
+
+def test_line_parallel_to_a_cap_passing_beside_it_is_not_inside_the_disk():
+    """B perpendicular to A, 0.6 mm from A's top rim: its axis runs 7 mm above the cap plane
+    (less than RB) but 15 mm from A's axis (more than RA), so B's foot on the cap plane lies
+    outside A's cap disk. The distance is known in closed form."""
+    ra, rb, off, h = 0.01, 0.008, 0.015, 0.007
+    a0, a1 = [0.0, 0, 0], [0.0, 0, 0.04]
+    b0, b1 = [-0.03, off, 0.04 + h], [0.03, off, 0.04 + h]
+    gap = np.hypot(off - ra, h) - rb   # from A's rim point (0, ra, 0.04) to B's surface
+    assert 5e-4 < gap < 7e-4
+    lo, hi = C.distance_bounds(*(np.atleast_2d(x) for x in (a0, a1, ra, b0, b1, rb)))
+    np.testing.assert_allclose([lo[0], hi[0]], gap, atol=1e-9)
+    for backend in BACKENDS:
+        assert not C.cylinders_intersect(a0, a1, ra, b0, b1, rb, backend=backend), backend
+        assert not C.cylinders_intersect(b0, b1, rb, a0, a1, ra, backend=backend), backend
+        # moved by gap + 0.1 mm towards A's rim: the rim now pokes 0.1 mm into B
+        shift = -(gap + 1e-4) * np.array([0.0, off - ra, h]) / np.hypot(off - ra, h)
+        assert C.cylinders_intersect(a0, a1, ra, np.add(b0, shift), np.add(b1, shift), rb,
+                                     backend=backend), backend
+
+
 @pytest.mark.parametrize("b0, b1, rb", [
     ([-LB / 2, 0, L / 2], [LB / 2, 0, L / 2], RB),             # axes intersect inside both
     ([0, 0, L], [LB, 0, L], RB),                                # zero separation: axis end on axis

@@ -222,6 +222,17 @@ def test_prediction_errors(tmp_path):
         fh.load_predictions(tmp_path / "missing.json")
 
 
+@pytest.mark.parametrize("num_vertices", [779, 777, 49])
+def test_write_predictions_refuses_a_non_mano_vertex_count(tmp_path, num_vertices):
+    """Our template has 779 vertices; FreiHAND's evaluation expects MANO's 778 and could not
+    score such a file: refuse it, saying why, and write nothing."""
+    with pytest.raises(ValueError, match=rf"{num_vertices} vertices.*MANO's 778"):
+        fh.write_predictions(tmp_path / "pred.json", np.zeros((2, 21, 3)),
+                             np.zeros((2, num_vertices, 3)))
+    assert not any(tmp_path.iterdir())
+    fh.write_predictions(tmp_path / "pred.json", np.zeros((2, 21, 3)), np.zeros((2, 778, 3)))
+
+
 def test_evaluate_predictions_equals_freihand_scores(data, tmp_path):
     root, arrays = data
     a = arrays["evaluation"]

@@ -321,6 +321,33 @@ def test_random_pose_valid_for_hand(right):
     assert a.tobytes() == b.tobytes()
 
 
+def test_within_limits_default_tolerance_accepts_float32_round_trips(right, left):
+    """A float32 pose read back as angles is off by ~1e-7 rad; the default tolerance (1e-5 rad)
+    accepts it for every random pose, while a pose 0.01 rad or even 1e-4 rad outside a limit
+    stays out, and ``atol=0`` keeps the exact test."""
+    for _, art in (right, left):
+        assert art.within_limits(art.from_pose(art.random_pose(0)))
+        for limits in ("paper", "anatomical"):
+            lim = art.with_limits(limits)
+            back = lim.from_pose(lim.random_pose(1, n=500))
+            assert lim.within_limits(back).all(), limits
+            worst = np.maximum(lim.lower - back, back - lim.upper).max()
+            assert worst < 1e-6, worst  # the round trip's own error, far below the tolerance
+            angles = lim.random_angles(2, n=4)
+            for outside in (1e-2, 1e-4):
+                over = angles.copy()
+                over[:, 3, 1] = lim.upper[3, 1] + outside        # flexion past its limit
+                under = angles.copy()
+                under[:, 0, 0] = lim.lower[0, 0] - outside
+                for bad in (over, under):
+                    assert not lim.within_limits(lim.from_pose(lim.to_pose(bad))).any()
+                    assert not L.within_limits(bad, lim.lower, lim.upper).any()
+            assert L.within_limits(angles, lim.lower, lim.upper).all()
+    art = right[1]
+    exact = art.from_pose(art.random_pose(3, n=50))
+    assert not art.within_limits(exact, atol=0.0).all()  # the float32 error is there
+
+
 def test_left_frames_mirror_right(hand, right, left):
     (rmodel, rart), (lmodel, lart) = right, left
     mirror = np.diag(hand.mirror_points(np.ones(3)))   # the library's left = right mirrored

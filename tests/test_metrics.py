@@ -131,6 +131,31 @@ def test_matches_independent_reference(noise):
     assert ours["num_samples"] == 12
 
 
+def test_joints_only_scores_equal_the_joint_scores_with_vertices():
+    """Without vertices: the joint keys, equal to those of a call with vertices, and no vertex
+    keys at all (documented); half-given vertices and unaligned F-scores are refused."""
+    rng = np.random.default_rng(5)
+    gj, gv = hand_like(rng, 6)
+    pj = apply(gj + rng.normal(size=gj.shape) * 0.006, *random_similarity(rng, 6))
+    pv = gv + rng.normal(size=gv.shape) * 0.006
+    full = M.freihand_scores(pred_joints=pj, gt_joints=gj, pred_verts=pv, gt_verts=gv)
+    only = M.freihand_scores(pred_joints=pj, gt_joints=gj, pred_verts=None, gt_verts=None)
+    assert only == M.freihand_scores(pred_joints=pj, gt_joints=gj)  # vertices default to None
+    joint_keys = {"mpjpe", "pa_mpjpe", "auc_joints", "auc_joints_unaligned", "auc_joints_20mm",
+                  "num_samples"}
+    assert set(only) == joint_keys
+    for key in joint_keys:
+        assert only[key] == full[key], key
+    ref = ref_eval(pj, gj, pv, gv)  # the independent reference, joint part
+    for key in joint_keys - {"num_samples"}:
+        assert only[key] == pytest.approx(ref[key], abs=TOL), key
+    assert only["pa_mpjpe"] > 1.0
+    with pytest.raises(ValueError, match="both pred_verts and gt_verts"):
+        M.freihand_scores(pred_joints=pj, gt_joints=gj, pred_verts=pv, gt_verts=None)
+    with pytest.raises(ValueError, match="unaligned_fscore needs vertices"):
+        M.freihand_scores(pred_joints=pj, gt_joints=gj, unaligned_fscore=True)
+
+
 def test_torch_float32_inputs_accepted():
     rng = np.random.default_rng(3)
     gj, gv = hand_like(rng, 4)

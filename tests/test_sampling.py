@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 from collections import Counter
 
 import numpy as np
@@ -14,6 +15,7 @@ import handmesh_tutorial as hmt
 from handmesh_tutorial.sampling import (
     barycentric_upsampling,
     decimate,
+    default_cache_dir,
     mesh_hierarchy,
     selection_matrix,
     to_torch_sparse,
@@ -265,6 +267,66 @@ def test_cache_rebuilds_a_corrupt_file(tmp_path, sphere):
     assert np.array_equal(h1.faces[1], h2.faces[1])
     with np.load(path, allow_pickle=False) as z:
         assert "faces_1" in z.files
+
+
+def _no_cache_env(monkeypatch, home):
+    monkeypatch.delenv("HANDMESH_CACHE", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setenv("HOME", str(home))
+
+
+def test_default_cache_dir_follows_handmesh_cache_then_xdg_then_home(tmp_path, monkeypatch,
+                                                                     sphere):
+    _no_cache_env(monkeypatch, tmp_path / "home")
+    assert default_cache_dir() == tmp_path / "home" / ".cache" / "handmesh_tutorial"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert default_cache_dir() == tmp_path / "xdg" / "handmesh_tutorial"
+    monkeypatch.setenv("HANDMESH_CACHE", str(tmp_path / "mine"))
+    assert default_cache_dir() == tmp_path / "mine"
+    mesh_hierarchy(*sphere, factors=(2,))  # the default cache is the chosen folder
+    assert len(list((tmp_path / "mine").glob("hierarchy_*.npz"))) == 1
+    assert not (tmp_path / "xdg").exists() and not (tmp_path / "home").exists()
+    monkeypatch.setenv("HANDMESH_CACHE", "")  # empty = unset
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/path")  # not absolute: ignored (XDG spec)
+    assert default_cache_dir() == tmp_path / "home" / ".cache" / "handmesh_tutorial"
+
+
+def _unwritable_cache(tmp_path, how):
+    if how == "under_a_file":  # mkdir fails even for root
+        (tmp_path / "a_file").write_text("not a folder")
+        return tmp_path / "a_file" / "cache"
+    folder = tmp_path / "read_only"
+    folder.mkdir()
+    folder.chmod(0o500)
+    if os.access(folder, os.W_OK):  # root ignores the mode bits
+        folder.chmod(0o700)
+        pytest.skip("running as root: chmod cannot make a folder unwritable")
+    return folder / "cache"
+
+
+@pytest.mark.parametrize("how", ["under_a_file", "read_only_folder"])
+def test_unwritable_cache_falls_back_to_memory_with_a_warning(tmp_path, monkeypatch, sphere,
+                                                              sphere_hier, how):
+    _no_cache_env(monkeypatch, tmp_path / "home")
+    bad = _unwritable_cache(tmp_path, how)
+    try:
+        monkeypatch.setenv("HANDMESH_CACHE", str(bad))
+        with pytest.warns(UserWarning, match="cannot write the mesh-hierarchy cache"):
+            h = mesh_hierarchy(*sphere)
+        for a, b in zip(sphere_hier.up + sphere_hier.down, h.up + h.down, strict=True):
+            assert (a != b).nnz == 0
+        assert not bad.exists()
+        with pytest.warns(UserWarning, match="cannot write"):  # an explicit folder as well
+            mesh_hierarchy(*sphere, factors=(2,), cache_dir=bad)
+        # an unwritable home (no HANDMESH_CACHE, no XDG_CACHE_HOME): the shipped network loads
+        monkeypatch.delenv("HANDMESH_CACHE")
+        monkeypatch.setenv("HOME", str(bad))
+        with pytest.warns(UserWarning, match="cannot write"):
+            net = hmt.model.pretrained()
+        assert net.template.shape[0] == hmt.hand.HandModel("right").num_vertices
+    finally:
+        if how == "read_only_folder":
+            bad.parent.chmod(0o700)
 
 
 def test_no_cache_writes_nothing(tmp_path, sphere):

@@ -670,3 +670,85 @@ def test_random_states_restore_from_tensors_on_the_training_device():
     _set_rng_state(state)
     got = (np.random.rand(3), torch.rand(3), random.random())  # noqa: NPY002
     assert np.array_equal(want[0], got[0]) and torch.equal(want[1], got[1]) and want[2] == got[2]
+
+
+def _mano_size_template():
+    """The library's hand (779 vertices) with one interior edge collapsed: a valid 778-vertex
+    (MANO-size) template, so that a network's output fits FreiHAND's 778-vertex annotations."""
+    from handmesh_tutorial.model import as_template
+
+    t = as_template(None)
+    v, f, jr = t.vertices, t.faces, t.joint_regressor
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
+    uniq, cnt = np.unique(edges, axis=0, return_counts=True)
+    boundary = set(uniq[cnt == 1].ravel().tolist())
+    nbrs = [set() for _ in range(len(v))]
+    for a, b in uniq:
+        nbrs[a].add(b)
+        nbrs[b].add(a)
+    for a, b in uniq[cnt == 2]:  # an interior edge whose collapse keeps the mesh manifold
+        if (a not in boundary and b not in boundary and len(nbrs[a] & nbrs[b]) == 2
+                and min(len(nbrs[a]), len(nbrs[b])) > 3):
+            break
+    f2 = np.where(f == b, a, f)
+    f2 = f2[(f2[:, 0] != f2[:, 1]) & (f2[:, 1] != f2[:, 2]) & (f2[:, 2] != f2[:, 0])]
+    keep = np.delete(np.arange(len(v)), b)
+    remap = np.full(len(v), -1)
+    remap[keep] = np.arange(len(keep))
+    jr2 = jr.copy()
+    jr2[:, a] += jr2[:, b]
+    return v[keep], remap[f2], jr2[:, keep]
+
+
+def _write_freihand_root(root: Path, template_vertices, joint_regressor, n: int = 3,
+                         size: int = 32) -> None:
+    """A tiny FreiHAND tree (evaluation split): ``n`` posed-by-noise hands 0.6 m away."""
+    from PIL import Image
+
+    rng = np.random.default_rng(5)
+    (root / "evaluation" / "rgb").mkdir(parents=True)
+    verts = (template_vertices - template_vertices.mean(0))[None] + [0.0, 0.0, 0.6]
+    verts = verts + rng.normal(scale=0.002, size=(n, *template_vertices.shape))
+    xyz = np.einsum("jv,nvc->njc", joint_regressor, verts)
+    K = np.tile([[60.0, 0.0, size / 2], [0.0, 60.0, size / 2], [0.0, 0.0, 1.0]], (n, 1, 1))
+    for key, arr in (("K", K), ("xyz", xyz), ("verts", verts)):
+        (root / f"evaluation_{key}.json").write_text(json.dumps(arr.tolist()))
+    for i in range(n):
+        img = rng.integers(0, 255, size=(size, size, 3), dtype=np.uint8)
+        Image.fromarray(img).save(root / "evaluation" / "rgb" / f"{i:08d}.jpg")
+
+
+def test_evaluate_on_freihand_data(tmp_path, capsys):
+    """A FreiHAND reader has an ``annotation`` method too; evaluate must not take it for an
+    INTER-SH reader (it asked it for annotation 0 and failed). No scene kinds on FreiHAND."""
+    v, f, jr = _mano_size_template()
+    assert v.shape == (778, 3)
+    tpath = T.save_template(tmp_path / "mano_size.npz", (v, f, jr))
+    root = tmp_path / "freihand"
+    _write_freihand_root(root, v, jr)
+    cfg = T.TrainConfig(data=str(root), dataset="freihand", template=str(tpath),
+                        out_dir=str(tmp_path / "run"), **TINY)
+    torch.manual_seed(0)
+    net = T.build_model_from_config(cfg)
+    ds = A.FreiHANDTorchDataset(root, "evaluation", image_size=32, train=False)
+    ev = T.evaluate(net, dataset=ds, progress=False, template=str(tpath))
+    assert ev["num_samples"] == 3 and ev["kind_table"] == [] and ev["vr_table"] == []
+    assert "kind" not in ev["per_sample"]
+    # predictions are back in the camera frame: their error against the reader's raw ground
+    # truth, computed here, is the per-sample MPJPE
+    pj = ev["predictions"]["joints"]
+    assert ev["predictions"]["frame"] == "camera" and pj.shape == (3, 21, 3)
+    want = 1000 * np.linalg.norm(pj - np.stack([ds.source[i]["joints"] for i in range(3)]),
+                                 axis=2).mean(1)
+    np.testing.assert_allclose(ev["per_sample"]["mpjpe"], want, rtol=1e-4, atol=1e-3)
+    by_root = T.evaluate(net, root, kind="freihand", image_size=32, progress=False,
+                         template=str(tpath))
+    np.testing.assert_allclose(by_root["per_sample"]["pa_mpjpe"], ev["per_sample"]["pa_mpjpe"])
+    # the command line, from a checkpoint trained on FreiHAND (its config says so) or told
+    ck = T.save_checkpoint(tmp_path / "ck.pt", model=net, config=cfg,
+                           template_id=T.template_hash(str(tpath)), durable=False)
+    for extra in ([], ["--kind", "freihand"], ["--dataset", "freihand"]):
+        code = cli_main(["evaluate", "--checkpoint", str(ck), "--data", str(root),
+                         "--no-progress", "--threads", "1", *extra])
+        assert code == 0, extra
+        assert "handmesh evaluate: 3 samples" in capsys.readouterr().out

@@ -121,7 +121,7 @@ def _disk_closest_to_line(c, n, r, p, v):
     g2 = _dot(d, e2)
     y1 = 0.0
     y2 = -g2
-    inside = g1 * g1 <= kappa * kappa * (r * r - g2 * g2)
+    inside = (g1 * g1 <= kappa * kappa * (r * r - g2 * g2)) and (g2 * g2 <= r * r)
     if inside and kappa > 0:
         y1 = -g1 / kappa
     if (not inside) and r > 0:

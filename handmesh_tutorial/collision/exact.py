@@ -125,7 +125,9 @@ def _disk_closest_to_line(c, n, r, p, v):
     y2 = -g2
     # Unconstrained minimiser (-g1 / kappa, -g2) inside the disk? Division-free. When kappa == 0
     # (line parallel to the plane) and g1 == 0, a whole chord is optimal: y1 = 0 is one of it.
-    inside = g1 * g1 <= kappa * kappa * (r * r - g2 * g2)
+    # The chord is in the disk only if |g2| <= r: with kappa == 0 the first test reads
+    # 0 <= 0 * (r^2 - g2^2), true (as -0.0) even for |g2| > r, so the second one is needed.
+    inside = (g1 * g1 <= kappa * kappa * (r * r - g2 * g2)) & (g2 * g2 <= r * r)
     ok = inside & (kappa > 0)
     y1[ok] = -g1[ok] / kappa[ok]
     todo = np.flatnonzero(~inside & (r > 0))

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .angles import (
+    _LIMITS_ATOL,
     clip_angles,
     lcs_angles_to_pose,
     pose_to_lcs_angles,
@@ -111,8 +112,18 @@ class Articulation:
         """Angles clipped to this articulation's limits."""
         return clip_angles(angles, self.lower, self.upper)
 
-    def within_limits(self, angles, atol: float = 1e-9) -> np.ndarray:
-        """Bool (...) whether every angle lies within the limits."""
+    def within_limits(self, angles, atol: float = _LIMITS_ATOL) -> np.ndarray:
+        """Whether every angle lies within the limits.
+
+        Args:
+            angles: (..., J, 3) LCS angles, radians.
+            atol: tolerance in radians; the default 1e-5 accepts angles read back from a
+                float32 pose (``from_pose(random_pose(...))``, error ~1e-7 rad); ``0`` = the
+                exact test.
+
+        Returns:
+            bool array of shape ``angles.shape[:-2]``.
+        """
         return within_limits(angles, self.lower, self.upper, atol)
 
     def with_limits(self, limits) -> Articulation:

@@ -66,7 +66,7 @@ def per_sample_scores(*, pred_joints, gt_joints, pred_verts=None, gt_verts=None,
     return out
 
 
-def freihand_scores(*, pred_joints, gt_joints, pred_verts, gt_verts,
+def freihand_scores(*, pred_joints, gt_joints, pred_verts=None, gt_verts=None,
                     allow_reflection: bool = True, unaligned_fscore: bool = False) -> dict:
     """The official FreiHAND evaluation, batched: errors in mm, AUCs and F-scores.
 
@@ -77,10 +77,12 @@ def freihand_scores(*, pred_joints, gt_joints, pred_verts, gt_verts,
     Args:
         pred_joints: (N,21,3) predicted keypoints, metres, numpy or torch.
         gt_joints: (N,21,3) ground-truth keypoints, metres.
-        pred_verts: (N,V,3) predicted mesh vertices, metres (V = 778 for MANO).
-        gt_verts: (N,V,3) ground-truth vertices, same topology.
+        pred_verts: (N,V,3) predicted mesh vertices, metres (V = 778 for MANO), or ``None``
+            (joints-only scoring, with ``gt_verts=None`` too).
+        gt_verts: (N,V,3) ground-truth vertices, same topology, or ``None``.
         allow_reflection: official Procrustes (may mirror); ``False`` = proper rotations only.
-        unaligned_fscore: also compute the official unaligned F-scores (doubles the F-score time).
+        unaligned_fscore: also compute the official unaligned F-scores (doubles the F-score time;
+            needs vertices).
 
     Returns:
         dict of floats: ``mpjpe``, ``mpvpe``, ``pa_mpjpe``, ``pa_mpvpe`` (mm); ``f_at_5mm``,
@@ -88,8 +90,16 @@ def freihand_scores(*, pred_joints, gt_joints, pred_verts, gt_verts,
         thresholds); ``auc_joints_unaligned``, ``auc_verts_unaligned`` (raw, 0-50 mm);
         ``auc_joints_20mm``, ``auc_verts_20mm`` (aligned, 0-20 mm, 20 thresholds, as the paper's
         Table 2); ``num_samples``; with ``unaligned_fscore`` also ``f_at_5mm_unaligned``,
-        ``f_at_15mm_unaligned``.
+        ``f_at_15mm_unaligned``. Without vertices only the joint keys (``mpjpe``, ``pa_mpjpe``,
+        ``auc_joints``, ``auc_joints_unaligned``, ``auc_joints_20mm``, ``num_samples``), equal to
+        those of a call with vertices; the vertex keys are **absent** (not NaN).
+
+    Raises:
+        ValueError: only one of ``pred_verts`` / ``gt_verts`` given, ``unaligned_fscore``
+            without vertices, or bad shapes (the message names the argument).
     """
+    if unaligned_fscore and pred_verts is None:
+        raise ValueError("unaligned_fscore needs vertices: give pred_verts and gt_verts")
     ps = per_sample_scores(pred_joints=pred_joints, gt_joints=gt_joints, pred_verts=pred_verts,
                            gt_verts=gt_verts, allow_reflection=allow_reflection)
     scores = scores_from_errors(ps)
@@ -105,29 +115,39 @@ def scores_from_errors(ps: dict) -> dict:
     already computed per-sample errors.
 
     Args:
-        ps: [`per_sample_scores`][handmesh_tutorial.metrics.scores.per_sample_scores] output with
-            vertices (the F-scores at the default thresholds, 5 and 15 mm).
+        ps: [`per_sample_scores`][handmesh_tutorial.metrics.scores.per_sample_scores] output,
+            with vertices (the F-scores at the default thresholds, 5 and 15 mm) or without.
 
     Returns:
         The dict of [`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores] without
-        the unaligned F-scores.
+        the unaligned F-scores; without vertex errors in ``ps``, only its joint keys.
     """
-    je, jpa, ve, vpa = ps["joint_err"], ps["joint_err_pa"], ps["vert_err"], ps["vert_err_pa"]
+    je, jpa = ps["joint_err"], ps["joint_err_pa"]
     ft, pt = FREIHAND_THRESHOLDS, PAPER_THRESHOLDS
-    s_je, s_jpa, s_ve, s_vpa = (np.sort(e, axis=None) for e in (je, jpa, ve, vpa))  # sort once
+    s_je, s_jpa = (np.sort(e, axis=None) for e in (je, jpa))  # sort once
     scores = {
         "mpjpe": 1000.0 * float(je.mean()),
-        "mpvpe": 1000.0 * float(ve.mean()),
         "pa_mpjpe": 1000.0 * float(jpa.mean()),
+        "auc_joints": auc(_pck_sorted(s_jpa, ft), ft),
+        "auc_joints_unaligned": auc(_pck_sorted(s_je, ft), ft),
+        "auc_joints_20mm": auc(_pck_sorted(s_jpa, pt), pt),
+        "num_samples": int(je.shape[0]),
+    }
+    if "vert_err" not in ps:
+        return scores
+    ve, vpa = ps["vert_err"], ps["vert_err_pa"]
+    s_ve, s_vpa = (np.sort(e, axis=None) for e in (ve, vpa))
+    scores.update({
+        "mpvpe": 1000.0 * float(ve.mean()),
         "pa_mpvpe": 1000.0 * float(vpa.mean()),
         "f_at_5mm": float(ps["fscore"][:, 0].mean()),
         "f_at_15mm": float(ps["fscore"][:, 1].mean()),
-        "auc_joints": auc(_pck_sorted(s_jpa, ft), ft),
         "auc_verts": auc(_pck_sorted(s_vpa, ft), ft),
-        "auc_joints_unaligned": auc(_pck_sorted(s_je, ft), ft),
         "auc_verts_unaligned": auc(_pck_sorted(s_ve, ft), ft),
-        "auc_joints_20mm": auc(_pck_sorted(s_jpa, pt), pt),
         "auc_verts_20mm": auc(_pck_sorted(s_vpa, pt), pt),
-        "num_samples": int(je.shape[0]),
-    }
-    return scores
+    })
+    # the key order of a call with vertices, as before
+    order = ("mpjpe", "mpvpe", "pa_mpjpe", "pa_mpvpe", "f_at_5mm", "f_at_15mm", "auc_joints",
+             "auc_verts", "auc_joints_unaligned", "auc_verts_unaligned", "auc_joints_20mm",
+             "auc_verts_20mm", "num_samples")
+    return {k: scores[k] for k in order}

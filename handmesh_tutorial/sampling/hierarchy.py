@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,9 +89,35 @@ class MeshHierarchy:
         return out
 
 
+CACHE_ENV = "HANDMESH_CACHE"
+"""Environment variable naming the hierarchy cache folder (it wins over ``XDG_CACHE_HOME``)."""
+
+
 def default_cache_dir() -> Path:
-    """``~/.cache/handmesh_tutorial``, where hierarchies are cached by default."""
+    """Where hierarchies are cached by default.
+
+    Returns:
+        ``$HANDMESH_CACHE`` when set (non-empty), else ``$XDG_CACHE_HOME/handmesh_tutorial`` when
+        that is set to an absolute path (the XDG rule), else ``~/.cache/handmesh_tutorial``. The
+        folder need not exist or be writable: [`mesh_hierarchy`][handmesh_tutorial.sampling.
+        hierarchy.mesh_hierarchy] then computes in memory (with a warning).
+
+    Raises:
+        RuntimeError: none of the variables is set and the home folder cannot be determined.
+    """
+    own = os.environ.get(CACHE_ENV, "")
+    if own:
+        return Path(own).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    if xdg and os.path.isabs(xdg):
+        return Path(xdg) / "handmesh_tutorial"
     return Path.home() / ".cache" / "handmesh_tutorial"
+
+
+def _warn_no_cache(where, err: Exception) -> None:
+    warnings.warn(f"cannot write the mesh-hierarchy cache in {where} ({err}); computing in "
+                  f"memory instead (set {CACHE_ENV} to a writable folder to keep it on disk)",
+                  UserWarning, stacklevel=3)
 
 
 def _cache_key(v: np.ndarray, f: np.ndarray, factors: tuple[float, ...]) -> str:
@@ -156,7 +183,10 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
             belong to a face.
         factors: reduction factor per step, each > 1.
         cache_dir: directory of the cache; ``None`` means
-            [`default_cache_dir`][handmesh_tutorial.sampling.hierarchy.default_cache_dir].
+            [`default_cache_dir`][handmesh_tutorial.sampling.hierarchy.default_cache_dir]
+            (``$HANDMESH_CACHE``, else ``$XDG_CACHE_HOME/handmesh_tutorial``, else
+            ``~/.cache/handmesh_tutorial``). A folder that cannot be created or written is no
+            error: the hierarchy is computed in memory and a ``UserWarning`` names the folder.
         use_cache: read and write the cache (``False`` always recomputes and writes nothing).
 
     Returns:
@@ -180,9 +210,18 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
                          "remove unreferenced vertices first")
     if not use_cache:
         return _build(v, f, factors)
-    root = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    try:
+        root = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    except RuntimeError as e:  # no home folder and no variable set
+        hier = _build(v, f, factors)
+        _warn_no_cache("the default folder", e)
+        return hier
     path = root / f"hierarchy_{_cache_key(v, f, factors)}.npz"
-    if path.exists():
+    try:
+        found = path.is_file()
+    except OSError:  # e.g. a folder we may not search
+        found = False
+    if found:
         try:
             hier = _load(path)
             if (hier.factors == factors and np.array_equal(hier.vertices[0], v)
@@ -191,5 +230,8 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
         except (OSError, KeyError, ValueError):
             pass  # unreadable or foreign file: rebuild and overwrite it
     hier = _build(v, f, factors)
-    _save(path, hier)
+    try:
+        _save(path, hier)
+    except OSError as e:  # cannot create or write the folder: the cache is only an optimisation
+        _warn_no_cache(root, e)
     return hier

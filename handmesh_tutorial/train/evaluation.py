@@ -22,7 +22,7 @@ from .. import metrics as M
 from .. import viz
 from .._io import atomic_savez, write_json
 from .._progress import progress_bar
-from ..dataset import KINDS
+from ..dataset import KINDS, InterSHDataset
 from ..dataset import torch_views as TV
 from ..losses import vertex_loss
 from ..surface import flipped_face_fraction, roughness_deg
@@ -127,12 +127,17 @@ def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
 
 
 def _item_kinds(dataset, index: np.ndarray) -> list | None:
-    """Scene kind of each evaluated item (INTER-SH readers only), else ``None``."""
+    """Scene kind of each evaluated item (INTER-SH readers only), else ``None``.
+
+    Only an [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset] source has scene kinds;
+    other readers with an ``annotation`` method (FreiHAND's takes a file key, not an index) and
+    in-memory sample lists give ``None``.
+    """
     base = dataset
     while isinstance(base, torch.utils.data.Subset):
         base = base.dataset
     source = getattr(base, "source", None)
-    if source is None or not hasattr(source, "annotation"):
+    if not isinstance(source, InterSHDataset):
         return None
     return [source.annotation(int(i)).get("kind") for i in index]
 
