@@ -22,10 +22,39 @@ from typing import IO, Any
 import numpy as np
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
-           "write_json", "json_safe", "fsync_dir", "leftover_temporaries"]
+           "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer"]
 
 
 _TMP_SUFFIX = ".tmp"
+
+
+@contextlib.contextmanager
+def single_writer(lock_file: str | os.PathLike, what: str):
+    """One writer at a time: an exclusive ``flock`` on ``lock_file``, which the OS drops when the
+    process dies (even on SIGKILL), so a stale lock never blocks a rerun.
+
+    Args:
+        lock_file: the lock's path (created if missing; its folder must exist).
+        what: the resource, for the message (e.g. ``"runs/demo/data"``).
+
+    Raises:
+        RuntimeError: another process holds the lock (the message names ``what`` and the file).
+    """
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no protection against two writers
+        yield
+        return
+    with open(lock_file, "a+b") as fh:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RuntimeError(f"{what} is being written by another process ({lock_file} is "
+                               "locked)") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
 def leftover_temporaries(path: str | os.PathLike) -> list[Path]:

@@ -12,14 +12,8 @@ it, the export to a small file, and the loader.
   ([`quantize_state_dict`][handmesh_tutorial.train.checkpoints.quantize_state_dict]), no optimiser
   state, plus what made it (data seeds and counts, recipe, seconds, hardware, commit).
 
-Why a separate recipe from the demo's: a network trained from random weights on a CPU in minutes
-does not learn to read finger poses from synthetic crops (docs page "Training from scratch on a
-CPU", the pose probe). The shipped weights come from 122,000 scenes at 224 px and about 750,000
-augmented 128-px crops, in seven runs, each starting from the last one's weights (``init``): 4
-minutes on a GPU, twice about 35 minutes on a 2-core CPU, 3 minutes on a GPU, then three times
-33-36 minutes on the CPU. They read the hand's orientation far better than the demo's network and
-some of the finger articulation. The numbers, and how they were measured, are on the docs page
-"The pretrained model".
+Why a separate recipe from the demo's, and how the shipped weights were made (runs, data, times,
+scores): docs page "The pretrained model".
 
 Taught in notebook 00 ("Quickstart") and notebook 09 ("Evaluation").
 """
@@ -36,8 +30,11 @@ import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
+from .pretraining_data import generate_train_val, generate_training_scenes
+
 __all__ = ["PRETRAINED_FILE", "PretrainedRecipe", "pretrained", "pretrained_path",
-           "pretrained_info", "build_pretrained", "export_pretrained", "generate_training_scenes"]
+           "pretrained_info", "build_pretrained", "export_pretrained", "generate_training_scenes",
+           "generate_train_val"]
 
 PRETRAINED_FILE = "msmr_net_pretrained.pt"
 """Name of the shipped file in ``handmesh_tutorial/assets/``."""
@@ -166,82 +163,6 @@ class PretrainedRecipe:
             num_workers=self.loader_workers or max(0, cpus - 1), cache_data=False,
             val_batch_size=256, precision=self.precision, out_dir=str(out_dir),
             progress=progress, init=self.init, **RECIPES[self.recipe])
-
-
-def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
-                             workers: int, max_seconds: float | None = None,
-                             parts: int = 1, progress: bool = True, log=print) -> dict:
-    """Generate up to ``num`` mixed-kind scenes into ``root``, within a time budget if given.
-
-    With ``max_seconds``, the set is made as ``parts`` shards
-    ([`generate_dataset`][handmesh_tutorial.dataset.generate.generate_dataset] ``shard=(k,
-    parts)``) and no new shard is started when the mean time of the shards so far would overrun
-    the budget; the shards made are hard-linked into ``root`` (``merge_shards``), so a set cut
-    short is still a valid root of the scenes it has (``meta.json`` ranges list them).
-
-    Returns:
-        ``{"root": Path, "scenes": int, "seconds": float, "shards": int}``.
-    """
-    from .dataset import InterSHDataset, merge_shards
-    from .demo.run import generate_scenes
-
-    root = Path(root)
-    t0 = time.perf_counter()
-    say = log or (lambda *_: None)
-    if max_seconds is None or parts <= 1:
-        generate_scenes(root, num, seed, render_size=render_size, workers=workers,
-                        progress=progress)
-        return {"root": root, "scenes": len(InterSHDataset(root)),
-                "seconds": time.perf_counter() - t0, "shards": 1}
-    unmerged = root.parent / f".{root.name}-shards"  # there until the shards are merged
-    if (root / "meta.json").exists() and not unmerged.exists():
-        # a rerun of the same build: keep the shards the first run made
-        return _reuse_sharded_root(root, num, seed, render_size, parts, t0, say)
-    shard_roots = []
-    for k in range(parts):
-        spent = time.perf_counter() - t0
-        if k and spent + spent / k > max_seconds:
-            say(f"      stopping after {k} of {parts} shards: {spent:.0f} s spent, the next "
-                f"would end past the {max_seconds:.0f} s budget")
-            break
-        r = unmerged / f"{k:04d}"
-        generate_scenes(r, num, seed, render_size=render_size, workers=workers,
-                        progress=progress, shard=(k, parts))
-        shard_roots.append(r)
-    merge_shards(shard_roots, root, link=True, progress=False, durable=False)
-    shutil.rmtree(unmerged)
-    return {"root": root, "scenes": len(InterSHDataset(root)),
-            "seconds": time.perf_counter() - t0, "shards": len(shard_roots)}
-
-
-def _reuse_sharded_root(root: Path, num: int, seed: int, render_size: int, parts: int,
-                        t0: float, say) -> dict:
-    """The scenes that an earlier run of the same time-bounded generation left in ``root``.
-
-    A time budget decides how many shards a run makes, so a rerun with another budget (or on a
-    faster machine) would make a different number and could not merge with the first; the first
-    run's shards are kept instead and training resumes on them.
-    """
-    from .dataset import InterSHDataset, read_meta
-
-    meta = read_meta(root)
-    want = {"seed": seed, "num_samples": num}
-    if meta.get("image_size") is not None:  # the generator's scenes record it
-        want["image_size"] = [render_size, render_size]
-    differ = {k: (meta.get(k), v) for k, v in want.items() if meta.get(k) != v}
-    if differ:
-        raise ValueError(
-            f"{root / 'meta.json'}: these scenes are not this build's (on disk, asked): {differ}; "
-            "use another --out, or delete the folder to generate anew")
-    ds = InterSHDataset(root)
-    if ds.missing:
-        raise ValueError(f"{root}: {len(ds.missing)} of its scenes are missing; delete the "
-                         "folder to generate anew")
-    shards = round(len(ds) * parts / num)
-    say(f"      reusing the {len(ds)} scenes ({shards} of {parts} shards) that an earlier run "
-        f"left in {root}")
-    return {"root": root, "scenes": len(ds), "seconds": time.perf_counter() - t0,
-            "shards": shards}
 
 
 def _resumed_plan(saved: dict, history: list, epochs: int,
@@ -396,21 +317,11 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     say = log or (lambda *_: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    cpus = os.cpu_count() or 1
-    workers = recipe.workers or cpus
-    t0 = time.perf_counter()
-    say(f"[1/3] generating up to {recipe.train_scenes} training and {recipe.val_scenes} "
-        f"validation scenes ({recipe.render_size} px, {workers} workers) in {out / 'data'}")
-    val = generate_training_scenes(out / "data" / "val", recipe.val_scenes, recipe.data_seed + 1,
-                                   render_size=recipe.render_size, workers=workers,
-                                   progress=progress, log=log)
-    budget = None if max_generate_seconds is None else max_generate_seconds - val["seconds"]
-    tr = generate_training_scenes(out / "data" / "train", recipe.train_scenes, recipe.data_seed,
-                                  render_size=recipe.render_size, workers=workers,
-                                  max_seconds=budget, parts=10 if budget else 1,
-                                  progress=progress, log=log)
-    t_gen = time.perf_counter() - t0
-    say(f"      {tr['scenes']} training + {val['scenes']} validation scenes in {t_gen:.0f} s")
+    tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
+                                        recipe.data_seed, render_size=recipe.render_size,
+                                        workers=recipe.workers,
+                                        max_generate_seconds=max_generate_seconds,
+                                        progress=progress, log=log)
 
     # torch only now: the generator's workers fork only from a process without torch
     import torch

@@ -7,15 +7,14 @@ line and ``docs/concepts/reliability.md`` show resuming and sharding).
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import shutil
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .._io import fsync_dir
+from .._io import fsync_dir, single_writer
 from .files import _is_own_temporary, _temporary, _write_atomic
 from .reader import _planned, _present, read_meta
 from .schema import LOCK_FILE, META_FILE, SAMPLES_DIR, TMP_PREFIX
@@ -56,25 +55,9 @@ def _diff_message(path: Path, old: dict, new: dict, keys: Sequence[str]) -> str:
             + "\n".join(lines))
 
 
-@contextlib.contextmanager
-def _lock(root: Path) -> Iterator[None]:
+def _lock(root: Path):
     """One writer per root (an flock the OS drops if the process dies, even on SIGKILL)."""
-    try:
-        import fcntl
-    except ImportError:  # not POSIX: no protection against two writers
-        yield
-        return
-    with open(root / LOCK_FILE, "a+b") as fh:
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise RuntimeError(f"{root} is being written by another process "
-                               f"({root / LOCK_FILE} is locked)") from None
-        try:
-            yield
-        finally:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
-
+    return single_writer(root / LOCK_FILE, str(root))
 
 
 def _clean_stale(folder: Path) -> int:

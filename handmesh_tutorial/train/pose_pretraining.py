@@ -15,7 +15,6 @@ checkpoint holds weights, optimiser, the planned number of steps and the history
 
 from __future__ import annotations
 
-import contextlib
 import datetime
 import math
 import os
@@ -26,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._io import atomic_write_bytes, write_json
+from .._io import atomic_write_bytes, single_writer, write_json
 from .._progress import progress_bar
 from ..losses import similarity_align
 from ..pose_encoder import (
@@ -184,22 +183,10 @@ def _lr_at(config: PosePretrainConfig, step: int, total: int) -> float:
     return config.lr * 0.5 * (1 + math.cos(math.pi * min(1.0, t)))
 
 
-@contextlib.contextmanager
 def _lock(out: Path):
     """Refuse a second process training into the same folder."""
-    import fcntl
-
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / ".pretrain.lock", "a+b") as fh:
-        try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            raise RuntimeError(f"{out}: another process is pretraining into this folder "
-                               f"({out / '.pretrain.lock'} is locked)") from None
-        try:
-            yield
-        finally:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+    return single_writer(out / ".pretrain.lock", f"{out} (pretraining)")
 
 
 def _save(path: Path, obj: dict) -> None:
@@ -413,25 +400,17 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     Returns:
         ``{"file", "history", "info"}``.
     """
-    from ..pretrained import _commit, _hardware, generate_training_scenes
+    from ..pretrained import _commit, _hardware, generate_train_val
 
     config = config or PosePretrainConfig()
     say = log or (lambda *_: None)
     out = Path(out)
     workers = config.workers or os.cpu_count() or 1
     t0 = time.perf_counter()
-    say(f"[1/3] generating up to {config.train_scenes} training and {config.val_scenes} "
-        f"validation scenes ({config.render_size} px, {workers} workers) in {out / 'data'}")
-    val = generate_training_scenes(out / "data" / "val", config.val_scenes, config.data_seed + 1,
-                                   render_size=config.render_size, workers=workers,
-                                   progress=progress, log=log)
-    budget = None if max_generate_seconds is None else max_generate_seconds - val["seconds"]
-    tr = generate_training_scenes(out / "data" / "train", config.train_scenes, config.data_seed,
-                                  render_size=config.render_size, workers=workers,
-                                  max_seconds=budget, parts=10 if budget else 1,
-                                  progress=progress, log=log)
-    t_gen = time.perf_counter() - t0
-    say(f"      {tr['scenes']} training + {val['scenes']} validation scenes in {t_gen:.0f} s")
+    tr, val, t_gen = generate_train_val(out / "data", config.train_scenes, config.val_scenes,
+                                        config.data_seed, render_size=config.render_size,
+                                        workers=workers, max_generate_seconds=max_generate_seconds,
+                                        progress=progress, log=log)
     caches = {}
     for split, r in (("train", tr), ("val", val)):
         path = out / f"crops_{split}.pt"
