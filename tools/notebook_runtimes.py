@@ -84,13 +84,12 @@ TRAINED = {
 #: Where the committed ``default`` run picked up what an earlier run had left in ``notebooks/runs/``
 #: (the notebooks reuse data sets and checkpoints): its time is then less than a first run's.
 REUSED = {
-    "00_quickstart": "reuses the scenes and the short training run of an earlier execution; "
-                     "its eight fresh scenes for the pretrained network were new",
+    "00_quickstart": "the committed run generated its scenes and trained its ten steps "
+                     "itself; a rerun reuses them from `notebooks/runs/`",
     "08_training": "the committed run generated its INTER-SH set too (about 3 min of the "
                    "total); a later run reuses it from `notebooks/runs/` and only trains",
-    "09_evaluation": "reuses notebook 08's data set and checkpoint, and section 5's 300 test "
-                     "scenes, made earlier by the same calls (about 2 min more on a first run); "
-                     "it made section 5's 600 training-set scenes itself",
+    "09_evaluation": "reuses notebook 08's data set and checkpoint; it made section 5's 300 "
+                     "test scenes and 600 training-set scenes itself",
     "10_ablation": "reuses notebook 08's data set; the committed run trained all nine runs "
                    "itself (the frozen encoder's features computed once for all nine); a rerun "
                    "finds them in `notebooks/runs/` and only evaluates",
