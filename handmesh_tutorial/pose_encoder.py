@@ -13,8 +13,9 @@ hand in the weights it starts from.
   builds with ``keypoints=True``) plus a linear 3D-joint head that is thrown away afterwards.
 * [`pose_loss`][handmesh_tutorial.pose_encoder.pose_loss]: its objective.
 * [`pretrained_encoder`][handmesh_tutorial.pose_encoder.pretrained_encoder]: the shipped weights
-  as a ready ``KeypointEncoder``; [`load_pretrained_encoder`][
-  handmesh_tutorial.pose_encoder.load_pretrained_encoder] copies them into a model's encoder.
+  as a ready ``KeypointEncoder``;
+  [`load_pretrained_encoder`][handmesh_tutorial.pose_encoder.load_pretrained_encoder] copies them
+  into a model's encoder.
 * [`export_pose_encoder`][handmesh_tutorial.pose_encoder.export_pose_encoder]: the small int8
   file, with what made it.
 
@@ -96,7 +97,8 @@ def pose_loss(out: dict, joints: torch.Tensor, root: torch.Tensor, K: torch.Tens
     Args:
         out: [`PoseNet`][handmesh_tutorial.pose_encoder.PoseNet]'s output.
         joints: ``(B, J, 3)`` root-relative targets, metres (crop camera frame).
-        root: ``(B, 3)`` the root in that frame. K: ``(B, 3, 3)`` crop intrinsics.
+        root: ``(B, 3)`` the root in that frame.
+        K: ``(B, 3, 3)`` crop intrinsics.
         image_size: crop side, pixels.
         keypoint_weight: weight of the 2D term (1 unit = half the crop side).
         aligned_weight: weight of the aligned-joint term.
@@ -167,8 +169,9 @@ def read_pose_encoder(path: str | os.PathLike) -> tuple[PoseNet, dict]:
         ``pretrained``, ``weights``).
 
     Raises:
-        FileNotFoundError: no such file. ValueError: not a pose-encoder file, or its weights do
-            not fit its architecture (the message names the file and the keys).
+        FileNotFoundError: no such file.
+        ValueError: not a pose-encoder file, or its weights do not fit its architecture (the
+            message names the file and the keys).
     """
     from .train.checkpoints import dequantize_state_dict
 

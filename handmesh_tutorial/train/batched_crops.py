@@ -78,8 +78,9 @@ def augment_crops(batch: dict, out_size: int, *, draws: dict | None = None,
 
     Args:
         batch: ``image`` ``(B, 3, P, P)`` uint8, ``joints`` ``(B, 21, 3)``, ``root`` ``(B, 3)``,
-            ``K`` ``(B, 3, 3)``, ``box`` ``(B,)`` as [`crop_cache`][
-            handmesh_tutorial.train.pose_pretraining.crop_cache] returns, on one device.
+            ``K`` ``(B, 3, 3)``, ``box`` ``(B,)`` as
+            [`crop_cache`][handmesh_tutorial.train.batched_crops.crop_cache] returns, on one
+            device.
         out_size: output side ``S``, pixels.
         draws: per-sample ``angle`` (radians), ``zoom`` (side factor), ``shift`` ``(B, 2)``
             (share of the side), ``brightness``, ``contrast``, ``saturation`` (factors);

@@ -101,11 +101,11 @@ class TrainConfig:
             this run's; only the weights are taken (no optimiser state, no epoch count). A
             resumed run continues from its own checkpoint (``init`` must stay the run's).
         init_encoder: start only the encoder from pretrained weights: ``"pretrained"`` (the
-            shipped hand encoder, [`pretrained_encoder`][
-            handmesh_tutorial.pose_encoder.pretrained_encoder]) or the path of a pose-encoder
-            file; the rest of the network starts from random weights (the paper's protocol). Needs
-            a ``resnet10`` encoder (with ``model_kwargs={"keypoints": True}`` it gets the keypoint
-            head too, else the ResNet only); not with ``init``.
+            shipped hand encoder,
+            [`pretrained_encoder`][handmesh_tutorial.pose_encoder.pretrained_encoder]) or the
+            path of a pose-encoder file; the rest of the network starts from random weights (the
+            paper's protocol). Needs a ``resnet10`` encoder (with ``model_kwargs={"keypoints":
+            True}`` it gets the keypoint head too, else the ResNet only); not with ``init``.
         freeze_encoder: epochs at the start during which the encoder's weights and BatchNorm
             statistics stay fixed (0: trained from the first step; ``>= epochs``: frozen
             throughout).

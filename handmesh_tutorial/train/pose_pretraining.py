@@ -133,8 +133,9 @@ def evaluate_pose(net: PoseNet, cache: dict, sizes=(64, 128), batch_size: int = 
     """Joint errors of ``net`` on the evaluation crops of ``cache`` (and of constant answers).
 
     Args:
-        net: the network. cache: [`crop_cache`][handmesh_tutorial.train.pose_pretraining.crop_cache]
-            of the validation scenes (on any device; ``net``'s is used).
+        net: the network.
+        cache: [`crop_cache`][handmesh_tutorial.train.batched_crops.crop_cache] of the
+            validation scenes (on any device; ``net``'s is used).
         sizes: crop sides to score.
         baselines: ``{name: (21, 3) root-relative joints}`` predicted for every crop.
 
@@ -224,22 +225,25 @@ def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.Path
     the network is exported to ``out/hand_encoder_pretrained.pt`` (int8).
 
     Args:
-        train_cache, val_cache: [`crop_cache`][handmesh_tutorial.train.pose_pretraining.crop_cache]
-            of the training and validation scenes.
+        train_cache: [`crop_cache`][handmesh_tutorial.train.batched_crops.crop_cache] of the
+            training scenes.
+        val_cache: the same of the validation scenes.
         out: output folder.
         config: the recipe.
         max_train_seconds: training budget of this call (``None``: ``max_steps``).
         info: provenance stored in the exported file.
         checkpoint_seconds: seconds between checkpoints.
         val_every: steps between validations.
-        progress: tqdm bar. log: one-line messages (``None``: silent).
+        progress: tqdm bar.
+        log: one-line messages (``None``: silent).
 
     Returns:
         ``{"file", "history", "steps", "seconds"}``.
 
     Raises:
-        ValueError: a checkpoint of another config in ``out``. RuntimeError: another process
-            trains into ``out``. FloatingPointError: a non-finite loss (names the step).
+        ValueError: a checkpoint of another config in ``out``.
+        RuntimeError: another process trains into ``out``.
+        FloatingPointError: a non-finite loss (names the step).
     """
     config = config or PosePretrainConfig()
     say = log or (lambda *_: None)
