@@ -5,8 +5,9 @@ cannot be downloaded here, and an encoder trained from random weights on a CPU i
 the data's mean hand and nothing per image (docs page "Why the paper starts from pretrained
 weights"). So the package ships an encoder pretrained on INTER-SH scenes with a **decoder-neutral**
 objective: 2D keypoints (heat-maps, soft-argmax) and root-relative 3D joints from the pooled
-features. No mesh decoder takes part, so no decoder compared in the ablation (notebook 10) had a
-hand in the weights it starts from.
+features; no mesh decoder takes part in it. (The shipped file continues weights that began as the
+shipped MSMR-Net's encoder; that page shows notebook 10's verdict is the same from an encoder
+trained from random weights.)
 
 * [`PoseNet`][handmesh_tutorial.pose_encoder.PoseNet]: the network that is pretrained, a
   [`KeypointEncoder`][handmesh_tutorial.keypoints.KeypointEncoder] (the ``encoder`` MSMR-Net
