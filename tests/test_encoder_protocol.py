@@ -117,3 +117,17 @@ def test_encoded_dataset_items_and_refusals(samples):
     aug = A.InterSHTorchDataset(samples[:4], 32, train=True)
     with pytest.raises(ValueError, match="augments"):
         FT.EncodedDataset(aug, enc)
+
+
+def test_a_second_training_into_the_same_folder_is_refused(samples, tmp_path):
+    from handmesh_tutorial._io import single_writer
+    from handmesh_tutorial.train.loop import TRAIN_LOCK
+
+    out = tmp_path / "run"
+    out.mkdir()
+    with single_writer(out / TRAIN_LOCK, "held"), pytest.raises(RuntimeError,
+                                                                 match="run.*training"):
+        _run(samples, out, epochs=1)
+    assert not (out / "checkpoint_last.pt").exists()  # nothing written by the refused run
+    _run(samples, out, epochs=1)  # the lock is free again: the same folder trains
+    assert (out / "checkpoint_last.pt").exists()

@@ -52,7 +52,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .._io import write_json
+from .._io import single_writer, write_json
 from .._progress import progress_bar
 from ..dataset import torch_views as TV
 from ..keypoints import keypoint_loss, normalised_keypoints
@@ -80,6 +80,9 @@ from .features import EncodedDataset, is_deterministic, model_outputs
 from .templates import build_model_from_config, resolve_template, template_hash
 
 __all__ = ["TrainResult", "train", "training_loss"]
+
+TRAIN_LOCK = ".train.lock"
+"""Lock file in a run folder while a process trains into it."""
 
 _VAL_KEYS = ("mpjpe", "mpvpe", "pa_mpjpe", "pa_mpvpe", "auc_joints", "auc_verts", "f_at_5mm",
              "f_at_15mm")
@@ -237,6 +240,7 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         FileNotFoundError: ``resume`` without a checkpoint, or missing data.
         FileExistsError: ``out_dir`` holds a run's checkpoints and neither ``resume`` nor
             ``overwrite`` was given.
+        RuntimeError: another process is training into ``out_dir`` (it holds ``.train.lock``).
         ValueError: inconsistent config, template/data vertex counts that differ, or a
             checkpoint of another architecture.
     """
@@ -249,8 +253,13 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         torch.cuda.set_device(device)
     rank, world, owns_pg = _init_distributed(device)
     try:
-        return _train(config, resume, overwrite, dataset, val_dataset, template, callback,
-                      device, rank, world, t_start)
+        lock = contextlib.nullcontext()
+        if rank == 0:  # one writer per run folder: a second train() into it is refused
+            Path(config.out_dir).mkdir(parents=True, exist_ok=True)
+            lock = single_writer(Path(config.out_dir) / TRAIN_LOCK, f"{config.out_dir} (training)")
+        with lock:
+            return _train(config, resume, overwrite, dataset, val_dataset, template, callback,
+                          device, rank, world, t_start)
     finally:
         if owns_pg:
             import torch.distributed as dist
