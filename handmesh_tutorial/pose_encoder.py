@@ -28,7 +28,6 @@ any side in ``image_sizes`` (it was trained on all of them).
 
 from __future__ import annotations
 
-import io
 import os
 from pathlib import Path
 
@@ -138,7 +137,7 @@ def export_pose_encoder(net: PoseNet, out: str | os.PathLike, *, info: dict | No
     Returns:
         ``out`` as a ``Path``.
     """
-    from ._io import atomic_write_bytes
+    from ._io import atomic_write_with
     from .train.checkpoints import quantize_state_dict
 
     if weights not in ("int8", "float32"):
@@ -153,12 +152,9 @@ def export_pose_encoder(net: PoseNet, out: str | os.PathLike, *, info: dict | No
                              "out_features": net.encoder.out_features},
             "preprocessing": dict(preprocessing or {}), "history": list(history or []),
             "pretrained": dict(info or {}), "torch_version": str(torch.__version__)}
-    buf = io.BytesIO()
-    torch.save(blob, buf)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(out, buf.getvalue(), True)
-    return out
+    return atomic_write_with(out, lambda fh: torch.save(blob, fh))
 
 
 def read_pose_encoder(path: str | os.PathLike) -> tuple[PoseNet, dict]:

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._io import atomic_write_bytes, single_writer, write_json
+from .._io import atomic_write_bytes, atomic_write_with, single_writer, write_json
 from .._progress import progress_bar
 from ..losses import similarity_align
 from ..pose_encoder import (
@@ -191,11 +191,7 @@ def _lock(out: Path):
 
 
 def _save(path: Path, obj: dict) -> None:
-    import io
-
-    buf = io.BytesIO()
-    torch.save(obj, buf)
-    atomic_write_bytes(path, buf.getvalue(), True)
+    atomic_write_with(path, lambda fh: torch.save(obj, fh))
 
 
 def _init_weights(net: PoseNet, init: str | None) -> None:
