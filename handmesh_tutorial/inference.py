@@ -67,7 +67,8 @@ class HandPrediction:
         vertices: ``(V, 3)`` float64, metres.
         joints: ``(21, 3)`` float64, metres, FreiHAND order.
         frame: ``"camera"`` (the image's OpenCV camera frame, with ``K``) or
-            ``"root-relative"`` (no ``K``: the camera's axes, joint 9 at the origin).
+            ``"root-relative"`` (no ``K``: the camera's axes, origin at the network's root,
+            so ``joints[9]`` is near the origin, as in ``handmesh evaluate``).
         side: ``"left"`` or ``"right"``.
         root: ``(3,)`` joint 9 in the camera frame, metres (``None`` when root-relative).
         keypoints_2d: ``(21, 2)`` the network's 2D joints in the image's pixels (``None``
@@ -291,6 +292,7 @@ def _network(model, image_size, box_scale, device) -> tuple[nn.Module, int, floa
     if model is None or isinstance(model, str | os.PathLike):
         from .train import load_checkpoint
 
+        device = "cpu" if device is None else device
         if model is None or str(model) == "pretrained":
             net, cfg = _shipped(str(device))
         else:
@@ -308,11 +310,12 @@ def _network(model, image_size, box_scale, device) -> tuple[nn.Module, int, floa
         raise ValueError("give image_size, the crop side this network was trained on (a "
                          "checkpoint's config['image_size']); a wrong size runs but predicts "
                          "worse")
-    return model.to(device), int(image_size), float(box_scale or 1.5)
+    return (model if device is None else model.to(device)), int(image_size), \
+        float(box_scale or 1.5)
 
 
 def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | None = None,
-                  box_scale: float | None = None, device: str = "cpu",
+                  box_scale: float | None = None, device: str | None = None,
                   batch_size: int = 32) -> list[HandPrediction]:
     """Predict every hand of one image, given its boxes and sides (one forward pass per batch).
 
@@ -327,7 +330,8 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
             checkpoint path, or a network (then give ``image_size``).
         image_size: crop side; default: the checkpoint's.
         box_scale: crop margin; default: the checkpoint's (1.5).
-        device: where the network runs.
+        device: where the network runs (``None``: a network object stays where it is, a
+            loaded one goes to the CPU).
         batch_size: crops per forward pass.
 
     Returns:
@@ -338,8 +342,8 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
             network that has no 2D keypoint head (it cannot place the hand), a root that comes
             out behind the camera (a ``K`` of another image?), a missing ``image_size``.
     """
-    net, size, scale = _network(model, image_size, box_scale, device)
     img = check_image(image)
+    net, size, scale = _network(model, image_size, box_scale, device)
     b = np.asarray(boxes, dtype=np.float64) if len(boxes) else np.zeros((0, 4))
     if b.ndim != 2 or b.shape[1] != 4:
         raise ValueError(f"boxes must be (N, 4), got {b.shape}")
@@ -394,17 +398,30 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
         preds.append(HandPrediction(
             vertices=verts[i], joints=joints[i], frame="root-relative" if K is None else "camera",
             side=side_list[i], root=None if K is None else cam_root[i].copy(), keypoints_2d=kp,
-            faces=None if f is None else np.ascontiguousarray(f), crop=c))
+            faces=None if f is None else np.array(f), crop=c))
     return preds
 
 
 def predict_hand(image, box, side: str, K=None, model=None, *, image_size: int | None = None,
-                 box_scale: float | None = None, device: str = "cpu") -> HandPrediction:
+                 box_scale: float | None = None, device: str | None = None) -> HandPrediction:
     """Predict one hand's mesh and joints from an RGB image, its box and its side.
 
-    ``hmt.inference.predict_hand("photo.jpg", (x0, y0, x1, y1), "left", K=K)``: see
-    [`predict_hands`][handmesh_tutorial.inference.predict_hands] for the arguments and errors.
-    Without ``K`` the output is root-relative (joint 9 at the origin, the camera's axes).
+    ``hmt.inference.predict_hand("photo.jpg", (x0, y0, x1, y1), "left", K=K)``. Without ``K``
+    the output is root-relative (the network's root near the origin, the camera's axes).
+
+    Args:
+        image: a path or an ``(H, W, 3)`` RGB array
+            ([`check_image`][handmesh_tutorial.inference.check_image]).
+        box: ``(x0, y0, x1, y1)``, pixels.
+        side: ``"left"`` or ``"right"``, the person's hand.
+        K: ``(3, 3)`` intrinsics of ``image``, or ``None``.
+        model: see [`predict_hands`][handmesh_tutorial.inference.predict_hands].
+        image_size: see ``predict_hands``.
+        box_scale: see ``predict_hands``.
+        device: see ``predict_hands``.
+
+    Raises:
+        ValueError: see [`predict_hands`][handmesh_tutorial.inference.predict_hands].
 
     Returns:
         The [`HandPrediction`][handmesh_tutorial.inference.HandPrediction]: ``vertices``
