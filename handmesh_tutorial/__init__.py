@@ -16,7 +16,8 @@ __version__ = "0.1.0"
 # One module per concept; see docs/index.md for the data flow between them.
 _SUBMODULES = (
     "augment", "blocks", "budget", "camera", "cli", "collision", "dataset", "decoder", "demo",
-    "encoder", "fit", "freihand", "hand", "interact", "keypoints", "lcs", "losses", "makehuman",
+    "encoder", "fit", "freihand", "hand", "inference", "interact", "keypoints", "lcs", "losses",
+    "makehuman",
     "mano", "metrics", "model", "objects", "pose_encoder", "pretrained", "render", "rotation",
     "sampling", "skinned", "spiral", "surface", "testing", "train", "visibility", "viz",
 )

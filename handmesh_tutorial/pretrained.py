@@ -66,7 +66,8 @@ def pretrained(device: str = "cpu"):
         The [`MSMRNet`][handmesh_tutorial.model.MSMRNet]; its input is a crop of
         ``pretrained_info()["config"]["image_size"]`` pixels around one hand, normalised as the
         training crops are
-        ([`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]).
+        ([`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]);
+        [`predict_hand`][handmesh_tutorial.inference.predict_hand] prepares one's own image so.
     """
     from .train import load_checkpoint
 
