@@ -21,6 +21,7 @@ from .. import augment as A
 from .. import metrics as M
 from .. import viz
 from .._io import atomic_savez, write_json
+from .._optional import require
 from .._progress import progress_bar
 from ..dataset import KINDS, InterSHDataset
 from ..dataset import torch_views as TV
@@ -342,7 +343,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
 
 
 def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", "evaluate --out (its figures)")
 
 
     out.mkdir(parents=True, exist_ok=True)
