@@ -11,6 +11,7 @@ Taught in notebook 09 ("Evaluation").
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -209,7 +210,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         batch_size: evaluation batch size.
         device: ``"auto"``, ``"cpu"``, ``"cuda"``.
         out_dir: when given, writes ``eval.json``, ``predictions.npz``, ``pck.png``,
-            ``vr.png``.
+            ``vr.png`` (the figures need matplotlib, the ``notebooks`` extra: without it a
+            warning says so and the other two files are written).
         camera_frame: predictions un-mirrored and moved back to the source camera frame
             (ground-truth root added); ``False``: the network's root-centred right-hand frame.
         num_samples: evaluate only the first ``num_samples`` items.
@@ -343,9 +345,6 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
 
 
 def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
-    plt = require("matplotlib.pyplot", "evaluate --out (its figures)")
-
-
     out.mkdir(parents=True, exist_ok=True)
     files = {}
     summary = {"checkpoint": source, "scores": res["scores"], "vr_table": res["vr_table"],
@@ -372,6 +371,12 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
                  vertices=p["vertices"].astype(np.float32), joints=p["joints"].astype(np.float32),
                  index=res["per_sample"]["index"], vr=res["per_sample"]["vr"],
                  mirrored=res["per_sample"]["mirrored"])
+    try:  # the scores and predictions need no extra; the figures need matplotlib
+        plt = require("matplotlib.pyplot", "evaluate's figures (pck.png, vr.png)")
+    except ModuleNotFoundError as err:
+        warnings.warn(f"{err}; {out} holds eval.json and predictions.npz, without the figures",
+                      UserWarning, stacklevel=3)
+        return files
 
     fig, ax = plt.subplots(figsize=(5, 3.6))
     curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors["vert_err_pa"],
