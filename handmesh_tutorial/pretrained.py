@@ -30,6 +30,7 @@ import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
+from ._version import __version__, shipped_version
 from .pretraining_data import generate_train_val, generate_training_scenes
 
 __all__ = ["PRETRAINED_FILE", "PretrainedRecipe", "pretrained", "pretrained_path",
@@ -77,13 +78,18 @@ def pretrained(device: str = "cpu"):
 
 def pretrained_info() -> dict:
     """What made the shipped weights: ``config`` (the training run's), ``pretrained`` (recipe,
-    data seeds and counts, seconds, hardware, commit, date), ``history`` (one row per epoch) and
-    ``weights`` (storage: ``"int8"`` or ``"float16"``)."""
+    data seeds and counts, seconds, hardware, commit, date), ``history`` (one row per epoch),
+    ``weights`` (storage: ``"int8"`` or ``"float16"``) and ``library_version`` (the version that
+    wrote the file, or for a shipped file of before 0.2.0 the version that shipped it, recorded
+    by hash in ``handmesh_tutorial/_version.py``)."""
     from .train.checkpoints import _read_checkpoint
 
-    ck = _read_checkpoint(pretrained_path())
-    return {k: ck.get(k) for k in ("config", "pretrained", "history", "weights", "epoch",
+    path = pretrained_path()
+    ck = _read_checkpoint(path)
+    info = {k: ck.get(k) for k in ("config", "pretrained", "history", "weights", "epoch",
                                    "step", "template_hash", "torch_version")}
+    info["library_version"] = ck.get("library_version") or shipped_version(path)
+    return info
 
 
 @dataclass
@@ -262,7 +268,7 @@ def export_pretrained(checkpoint: str | os.PathLike, out: str | os.PathLike, *,
     small = {k: ck[k] for k in ("format", "config", "template_hash", "num_vertices", "epoch",
                                 "step", "history", "best", "torch_version")}
     small.update(model=model, scales=scales, weights=weights, optimizer=None, scheduler=None,
-                 pretrained=dict(info or {}))
+                 pretrained=dict(info or {}), library_version=__version__)
     buf = io.BytesIO()
     torch.save(small, buf)
     out = Path(out)

@@ -111,6 +111,7 @@ def test_export_read_round_trip_and_bad_files(tmp_path):
     for k, v in net.state_dict().items():
         assert torch.equal(back.state_dict()[k], v)
     assert meta["pretrained"] == {"a": 1} and meta["architecture"]["backbone"] == "resnet10"
+    assert meta["library_version"] == hmt.__version__
     i8 = PE.export_pose_encoder(net, tmp_path / "i.pt", weights="int8")
     assert i8.stat().st_size < 0.3 * f32.stat().st_size
     q, _ = PE.read_pose_encoder(i8)

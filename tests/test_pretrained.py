@@ -75,6 +75,7 @@ def test_export_loads_back_close_to_the_run_and_is_small(run, tmp_path):
     raw = torch.load(f8, weights_only=True)
     assert raw["optimizer"] is None and "rng" not in raw and raw["weights"] == "int8"
     assert raw["pretrained"] == info and raw["epoch"] == full["epoch"] == 2
+    assert raw["library_version"] == full["library_version"] == hmt.__version__
     params = dict(run["model"].named_parameters())
     big = [k for k, v in params.items() if v.ndim >= 2]
     assert big and all(raw["model"][k].dtype == torch.int8 for k in big)
@@ -104,6 +105,7 @@ def test_pretrained_is_found_by_name_and_missing_says_how_to_make_it(run, tmp_pa
     assert np.array_equal(_vertices(net, run["dataset"]), ref)
     info = P.pretrained_info()
     assert info["pretrained"]["data"]["train_seed"] == 9 and info["weights"] == "int8"
+    assert info["library_version"] == hmt.__version__  # the version that wrote the file
     assert len(info["history"]) == 2
 
 

@@ -380,6 +380,19 @@ def _umeyama_pa_mpjpe(pred, gt):
     return np.array(out)
 
 
+def test_evaluate_out_without_matplotlib_writes_scores_and_names_the_extra(toy_root, tmp_path,
+                                                                          monkeypatch):
+    for name in [m for m in sys.modules if m.startswith("matplotlib.")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # as in a core install
+    net = T.build_model_from_config(T.TrainConfig(data=str(toy_root), **TINY))
+    with pytest.warns(UserWarning, match=r'handmesh_tutorial\[notebooks\].*without the figures'):
+        ev = T.evaluate(net, toy_root, image_size=32, progress=False, num_samples=2,
+                        baseline=False, out_dir=tmp_path / "ev")
+    assert sorted(ev["files"]) == ["json", "predictions"]
+    assert sorted(p.name for p in (tmp_path / "ev").iterdir()) == ["eval.json", "predictions.npz"]
+
+
 def test_evaluate_scores_the_rest_hand_baseline_beside_the_model(toy_root, tmp_path):
     """An untrained network (zero head) outputs the template: its scores equal the rest hand's;
     the baseline's PA-MPJPE equals an independent Umeyama alignment of the template joints."""

@@ -11,6 +11,8 @@ import sys
 
 import numpy as np
 
+from .._optional import missing_extra_message
+
 # Below this sine of the angle between two disk normals the disks are treated as parallel; the tilt
 # this ignores moves a 1 cm disk by 1e-12 m.
 _PARALLEL_SIN = 1e-10
@@ -101,7 +103,7 @@ def _kernels(backend):
             _numba = None
         _NUMBA_STATE.append(_numba)
     if _NUMBA_STATE[0] is None and backend == "numba":
-        raise ImportError("backend='numba' needs the numba package (pip install numba)")
+        raise ModuleNotFoundError(missing_extra_message("numba", "backend='numba'"), name="numba")
     return _NUMBA_STATE[0]
 
 

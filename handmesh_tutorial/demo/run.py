@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import write_json
+from .._optional import require
 from ..viz import plot_loss_curves, plot_overlays, save_figure
 from .config import DemoConfig, train_config
 from .report import BASELINE_ROW, MEAN_ROW, PRETRAINED_ROW, write_report
@@ -147,7 +148,7 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
         ValueError: ``out`` holds a run of another configuration (the message says what
             differs; delete the folder or pick another ``--out``).
     """
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", "the demo (its figures)")
 
     from ..dataset import InterSHDataset
 

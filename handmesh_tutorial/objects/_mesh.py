@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from .._optional import require
 from ..collision import Cylinders, ring_cylinders
 
 
@@ -28,6 +29,7 @@ def _revolve(profile: Any, sections: int = 40, step: float = 0.008) -> trimesh.T
 
 
 def _union(meshes: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    require("manifold3d", "procedural objects (mesh booleans)")
     return trimesh.boolean.union(meshes, engine="manifold")
 
 

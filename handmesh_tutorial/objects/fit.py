@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from .._optional import require
 from ..collision import Cylinders, point_cylinder_distance
 from .body import Body
 
@@ -78,6 +79,7 @@ def primitive_fit(body: Body, samples: int = 2000, tol: float = 0.001,
     d_surf = distance_to_cylinders(surf, body.cylinders)
     per = max(8, samples // max(len(body.cylinders), 1))
     inner = _sample_in_cylinders(body.cylinders, per, rng)
+    require("rtree", "primitive_fit (trimesh's proximity queries)")
     sd = trimesh.proximity.signed_distance(mesh, inner)  # > 0 inside the mesh
     excess = np.maximum(-sd, 0.0)
     return {"coverage": float(np.mean(d_surf <= tol)),

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from .._optional import require
 from ..collision import box_cylinders
 from ._mesh import (
     _centre,
@@ -126,6 +127,7 @@ def _build_mug(rng):
     # keep only the part of the handle outside the mid-wall cylinder (its cut ends sit in the wall)
     keep = trimesh.creation.box(extents=[0.2, 0.2, 0.2])
     keep.apply_translation([0.1 + (r - w / 2), 0, h / 2])
+    require("manifold3d", "procedural objects (mesh booleans)")
     handle = trimesh.boolean.intersection([handle, keep], engine="manifold")
     mesh = _union([cup, handle])
     # wall: vertical staves around the circumference; bottom: one disc

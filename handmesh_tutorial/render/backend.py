@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from .._optional import require
+
 __all__ = ["ensure_egl", "gl_opened", "import_pyrender", "patch_pyrender_numpy2"]
 
 
@@ -104,8 +106,9 @@ def import_pyrender() -> types.ModuleType:
     global _PYRENDER
     if _PYRENDER is None:
         ensure_egl()
-        import pyrender
-        import pyrender.mesh
+        require("OpenGL", "rendering (pyrender)")
+        pyrender = require("pyrender", "rendering")
+        require("pyrender.mesh", "rendering")
 
         patch_pyrender_numpy2(pyrender.mesh)
         _PYRENDER = pyrender

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._optional import missing_extra_message
+
 __all__ = [
     "BACKGROUND_PHOTOS",
     "BackgroundPhoto",
@@ -174,12 +176,13 @@ def skimage_data_dir() -> Path:
     """The ``data`` folder of the installed scikit-image (found without importing it).
 
     Raises:
-        ImportError: scikit-image is not installed (``pip install scikit-image``).
+        ImportError: scikit-image is not installed (``pip install "handmesh_tutorial[scenes]"``).
     """
     spec = importlib.util.find_spec("skimage")
     if spec is None or not spec.submodule_search_locations:
-        raise ImportError("photo backgrounds read the photographs bundled in scikit-image's "
-                          "wheel: pip install scikit-image (random_background needs nothing)")
+        raise ModuleNotFoundError(missing_extra_message(
+            "skimage", "photo backgrounds (the photographs bundled in scikit-image's wheel; "
+            "random_background needs nothing)"), name="skimage")
     return Path(list(spec.submodule_search_locations)[0]) / "data"
 
 

@@ -26,6 +26,7 @@ from torch import nn
 
 from .._io import atomic_write_bytes as _atomic_write_bytes
 from .._io import leftover_temporaries
+from .._version import __version__
 from ._distributed import _resolve_device
 from .config import TrainConfig
 from .templates import build_model_from_config, resolve_template, template_hash
@@ -112,6 +113,7 @@ def save_checkpoint(path: str | os.PathLike, *, model: nn.Module, config: TrainC
         "step_losses": torch.tensor(list(step_losses), dtype=torch.float64),
         "best": float(best),
         "torch_version": str(torch.__version__),
+        "library_version": __version__,
         **dict(extra or {}),
     }
     buf = io.BytesIO()

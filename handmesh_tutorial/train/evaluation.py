@@ -11,6 +11,7 @@ Taught in notebook 09 ("Evaluation").
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from .. import augment as A
 from .. import metrics as M
 from .. import viz
 from .._io import atomic_savez, write_json
+from .._optional import require
 from .._progress import progress_bar
 from ..dataset import KINDS, InterSHDataset
 from ..dataset import torch_views as TV
@@ -208,7 +210,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         batch_size: evaluation batch size.
         device: ``"auto"``, ``"cpu"``, ``"cuda"``.
         out_dir: when given, writes ``eval.json``, ``predictions.npz``, ``pck.png``,
-            ``vr.png``.
+            ``vr.png`` (the figures need matplotlib, the ``notebooks`` extra: without it a
+            warning says so and the other two files are written).
         camera_frame: predictions un-mirrored and moved back to the source camera frame
             (ground-truth root added); ``False``: the network's root-centred right-hand frame.
         num_samples: evaluate only the first ``num_samples`` items.
@@ -342,9 +345,6 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
 
 
 def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
-    import matplotlib.pyplot as plt
-
-
     out.mkdir(parents=True, exist_ok=True)
     files = {}
     summary = {"checkpoint": source, "scores": res["scores"], "vr_table": res["vr_table"],
@@ -371,6 +371,12 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
                  vertices=p["vertices"].astype(np.float32), joints=p["joints"].astype(np.float32),
                  index=res["per_sample"]["index"], vr=res["per_sample"]["vr"],
                  mirrored=res["per_sample"]["mirrored"])
+    try:  # the scores and predictions need no extra; the figures need matplotlib
+        plt = require("matplotlib.pyplot", "evaluate's figures (pck.png, vr.png)")
+    except ModuleNotFoundError as err:
+        warnings.warn(f"{err}; {out} holds eval.json and predictions.npz, without the figures",
+                      UserWarning, stacklevel=3)
+        return files
 
     fig, ax = plt.subplots(figsize=(5, 3.6))
     curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors["vert_err_pa"],

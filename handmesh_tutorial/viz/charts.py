@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from .. import metrics
+from .._optional import require
 from ..visibility import VR_BINS
 from ._common import _to_numpy
 
@@ -143,7 +144,7 @@ def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = 
     Shapes:
         ``step_losses (S,)`` (S optimiser steps); ``history`` one dict per epoch.
     """
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", "hmt.viz figures")
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.4))
     sl = 1000 * np.asarray(step_losses, dtype=float)

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from .._optional import require
 from ..camera import project
 from ._common import _to_numpy
 
@@ -45,7 +46,7 @@ def plot_mesh_on_image(ax, image, vertices, faces, K, color=(0.35, 0.6, 1.0), al
     Shapes:
         ``image (H, W, 3)``, ``vertices (V, 3)``, ``faces (F, 3)``, ``K (3, 3)``.
     """
-    from matplotlib.collections import PolyCollection
+    PolyCollection = require("matplotlib.collections", "hmt.viz figures").PolyCollection
 
     v = np.asarray(_to_numpy(vertices), dtype=np.float64)
     f = np.asarray(_to_numpy(faces), dtype=np.int64)
@@ -109,7 +110,7 @@ def plot_overlays(samples: list, pred_vertices, faces, titles: list | None = Non
     Shapes:
         ``pred_vertices (N, V, 3)``, ``faces (F, 3)``; ``samples`` and ``titles`` of length N.
     """
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", "hmt.viz figures")
 
     n = len(samples)
     if len(pred_vertices) != n:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._optional import require
 from ._common import _to_numpy
 from .files import save_figure
 
@@ -229,7 +230,7 @@ def save_hand_gallery(path: str | os.PathLike, seed: int = 0, dpi: int = 90) -> 
     Returns:
         The written path.
     """
-    import matplotlib
+    matplotlib = require("matplotlib", "hmt.viz figures")
 
     if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
         matplotlib.use("Agg")  # headless-safe; harmless when already on Agg
@@ -319,7 +320,7 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
     Returns:
         The list of added ``Poly3DCollection`` artists.
     """
-    from matplotlib.colors import to_rgba
+    to_rgba = require("matplotlib.colors", "hmt.viz figures").to_rgba
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     p0, p1 = np.asarray(cylinders.p0, float), np.asarray(cylinders.p1, float)

@@ -1,0 +1,50 @@
+"""The library's version (the one source: ``pyproject.toml`` reads it from here) and the record of
+the shipped weights that each version carries.
+
+The version changes whenever behaviour or the shipped weights change; ``CHANGELOG.md`` has an entry
+for each. Files the library writes (training checkpoints, the pretrained network's export, the
+pose-encoder file) record the version that wrote them under ``library_version``. The shipped files
+made before 0.2.0 carry no such entry: `SHIPPED_ASSETS` records them by hash, and a test fails
+when a shipped file changes without a new entry here. Docs page "Changelog".
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+__all__ = ["SHIPPED_ASSETS", "__version__", "shipped_version"]
+
+__version__ = "0.2.0"
+
+SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
+    # file in handmesh_tutorial/assets/: (sha256 of its bytes, the version that first shipped them)
+    "hand_encoder_pretrained.pt": (
+        "24efdbb4d848cd637662faaefd80ee449bd1e33b8022e6ba21b7b18f90f43325", "0.2.0"),
+    "makehuman_hand.npz": (
+        "7ec92e1e3c99b0d6cedef1209e2cd6ade09b5e4ce2abb04c17c1713b08e1a739", "0.2.0"),
+    "msmr_net_pretrained.pt": (
+        "98e414ff0ffde8ca72e257481dbcbe962acecd2fc9fdfea4dc21b85181ca9251", "0.2.0"),
+}
+"""The shipped files, by hash: file name -> (sha256, the library version that shipped them).
+
+Replacing a file (new weights, a rebuilt template) means a new version: bump `__version__`, record
+the new hash with it here and add the CHANGELOG entry."""
+
+
+def shipped_version(path: str | os.PathLike) -> str | None:
+    """The library version that shipped a file, by its bytes (`SHIPPED_ASSETS`).
+
+    Args:
+        path: a file; only its name and bytes are read.
+
+    Returns:
+        The recorded version when the file's name is in `SHIPPED_ASSETS` and its sha256 equals the
+        recorded one, else ``None`` (another file, or shipped files edited by hand).
+    """
+    path = Path(path)
+    digest, version = SHIPPED_ASSETS.get(path.name, ("", None))
+    if not digest or not path.is_file():
+        return None
+    return version if hashlib.sha256(path.read_bytes()).hexdigest() == digest else None

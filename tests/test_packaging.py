@@ -1,0 +1,173 @@
+"""Packaging: the core install without extras, the errors that name an extra, one version.
+
+The core-install test runs in a subprocess where the extras' packages are absent
+(``sys.modules[name] = None``: ``import`` raises ``ModuleNotFoundError`` and
+``importlib.util.find_spec`` returns ``None``, as for a package that is not installed).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import json
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import handmesh_tutorial as hmt
+from handmesh_tutorial import _optional, _version
+
+ROOT = Path(hmt.__file__).resolve().parent.parent
+tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+# every optional package, plus what they drag in (a component must not import these either)
+ABSENT = sorted({*_optional.EXTRAS, "IPython", "ipykernel", "zmq", "tornado", "llvmlite",
+                 "pyngrok", "mpl_toolkits", "pyglet"})
+
+
+def _dist(requirement: str) -> str:
+    """The normalised distribution name of a requirement string (PEP 503)."""
+    name = re.match(r"[A-Za-z0-9._-]+", requirement).group(0)
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+@pytest.mark.slow  # a fresh interpreter: torch's import and the network's load
+def test_core_components_and_the_pretrained_network_work_without_any_extra():
+    code = textwrap.dedent(f"""
+        import sys
+        for name in {ABSENT!r}:
+            sys.modules[name] = None  # as if not installed
+        import numpy as np, torch
+        import handmesh_tutorial as hmt
+        from handmesh_tutorial import (blocks, collision, decoder, encoder, freihand, hand, lcs,
+                                       mano, metrics, model, spiral, visibility)
+        net = hmt.model.pretrained()
+        s = hmt.pretrained.pretrained_info()["config"]["image_size"]
+        with torch.no_grad():
+            out = net(torch.zeros(1, 3, s, s))
+        assert out["joints"].shape == (1, 21, 3) and torch.isfinite(out["vertices"]).all()
+        hm = hmt.hand.HandModel("right")
+        idx = hmt.spiral.spiral_indices(hm.faces, 9)
+        y = hmt.spiral.SpiralConv(3, 4, idx)(hm().vertices)
+        a0, a1 = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]])
+        hit = hmt.collision.cylinders_intersect(a0, a1, np.array([0.1]), a0 + [0.15, 0, 0],
+                                                a1 + [0.15, 0, 0], np.array([0.1]))
+        j = out["joints"].numpy().astype(float)
+        sc = hmt.metrics.freihand_scores(pred_joints=j, gt_joints=j + 0.001)
+        art = hmt.lcs.hand_lcs(hm)
+        m = np.zeros((4, 4), int); m[1:3, 1:3] = 1
+        vr = hmt.visibility.visibility_ratio(m, m, 1)
+        bad = sorted(n for n in {ABSENT!r} if sys.modules.get(n) is not None)
+        print(tuple(y.shape), bool(hit[0]), round(sc["mpjpe"], 3), vr, bad)
+    """)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    hand_v = hmt.hand.HandModel("right").num_vertices
+    assert res.stdout.split() == ["(1,", f"{hand_v},", "4)", "True", "1.732", "1.0", "[]"]
+
+
+def test_a_missing_extra_is_named_in_the_error(monkeypatch):
+    from handmesh_tutorial.collision import _common
+    from handmesh_tutorial.render import backend, backgrounds
+
+    for top in ("matplotlib", "pyrender", "OpenGL", "skimage", "numba"):  # as if not installed
+        for name in [m for m in sys.modules if m.startswith(top + ".")]:
+            monkeypatch.delitem(sys.modules, name)
+        monkeypatch.setitem(sys.modules, top, None)
+    monkeypatch.setattr(backend, "_PYRENDER", None)
+    monkeypatch.setattr(_common, "_NUMBA_STATE", [])
+    with pytest.raises(ImportError, match=r'hmt.viz figures needs matplotlib.*pip install '
+                                          r'"handmesh_tutorial\[notebooks\]"'):
+        hmt.viz.plot_loss_curves([1.0, 0.5], [{"epoch": 1, "val_loss": 0.4}])
+    with pytest.raises(ImportError, match=r'PyOpenGL.*"handmesh_tutorial\[scenes\]"'):
+        backend.import_pyrender()
+    with pytest.raises(ImportError, match=r'scikit-image.*"handmesh_tutorial\[scenes\]"'):
+        backgrounds.skimage_data_dir()
+    a = np.zeros((1, 3))
+    with pytest.raises(ImportError, match=r'numba.*"handmesh_tutorial\[scenes\]"'):
+        hmt.collision.cylinders_intersect(a, a + 1, [0.1], a, a + 1, [0.1], backend="numba")
+    assert hmt.collision.cylinders_intersect(a, a + 1, [0.1], a, a + 1, [0.1],
+                                             backend="auto")[0]  # numpy fallback without numba
+
+
+def test_require_names_the_extra_only_when_the_package_itself_is_missing(tmp_path, monkeypatch):
+    pkg = tmp_path / "hmt_fake_extra"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("import hmt_fake_missing_dependency\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(_optional.EXTRAS, "hmt_fake_extra", ("fake-extra", "scenes"))
+    monkeypatch.setitem(_optional.EXTRAS, "hmt_fake_absent", ("fake-absent", "notebooks"))
+    with pytest.raises(ModuleNotFoundError, match="hmt_fake_missing_dependency") as err:
+        _optional.require("hmt_fake_extra", "a test")  # installed, but broken inside
+    assert "handmesh_tutorial[" not in str(err.value)
+    with pytest.raises(ModuleNotFoundError, match=r'^a test needs fake-absent, which the core '
+                                                  r'install leaves out: pip install '
+                                                  r'"handmesh_tutorial\[notebooks\]"'):
+        _optional.require("hmt_fake_absent.sub", "a test")
+    with pytest.raises(KeyError):
+        _optional.missing_extra_message("torch", "core")
+
+
+def test_extras_in_pyproject_match_the_library_and_the_core_install_leaves_them_out():
+    project = PYPROJECT["project"]
+    core = {_dist(r) for r in project["dependencies"]}
+    extras = {k: {_dist(r) for r in v} for k, v in project["optional-dependencies"].items()}
+    assert core == {"torch", "numpy", "scipy", "trimesh", "tqdm", "pillow"}, core
+    for module, (dist, extra) in _optional.EXTRAS.items():
+        assert _dist(dist) in extras[extra], f"{module}: {dist} is not in the [{extra}] extra"
+        assert _dist(dist) not in core, f"{dist} ({module}) is in the core install"
+    for heavy in ("jupyterlab", "ipywidgets", "meshcat", "matplotlib", "scikit-image"):
+        assert heavy not in core
+    assert (ROOT / "handmesh_tutorial" / "py.typed").is_file()
+    assert "py.typed" in PYPROJECT["tool"]["setuptools"]["package-data"]["handmesh_tutorial"]
+    setup = (ROOT / "Makefile").read_text()
+    installed = re.search(r'pip install -e "\.\[([a-z,]+)\]"', setup).group(1).split(",")
+    assert sorted(installed) == sorted(extras), "make setup must install every extra"
+
+
+def test_one_version_in_the_package_pyproject_and_changelog():
+    assert hmt.__version__ == _version.__version__
+    assert "version" in PYPROJECT["project"]["dynamic"] and "version" not in PYPROJECT["project"]
+    attr = PYPROJECT["tool"]["setuptools"]["dynamic"]["version"]["attr"]
+    assert attr == "handmesh_tutorial._version.__version__"
+    changelog = (ROOT / "CHANGELOG.md").read_text()
+    heads = re.findall(r"^## \[(\d+\.\d+\.\d+)\] - \d{4}-\d{2}-\d{2}$", changelog, re.M)
+    assert heads and heads[0] == hmt.__version__, f"CHANGELOG's newest entry is {heads[:1]}"
+    licence = (ROOT / "LICENSE").read_text()
+    assert "MIT License" in licence and "CC0 1.0" in licence and "Apache License 2.0" in licence
+
+
+def test_the_installed_metadata_has_the_package_version():
+    dist = importlib.metadata.distribution("handmesh_tutorial")
+    url = json.loads(dist.read_text("direct_url.json") or "{}").get("url", "")
+    if url.startswith("file://") and Path(url[7:]).resolve() != ROOT:
+        pytest.skip(f"the installed distribution is another tree's ({url}), not {ROOT}")
+    installed = dist.version
+    assert installed == hmt.__version__, (
+        f"the installed metadata says {installed}, the package {hmt.__version__}: the install "
+        "is stale (rerun make setup / pip install -e .)")
+
+
+def test_shipped_files_are_recorded_with_the_version_that_shipped_them():
+    assets = ROOT / "handmesh_tutorial" / "assets"
+    shipped = sorted(p.name for p in assets.iterdir() if p.is_file())
+    assert shipped == sorted(_version.SHIPPED_ASSETS)
+    changelog = (ROOT / "CHANGELOG.md").read_text()
+    entries = dict(re.findall(r"^## \[([\d.]+)\][^\n]*\n(.*?)(?=^## \[|\Z)", changelog,
+                              re.M | re.S))
+    for name, (digest, version) in _version.SHIPPED_ASSETS.items():
+        got = hashlib.sha256((assets / name).read_bytes()).hexdigest()
+        assert got == digest, (
+            f"{name} changed (sha256 {got[:12]}...): a new shipped file is a new version; bump "
+            "handmesh_tutorial/_version.py, record the hash there and add a CHANGELOG entry")
+        assert version in entries and name in entries[version], (
+            f"CHANGELOG's {version} entry does not name {name}")
+        assert _version.shipped_version(assets / name) == version
+    assert hmt.pretrained.pretrained_info()["library_version"] == (
+        _version.SHIPPED_ASSETS["msmr_net_pretrained.pt"][1])
