@@ -297,7 +297,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--no-attention", action="store_true", help="no coarse-mesh transformer")
     tr.add_argument("--channels", type=_channels, help="decoder channels, finest first")
     tr.add_argument("--latent-channels", type=int)
-    tr.add_argument("--template", help=".npz template (default: the MakeHuman hand)")
+    tr.add_argument("--template", help="mesh template: a .npz of train.save_template or your "
+                    "MANO_RIGHT.pkl (default: the MakeHuman hand)")
     tr.add_argument("--seed", type=int)
     tr.add_argument("--device", help="auto | cpu | cuda")
     tr.add_argument("--threads", type=int, help="torch threads")
@@ -348,7 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--num", type=int, default=None, help="only the first N samples")
     ev.add_argument("--device", default="auto")
     ev.add_argument("--threads", type=int, default=None)
-    ev.add_argument("--template", default=None, help="template .npz used for training")
+    ev.add_argument("--template", default=None, help="the template used for training (.npz "
+                    "or MANO_RIGHT.pkl; default: the one the checkpoint names)")
     ev.add_argument("--network-frame", action="store_true",
                     help="store predictions in the network frame, not the camera frame")
     ev.add_argument("--skip-bad", action="store_true",
