@@ -214,6 +214,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     print(ev["comparison"])
     for name, path in ev["files"].items():
         print(f"{name}: {path}")
+    for note in ev.get("notes", []):
+        print(f"note: {note}")
     _print_skipped("evaluate", ev["skipped"])
     return 0
 

@@ -292,6 +292,54 @@ def test_template_file_round_trip_and_data_mismatch(tmp_path):
                 dataset=ds)
 
 
+def _read_freihand_submission(path) -> tuple[np.ndarray, np.ndarray]:
+    """pred.json read as FreiHAND's published format says (eval.py: ``pred = json_load(...)``;
+    ``xyz_pred_list, verts_pred_list = pred[0], pred[1]``; one entry per evaluation sample, 21
+    keypoints and 778 MANO vertices of [x, y, z] in metres), written here without the library."""
+    with open(path) as fh:
+        pred = json.load(fh)
+    assert isinstance(pred, list) and len(pred) == 2, "pred.json must be [xyz_list, verts_list]"
+    xyz, verts = pred
+    assert len(xyz) == len(verts)
+    for j, v in zip(xyz, verts, strict=True):
+        assert len(j) == 21 and all(len(p) == 3 for p in j)
+        assert len(v) == 778 and all(len(p) == 3 for p in v)
+    return np.array(xyz, dtype=np.float64), np.array(verts, dtype=np.float64)
+
+
+def test_freihand_end_to_end_from_a_mano_pickle(tmp_path, capsys, mano_freihand):
+    """A user's MANO_RIGHT.pkl as the template of handmesh train on a FreiHAND-format root, then
+    handmesh evaluate --dataset freihand writes a pred.json that FreiHAND's format accepts."""
+    pkl, root = mano_freihand
+    run, ev_dir = tmp_path / "run", tmp_path / "eval"
+    code = cli_main(["train", "--data", str(root), "--dataset", "freihand", "--val-data",
+                     str(root), "--template", str(pkl), "--out", str(run), "--budget", "smoke",
+                     "--epochs", "1", "--batch-size", "4", "--image-size", "32", "--channels",
+                     "4,4,8,8,8", "--latent-channels", "8", "--threads", "1", "--no-augment",
+                     "--no-progress", "--no-fsync"])
+    assert code == 0, capsys.readouterr().err
+    code = cli_main(["evaluate", "--checkpoint", str(run / "checkpoint_last.pt"), "--data",
+                     str(root), "--dataset", "freihand", "--out", str(ev_dir), "--threads", "1",
+                     "--no-progress"])
+    out = capsys.readouterr().out
+    assert code == 0 and f"pred_json: {ev_dir / 'pred.json'}" in out
+    xyz, verts = _read_freihand_submission(ev_dir / "pred.json")
+    assert xyz.shape == (3, 21, 3) and verts.shape == (3, 778, 3)
+    with np.load(ev_dir / "predictions.npz") as z:   # the same predictions, camera frame
+        np.testing.assert_allclose(xyz, z["joints"], atol=1e-6)
+        np.testing.assert_allclose(verts, z["vertices"], atol=1e-6)
+    # scored independently against the raw annotation files: eval.json's root-relative MPJPE
+    gt = np.array(json.loads((root / "evaluation_xyz.json").read_text()))
+    mpjpe = 1000 * np.linalg.norm(xyz - gt, axis=2).mean()
+    got = json.loads((ev_dir / "eval.json").read_text())["scores"]["mpjpe"]
+    assert abs(got - mpjpe) < 1e-3 * max(1.0, mpjpe)
+    # predictions in the network frame cannot be a submission: no pred.json, a note says why
+    ev = T.evaluate(str(run / "checkpoint_last.pt"), root, kind="freihand", progress=False,
+                    camera_frame=False, out_dir=tmp_path / "net_frame")
+    assert "pred_json" not in ev["files"] and not (tmp_path / "net_frame" / "pred.json").exists()
+    assert any("network frame" in n for n in ev["notes"])
+
+
 def test_mano_pickle_is_a_template(tmp_path, mano_freihand):
     """A user's MANO_RIGHT.pkl is a template wherever a .npz is: read through the restricted
     MANO loader, the flat rest hand with MANO's 21-keypoint regressor; a left file is refused."""
