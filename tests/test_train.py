@@ -651,7 +651,7 @@ def test_a_bad_sample_stops_train_and_evaluate_named_and_skip_bad_lists_it(toy_r
            "32", "--channels", "4,4,8,8,8", "--latent-channels", "8", "--threads", "1",
            "--no-progress", "--no-fsync", "--val-fraction", "0"]
     # default: fail fast, the file named in one line (also from a DataLoader worker process)
-    for extra in ([], ["--workers", "1"]):
+    for extra in ([], ["--loader-workers", "1"]):
         assert cli_main([*run, "--out", str(tmp_path / "stopped"), *extra]) == 3
         err = capsys.readouterr().err
         assert f"error: sample 3: {png}: not a readable PNG" in err, err
