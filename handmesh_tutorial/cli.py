@@ -9,6 +9,12 @@ file, key or shape and what to do) and exits with a code that says what kind of 
 traceback instead. The sub-commands import their library modules when they run, so ``handmesh
 --help`` starts fast without torch or OpenGL.
 
+One name per concept: ``--dataset intersh|freihand`` is the data format (``train``,
+``evaluate``), ``--kind`` the scene kind (``generate``), ``--workers`` generator processes
+(``generate``, ``pretrain``, ``pretrain-encoder``) and ``--loader-workers`` DataLoader processes
+(``train``, ``pretrain``). Old spellings (``evaluate --kind``, ``train --workers``) still work,
+hidden from ``--help``, and print a warning naming the new one.
+
 Taught in notebook 00 ("Quickstart") and notebook 08 ("Training").
 """
 
@@ -29,6 +35,20 @@ __all__ = ["EXIT_CODES", "build_parser", "main", "error_kind", "error_message"]
 EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4,
               "exists": 5, "interrupted": 130}
 """Exit codes of ``handmesh`` (argparse's own usage errors exit with 2)."""
+
+
+class _DeprecatedAlias(argparse.Action):
+    """An old spelling of an option, hidden from ``--help``: stores into the canonical option's
+    ``dest`` and prints a warning naming the canonical spelling (one name per concept)."""
+
+    def __init__(self, option_strings, dest, canonical: str, **kwargs):
+        self.canonical = canonical
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"{parser.prog}: warning: {option_string} is deprecated and will be removed; use "
+              f"{self.canonical}", file=sys.stderr)
+        setattr(namespace, self.dest, True if self.nargs == 0 else values)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -178,7 +198,7 @@ def _print_skipped(command: str, skipped: list) -> None:
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from . import train
 
-    ev = train.evaluate(args.checkpoint, args.data, kind=args.kind, split=args.split,
+    ev = train.evaluate(args.checkpoint, args.data, kind=args.dataset, split=args.split,
                         image_size=args.image_size, batch_size=args.batch_size,
                         device=args.device, out_dir=args.out, num_samples=args.num,
                         template=args.template, progress=not args.no_progress,
@@ -194,6 +214,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     print(ev["comparison"])
     for name, path in ev["files"].items():
         print(f"{name}: {path}")
+    for note in ev.get("notes", []):
+        print(f"note: {note}")
     _print_skipped("evaluate", ev["skipped"])
     return 0
 
@@ -297,13 +319,18 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--no-attention", action="store_true", help="no coarse-mesh transformer")
     tr.add_argument("--channels", type=_channels, help="decoder channels, finest first")
     tr.add_argument("--latent-channels", type=int)
-    tr.add_argument("--template", help=".npz template (default: the MakeHuman hand)")
+    tr.add_argument("--template", help="mesh template: a .npz of train.save_template or your "
+                    "MANO_RIGHT.pkl (default: the MakeHuman hand)")
     tr.add_argument("--seed", type=int)
     tr.add_argument("--device", help="auto | cpu | cuda")
     tr.add_argument("--threads", type=int, help="torch threads")
     tr.add_argument("--precision", choices=("float32", "bfloat16"),
                     help="bfloat16: autocast forward pass (faster on CPUs with bf16 units)")
-    tr.add_argument("--workers", dest="num_workers", type=int, help="DataLoader workers")
+    tr.add_argument("--loader-workers", dest="num_workers", type=int,
+                    help="DataLoader worker processes (as in handmesh pretrain; --workers of "
+                    "generate and pretrain are generator processes)")
+    tr.add_argument("--workers", action=_DeprecatedAlias, dest="num_workers", type=int,
+                    canonical="--loader-workers")
     tr.add_argument("--init", help="start from these weights: a checkpoint, or 'pretrained'")
     tr.add_argument("--recipe", choices=("paper", "cpu"), default="paper",
                     help="loss terms and heads (default: paper, the L1 vertex loss; cpu: the "
@@ -338,9 +365,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a checkpoint_*.pt of handmesh train, or 'pretrained' (the shipped "
                     "network)")
     ev.add_argument("--data", required=True, help="INTER-SH root (or FreiHAND root)")
-    ev.add_argument("--kind", "--dataset", dest="kind", choices=("intersh", "freihand"),
-                    default=None, help="data format (default: the checkpoint's training data "
-                    "format); --dataset is the same option, spelt as in handmesh train")
+    ev.add_argument("--dataset", choices=("intersh", "freihand"), default=None,
+                    help="data format (default: the format the checkpoint was trained on)")
+    ev.add_argument("--kind", action=_DeprecatedAlias, dest="dataset", canonical="--dataset",
+                    choices=("intersh", "freihand"))
     ev.add_argument("--split", default="evaluation", help="FreiHAND split (default: evaluation)")
     ev.add_argument("--out", default=None, help="write eval.json, predictions.npz and figures")
     ev.add_argument("--image-size", type=int, default=None, help="default: the checkpoint's")
@@ -348,7 +376,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--num", type=int, default=None, help="only the first N samples")
     ev.add_argument("--device", default="auto")
     ev.add_argument("--threads", type=int, default=None)
-    ev.add_argument("--template", default=None, help="template .npz used for training")
+    ev.add_argument("--template", default=None, help="the template used for training (.npz "
+                    "or MANO_RIGHT.pkl; default: the one the checkpoint names)")
     ev.add_argument("--network-frame", action="store_true",
                     help="store predictions in the network frame, not the camera frame")
     ev.add_argument("--skip-bad", action="store_true",

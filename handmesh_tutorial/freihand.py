@@ -22,6 +22,17 @@ evaluation sample, each a list of ``[x, y, z]`` in metres (21 keypoints; 778 ver
 server wants it zipped at the top level of ``pred.zip``
 ([`zip_predictions`][handmesh_tutorial.freihand.zip_predictions]).
 
+**From a network to ``pred.json``.** FreiHAND compares meshes vertex by vertex with MANO's, so
+only a network trained on a MANO-topology template can be submitted: give your ``MANO_RIGHT.pkl``
+as the template (``handmesh train --dataset freihand --template MANO_RIGHT.pkl``, or
+``TrainConfig(template=...)``), then ``handmesh evaluate --dataset freihand --out DIR`` writes
+``DIR/pred.json`` beside ``eval.json`` (camera frame, the evaluated items in order). The library's
+own hand has 779 vertices: its 778 skin vertices (all but the last, the wrist cap's centre) are
+the MakeHuman mesh's, not MANO's, so no conversion gives meaningful vertex scores; its joints can
+be scored alone ([`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores] with
+``pred_verts=None``). [`handmesh_tutorial.testing`][handmesh_tutorial.testing] writes a tiny
+MANO-format pickle and a tiny FreiHAND-format root to try the whole way on.
+
 No notebook reads FreiHAND (it cannot be downloaded here); notebook 09 ("Evaluation") scores
 with the same metrics ([`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores]).
 """
@@ -321,14 +332,18 @@ def write_predictions(path: str | os.PathLike, joints, vertices) -> Path:
     Raises:
         ValueError: bad shapes, sample counts that differ, NaN or inf, or a vertex count other
             than 778 (e.g. the library's 779-vertex hand: FreiHAND's evaluation could not score
-            the file; predict with a MANO template instead). Nothing is written then.
+            the file; see the module text for the way from a network to ``pred.json``). Nothing
+            is written then.
     """
     j, v = _check_predictions(joints, vertices)
     if v.shape[1] != NUM_VERTICES:
         raise ValueError(
             f"vertices has {v.shape[1]} vertices per sample, but FreiHAND's evaluation expects "
             f"MANO's {NUM_VERTICES} (it compares the meshes vertex by vertex) and could not score "
-            "this file; predict with a MANO-topology template")
+            "this file; train with a MANO template (handmesh train --template MANO_RIGHT.pkl). "
+            "The library's 779-vertex hand has no vertex correspondence with MANO (dropping its "
+            "last, wrist-cap vertex gives 778 vertices, not MANO's); score its joints alone with "
+            "metrics.freihand_scores(pred_verts=None, gt_verts=None)")
     payload = [j.tolist(), v.tolist()]  # float64 -> shortest round-trip decimal
     return atomic_write_with(path, lambda fh: json.dump(payload, fh), binary=False)
 

@@ -38,6 +38,28 @@ deterministically ([`vertex_spiral`][handmesh_tutorial.spiral.vertex_spiral] tak
 explicitly). Boundary vertices are exactly equivariant. (Non-manifold vertices, whose neighbours
 form several fans, list the fans ordered by lowest id.)
 
+**SpiralNet++'s convention** (``convention="spiralnet"``). SpiralNet++ (``sw-gong/spiralnet_plus``,
+``utils/generate_spiral_seq.py``), and HandMesh/CMR/MobRecon after it, read the rings from
+OpenMesh's vertex circulator: the same rings (BFS layers) in the opposite direction and from other
+starts, so their weights do not fit this module's spirals. Their rule, reproduced here without
+OpenMesh for meshes built from the faces in their stored order:
+
+* *Direction*: clockwise, i.e. against the faces' winding.
+* *First ring*: an interior vertex ``v`` starts at ``x`` of the **last** face ``(v, x, y)`` (rotated
+  so that ``v`` is first) in face storage order (OpenMesh's outgoing half-edge after building);
+  a boundary vertex starts at the end of its open fan, so its ring is this module's fan reversed.
+* *Further rings*: each vertex ``u`` of ring ``k``, in order, walks its own clockwise list from
+  its own start, beginning right after the first ring-``k`` vertex it meets (cyclically), and
+  appends every vertex not yet in the spiral.
+* *Running out*: SpiralNet++ then takes the ``length * dilation`` nearest vertices in space (a
+  k-d tree on the positions); here the fallback above is used instead, so spirals differ only
+  where a vertex's rings run out. Non-manifold vertices are refused (OpenMesh cannot build them).
+
+Unlike this module's default, SpiralNet++ spirals depend on the order in which the faces are
+stored; use the faces of the mesh file the weights were trained with.
+``tests/fixtures/spiralnet_spirals.npz`` holds spirals written by SpiralNet++'s own function
+(``tools/spiralnet_reference.py``) that the tests compare against.
+
 Taught in notebook 06 ("Mesh hierarchy and spiral convolution").
 
 """
@@ -48,7 +70,12 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["SpiralConv", "rotational_neighbours", "spiral_indices", "vertex_spiral"]
+__all__ = ["CONVENTIONS", "SpiralConv", "rotational_neighbours", "spiral_indices", "vertex_spiral"]
+
+CONVENTIONS = ("library", "spiralnet")
+"""Spiral orderings of [`spiral_indices`][handmesh_tutorial.spiral.spiral_indices]: this module's
+(counter-clockwise from the lowest-id neighbour) and SpiralNet++'s (clockwise from OpenMesh's
+start); see the module text."""
 
 
 def _check_faces(faces, num_vertices: int | None) -> tuple[np.ndarray, int]:
@@ -151,6 +178,57 @@ def _grow(order: list[list[int]], v: int, total: int, start: int | None) -> list
     return seq
 
 
+def _spiralnet_neighbours(faces: np.ndarray, n: int) -> list[list[int]]:
+    """Neighbours as SpiralNet++ reads them from OpenMesh's circulator (see the module text)."""
+    succ: list[dict[int, int]] = [{} for _ in range(n)]
+    last: list[int | None] = [None] * n
+    for a, b, c in faces.tolist():
+        for v, x, y in ((a, b, c), (b, c, a), (c, a, b)):
+            succ[v][x] = y   # orientation already checked by rotational_neighbours
+            last[v] = x
+    out: list[list[int]] = []
+    for v in range(n):
+        pred = {y: x for x, y in succ[v].items()}  # one clockwise step: y -> x
+        tails = [y for y in pred if y not in succ[v]]
+        start = tails[0] if tails else last[v]
+        ring: list[int] = []
+        x = start
+        while x is not None and x not in ring:
+            ring.append(x)
+            x = pred.get(x)
+        if len(ring) != len(set(succ[v]) | set(pred)):
+            raise ValueError(f"vertex {v} is not manifold (its faces form several fans); "
+                             "SpiralNet++'s OpenMesh cannot build such a mesh")
+        out.append(ring)
+    return out
+
+
+def _grow_spiralnet(order: list[list[int]], v: int, total: int) -> list[int]:
+    """SpiralNet++'s ring-by-ring spiral of ``v`` (whole component if it runs out)."""
+    def next_ring(ring: list[int], taken: set[int]) -> list[int]:
+        in_ring, res, seen = set(ring), [], set()
+        for u in ring:
+            nb = order[u]
+            i = next((k for k, x in enumerate(nb) if x in in_ring), -1)
+            for x in nb[i + 1:] + nb[:max(i, 0)]:
+                if x not in taken and x not in in_ring and x not in seen:
+                    res.append(x)
+                    seen.add(x)
+        return res
+
+    spiral, ring = [v], list(order[v])
+    taken = {v}
+    nxt = next_ring(ring, taken)
+    spiral += ring
+    taken.update(ring)
+    while len(spiral) + len(nxt) < total and nxt:
+        ring = nxt
+        nxt = next_ring(ring, taken)
+        spiral += ring
+        taken.update(ring)
+    return spiral + nxt
+
+
 def _finish(seq: list[int], length: int, dilation: int) -> list[int]:
     picks = seq[: length * dilation][::dilation]
     if len(picks) < length:  # component too small for the dilated sequence
@@ -168,8 +246,8 @@ def _check_length(length: int, dilation: int) -> None:
         raise ValueError(f"dilation must be a positive integer, got {dilation}")
 
 
-def spiral_indices(faces, length: int, dilation: int = 1,
-                   num_vertices: int | None = None) -> np.ndarray:
+def spiral_indices(faces, length: int, dilation: int = 1, num_vertices: int | None = None,
+                   convention: str = "library") -> np.ndarray:
     """Spiral sequence of every vertex (SpiralNet++), deterministic from the faces alone.
 
     See the module docstring for the exact conventions (start, direction, rings, fallback).
@@ -180,6 +258,8 @@ def spiral_indices(faces, length: int, dilation: int = 1,
         dilation: keep every ``dilation``-th vertex of the first ``length * dilation``.
         num_vertices: V; default ``faces.max() + 1`` (pass it when trailing vertices are
             isolated).
+        convention: ``"library"`` (default, this module's ordering) or ``"spiralnet"``
+            (SpiralNet++/HandMesh's, for their weights; depends on the faces' storage order).
 
     Returns:
         (V, L) int64 array; row ``v`` starts with ``v``, followed by its 1-ring, then further
@@ -187,7 +267,8 @@ def spiral_indices(faces, length: int, dilation: int = 1,
         vertices.
 
     Raises:
-        ValueError: bad ``faces``, ``length`` or ``dilation``; inconsistent orientation.
+        ValueError: bad ``faces``, ``length``, ``dilation`` or ``convention``; inconsistent
+            orientation; a non-manifold vertex with ``convention="spiralnet"``.
 
     Examples:
         >>> import trimesh
@@ -197,11 +278,17 @@ def spiral_indices(faces, length: int, dilation: int = 1,
         ((12, 7), 5)
     """
     _check_length(length, dilation)
+    if convention not in CONVENTIONS:
+        raise ValueError(f"convention must be one of {CONVENTIONS}, got {convention!r}")
     order = rotational_neighbours(faces, num_vertices)
     total = length * dilation
+    if convention == "spiralnet":
+        order = _spiralnet_neighbours(_check_faces(faces, num_vertices)[0], len(order))
     out = np.empty((len(order), length), dtype=np.int64)
     for v in range(len(order)):
-        out[v] = _finish(_grow(order, v, total, None), length, dilation)
+        seq = (_grow_spiralnet(order, v, total) if convention == "spiralnet"
+               else _grow(order, v, total, None))
+        out[v] = _finish(seq, length, dilation)
     return out
 
 

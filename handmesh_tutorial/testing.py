@@ -1,23 +1,38 @@
-"""Fast stand-in samples for tests, benchmarks and quick demos (not INTER-SH scenes).
+"""Fast stand-ins for tests, benchmarks and quick demos: samples and files in foreign formats.
 
 * `synthetic_sample`: two spheres ray-cast with numpy, no hands, no OpenGL (dataset tests).
 * `toy_sample`: two posed hands of the hand model, point-splatted, no OpenGL (training tests).
+* `mano_format_params` / `write_mano_pickle`: a tiny MANO-format pickle built from the MakeHuman
+  hand (its 778 skin vertices, open at the wrist like MANO), for code that reads
+  ``MANO_RIGHT.pkl`` / ``MANO_LEFT.pkl`` ([`load_mano`][handmesh_tutorial.mano.load_mano],
+  ``handmesh train --template``) where the licence-gated files are absent.
+* `write_freihand_root`: a tiny FreiHAND-format folder (both splits, official file names and
+  layout) of posed MANO-format hands, for code that reads FreiHAND
+  ([`FreiHAND`][handmesh_tutorial.freihand.FreiHAND], ``handmesh train/evaluate --dataset
+  freihand``).
 
-Both return a sample dict that [`write_sample`][handmesh_tutorial.dataset.write_sample] and
+The samples are dicts that [`write_sample`][handmesh_tutorial.dataset.write_sample] and
 [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] accept, with masks, VR, meshes
 and joints consistent with each other, so the whole pipeline runs on them in seconds. Real scenes
 come from [`interact`][handmesh_tutorial.interact]. Used by the tests and benchmarks (docs page
-*Reliability*, ``benchmarks/train.py``); no notebook needs them.
+*Reliability*, ``benchmarks/train.py``) and meant for users' own tests; no notebook needs them.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import pickle
+from pathlib import Path
+
 import numpy as np
 import torch
 
+from ._io import atomic_write_with
 from .dataset import KINDS
 
-__all__ = ["synthetic_sample", "toy_sample"]
+__all__ = ["synthetic_sample", "toy_sample", "mano_format_params", "write_mano_pickle",
+           "write_freihand_root"]
 
 
 def _uv_sphere(resolution: int) -> tuple[np.ndarray, np.ndarray]:
@@ -223,3 +238,180 @@ def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict
         "names": {1: f"{side}_hand", 2: f"{other}_hand"},
         "stats": {"stop": "toy"},
     }
+
+
+# ------------------------------------------------------------------ MANO and FreiHAND formats
+
+
+def mano_format_params(side: str = "right") -> dict:
+    """The MakeHuman hand as the arrays of an official MANO pickle (``MANO_KEYS`` and more).
+
+    The hand's 778 skin vertices (the wrist cap's centre and faces are dropped, so the mesh is
+    open at the wrist like MANO), its skinning weights, its 16-joint tree and its phenotype shape
+    space (6 directions, padded with zeros to MANO's 10 betas). ``J_regressor`` (16, 778, scipy
+    ``csc``) is corrected (least norm) so that it regresses the hand's rest joints exactly, also
+    for every shape; ``posedirs`` are zero (the hand has no pose correctives), ``hands_components``
+    the identity and ``hands_mean`` zero. A left hand carries the official ``MANO_LEFT.pkl``'s
+    ``shapedirs`` quirk (x column of the wrong sign), so ``load_mano``'s default fix undoes it.
+
+    Posed with the same pose, shape, orientation and translation, a
+    [`ManoModel`][handmesh_tutorial.mano.ManoModel] of these arrays loaded with
+    ``fingertips=tuple(HandModel(side).fingertip_vertex_ids)`` gives the vertices ``[:778]`` and
+    the joints of [`HandModel`][handmesh_tutorial.hand.HandModel] (float32 round-off). With
+    MANO's own fingertip ids (the default ``"smplx"``) the 5 tips are other vertices of this mesh.
+
+    Args:
+        side: ``"right"`` or ``"left"``.
+
+    Returns:
+        dict: ``v_template`` (778, 3) float64 m, ``shapedirs`` (778, 3, 10), ``posedirs``
+        (778, 3, 135), ``J_regressor`` (16, 778) sparse, ``weights`` (778, 16),
+        ``kintree_table`` (2, 16) int64 (root parent 4294967295 as in the official files),
+        ``f`` (F, 3) uint32, ``hands_components`` (45, 45), ``hands_mean`` (45,), ``J`` (16, 3),
+        ``bs_style``, ``bs_type``.
+    """
+    import scipy.sparse as sp
+
+    from .hand import MANO_TO_FREIHAND, HandModel
+
+    if side not in ("right", "left"):
+        raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+    model = HandModel(side)
+    t = model.template
+    skin = ~np.asarray(t.cap_faces, bool)
+    faces = np.asarray(t.faces)[skin]
+    nv = int(faces.max()) + 1  # the cap's centre is the last vertex
+    verts = np.asarray(t.vertices, np.float64)[:nv]
+    sdirs = np.asarray(t.shape_dirs, np.float64)[:nv]
+    jdirs = np.asarray(t.joint_shape_dirs, np.float64)
+    rest = np.asarray(t.rest_joints, np.float64)
+    # start from the 21-joint regressor's 16 joint rows (vertex weights of each joint), then the
+    # least-norm correction that maps the rest mesh and every shape direction to the joints'
+    rows = np.asarray(t.joint_regressor, np.float64)[:, :nv]
+    reg = np.stack([rows[list(MANO_TO_FREIHAND).index(k)] for k in range(16)])
+    basis = np.concatenate([verts, sdirs.reshape(nv, -1)], 1)  # (V, 3 + 3S)
+    target = np.concatenate([rest, jdirs.reshape(16, -1)], 1)
+    reg = reg + (target - reg @ basis) @ np.linalg.pinv(basis)
+    shapedirs = np.zeros((nv, 3, 10))
+    shapedirs[:, :, :sdirs.shape[2]] = sdirs
+    if side == "left":  # the official left file's quirk, undone by load_mano's default
+        shapedirs[:, 0, :] *= -1
+    parents = np.asarray(model.parents, np.int64)
+    return {
+        "v_template": verts, "shapedirs": shapedirs, "posedirs": np.zeros((nv, 3, 135)),
+        "J_regressor": sp.csc_matrix(reg), "weights": np.asarray(t.weights, np.float64)[:nv],
+        "kintree_table": np.stack([parents % 2**32, np.arange(16)]),
+        "f": faces.astype(np.uint32), "hands_components": np.eye(45), "hands_mean": np.zeros(45),
+        "J": rest, "bs_style": "lbs", "bs_type": "lrotmin",
+    }
+
+
+def write_mano_pickle(path: str | os.PathLike, side: str = "right", protocol: int = 2) -> Path:
+    """Write a tiny MANO-format pickle built from the MakeHuman hand (about 3 MB).
+
+    The arrays of [`mano_format_params`][handmesh_tutorial.testing.mano_format_params], pickled
+    as plain numpy arrays and a scipy sparse ``J_regressor`` (the official files also hold chumpy
+    objects; the loader turns both into arrays). Loads with
+    [`load_mano`][handmesh_tutorial.mano.load_mano] and serves as ``handmesh train --template``;
+    name it ``..._RIGHT.pkl`` / ``..._LEFT.pkl`` so that the side can be inferred.
+
+    Args:
+        path: output file, written atomically.
+        side: ``"right"`` or ``"left"``.
+        protocol: pickle protocol (the official files are protocol 2).
+
+    Returns:
+        The path written.
+    """
+    params = mano_format_params(side)
+    return atomic_write_with(path, lambda fh: pickle.dump(params, fh, protocol=protocol))
+
+
+def write_freihand_root(root: str | os.PathLike, num_samples: int = 3, *, image_size: int = 32,
+                        seed: int = 0, hand=None) -> Path:
+    """Write a tiny FreiHAND-format folder: both splits, the official file names and layout.
+
+    ``training_K/xyz/verts.json`` with ``num_samples`` entries and ``training/rgb`` with four
+    images per sample (the versions ``gs, hom, sample, auto``, each with its own background),
+    ``training/mask`` (one per sample), and the same for ``evaluation`` (one image per sample,
+    no masks). Each sample is ``hand`` in a random pose (up to about 0.4 rad per joint) and
+    orientation, 0.5-0.6 m in front of the camera and near the optical axis, point-splatted in a
+    skin tone over a colour gradient (no OpenGL); ``xyz`` are the hand's 21 keypoints and
+    ``verts`` its vertices, camera frame, metres; ``K`` has a focal length of 2.2 image sides,
+    as FreiHAND's 224-px crops. ``mano`` and ``scale`` files are not written (optional in the
+    reader).
+
+    Args:
+        root: output folder (created; files in it are replaced).
+        num_samples: unique samples per split.
+        image_size: image side, pixels.
+        seed: same seed -> same files.
+        hand: a hand model with 778 vertices called like
+            [`HandModel`][handmesh_tutorial.hand.HandModel] (e.g. your
+            [`load_mano`][handmesh_tutorial.mano.load_mano] model); default the MANO-format
+            MakeHuman hand of [`mano_format_params`][handmesh_tutorial.testing.mano_format_params].
+
+    Returns:
+        The root folder.
+
+    Raises:
+        ValueError: ``hand`` has another vertex count than MANO's 778 (FreiHAND stores MANO
+            meshes), or ``num_samples < 1``.
+    """
+    from PIL import Image
+    from scipy.spatial.transform import Rotation
+
+    from .freihand import NUM_VERTICES, SAMPLE_VERSIONS
+
+    if num_samples < 1:
+        raise ValueError(f"num_samples must be >= 1, got {num_samples}")
+    if hand is None:
+        from .hand import HandModel
+        from .mano import ManoModel
+
+        tips = tuple(int(i) for i in HandModel("right").fingertip_vertex_ids)
+        hand = ManoModel(mano_format_params("right"), "right", fingertips=tips)
+    if hand.num_vertices != NUM_VERTICES:
+        raise ValueError(f"hand has {hand.num_vertices} vertices, but FreiHAND stores MANO's "
+                         f"{NUM_VERTICES}; give a MANO-topology hand (e.g. load_mano(...))")
+    root = Path(root)
+    rng = np.random.default_rng(seed)
+    s = int(image_size)
+    f = 2.2 * s
+    K = np.array([[f, 0.0, (s - 1) / 2], [0.0, f, (s - 1) / 2], [0.0, 0.0, 1.0]])
+    faces = np.asarray(hand.faces)
+    yy, xx = np.mgrid[0:s, 0:s] / max(s - 1, 1)
+    ramp = (0.5 * (xx + yy))[..., None]
+    for split, versions in (("training", len(SAMPLE_VERSIONS)), ("evaluation", 1)):
+        pose = rng.uniform(-0.4, 0.4, (num_samples, 15, 3)).astype(np.float32)
+        orient = Rotation.random(num_samples, random_state=rng).as_rotvec().astype(np.float32)
+        with torch.no_grad():
+            out = hand(pose=torch.as_tensor(pose), global_orient=torch.as_tensor(orient))
+        v, j = out.vertices.double().numpy(), out.joints.double().numpy()
+        centre = np.stack([*rng.uniform(-0.02, 0.02, (2, num_samples)),
+                           rng.uniform(0.5, 0.6, num_samples)], 1)[:, None]
+        shift = centre - v.mean(1, keepdims=True)
+        v, j = v + shift, j + shift
+        for key, arr in (("K", np.repeat(K[None], num_samples, 0)), ("xyz", j), ("verts", v)):
+            payload = arr.tolist()
+            atomic_write_with(root / f"{split}_{key}.json",
+                              lambda fh, p=payload: json.dump(p, fh), binary=False)
+        (root / split / "rgb").mkdir(parents=True, exist_ok=True)
+        if split == "training":
+            (root / split / "mask").mkdir(parents=True, exist_ok=True)
+        for i in range(num_samples):
+            pts = np.concatenate([v[i], v[i][faces].mean(1)])
+            tone = np.array([0.85, 0.65, 0.52]) * rng.uniform(0.7, 1.0)
+            depth, col = _splat(pts, np.tile(tone, (len(pts), 1)), K, s)
+            hand_px = np.isfinite(depth)
+            for version in range(versions):
+                c0, c1 = rng.uniform(0.1, 0.9, 3), rng.uniform(0.1, 0.9, 3)
+                image = (1 - ramp) * c0 + ramp * c1
+                image = np.where(hand_px[..., None], col, image)
+                image = np.clip(255 * image + rng.normal(0, 3, image.shape), 0, 255)
+                Image.fromarray(image.astype(np.uint8)).save(
+                    root / split / "rgb" / f"{i + version * num_samples:08d}.jpg", quality=95)
+            if split == "training":
+                Image.fromarray((255 * hand_px).astype(np.uint8)).save(
+                    root / split / "mask" / f"{i:08d}.jpg")
+    return root

@@ -233,6 +233,16 @@ def test_write_predictions_refuses_a_non_mano_vertex_count(tmp_path, num_vertice
     fh.write_predictions(tmp_path / "pred.json", np.zeros((2, 21, 3)), np.zeros((2, 778, 3)))
 
 
+def test_a_779_vertex_refusal_says_what_to_do_instead(tmp_path):
+    """The library's own hand (779 vertices) cannot be submitted; the message names the way:
+    a MANO template for training, or joints-only scoring, and why dropping the cap is no fix."""
+    with pytest.raises(ValueError) as err:
+        fh.write_predictions(tmp_path / "pred.json", np.zeros((1, 21, 3)), np.zeros((1, 779, 3)))
+    msg = str(err.value)
+    assert "--template MANO_RIGHT.pkl" in msg and "pred_verts=None" in msg
+    assert "wrist-cap vertex gives 778 vertices, not MANO's" in msg
+
+
 def test_evaluate_predictions_equals_freihand_scores(data, tmp_path):
     root, arrays = data
     a = arrays["evaluation"]

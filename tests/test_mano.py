@@ -18,6 +18,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from handmesh_tutorial import mano as M
+from handmesh_tutorial.testing import mano_format_params, write_mano_pickle
 
 torch.set_num_threads(1)
 
@@ -379,42 +380,28 @@ def test_same_interface_as_hand_model(right_file):
     assert model.joint_regressor.shape == (21, 778)
 
 
-def open_hand_in_mano_format(hand_model) -> dict:
-    """The open hand written as a MANO-format dict (no blend shapes, exact joint regressor)."""
-    verts = np.asarray(hand_model.template_vertices, dtype=np.float64)
-    nv = len(verts)
-    rows = np.asarray(hand_model.joint_regressor, dtype=np.float64)  # (21,V) FreiHAND order
-    from handmesh_tutorial.hand import MANO_TO_FREIHAND
-
-    m2f = list(MANO_TO_FREIHAND)
-    reg16 = np.stack([rows[m2f.index(k)] for k in range(16)])
-    err = np.asarray(hand_model.rest_joints, dtype=np.float64) - reg16 @ verts
-    reg16 = reg16 + err @ np.linalg.pinv(verts)           # least-norm correction: exact joints
-    return {
-        "v_template": verts, "shapedirs": np.zeros((nv, 3, 10)),
-        "posedirs": np.zeros((nv, 3, 135)), "J_regressor": sp.csc_matrix(reg16),
-        "weights": np.asarray(hand_model.skinning_weights, dtype=np.float64),
-        "kintree_table": np.stack([np.asarray(hand_model.parents) % 2**32, np.arange(16)]),
-        "f": np.asarray(hand_model.faces),
-    }
-
-
 @pytest.mark.parametrize("side", ["right", "left"])
 def test_open_hand_in_mano_format_matches_hand_model(tmp_path, side):
     hand = pytest.importorskip("handmesh_tutorial.hand")
     from handmesh_tutorial import lcs
 
     ref = hand.HandModel(side)
-    path = write_pickle(tmp_path / "open_hand.pkl", open_hand_in_mano_format(ref))
-    model = M.load_mano(path, side=side, fingertips=tuple(ref.fingertip_vertex_ids))
-    assert model.num_vertices == ref.num_vertices
+    # the library's MANO-format writer (handmesh_tutorial.testing), as a user's test would use it
+    path = write_mano_pickle(tmp_path / f"MANO_{side.upper()}.pkl", side)
+    model = M.load_mano(path, fingertips=tuple(ref.fingertip_vertex_ids))
+    assert model.side == side and model.num_vertices == 778 == ref.num_vertices - 1
+    skin = ref.faces[~ref.template.cap_faces]   # the hand without its wrist cap: MANO-like
+    np.testing.assert_array_equal(model.faces, skin)
     rng = np.random.default_rng(2)
     pose = torch.tensor(rng.normal(size=(3, 15, 3)) * 0.3, dtype=torch.float32)
     go = torch.tensor(rng.normal(size=(3, 3)) * 0.5, dtype=torch.float32)
     tr = torch.tensor(rng.normal(size=(3, 3)) * 0.1, dtype=torch.float32)
-    a, b = model(pose=pose, global_orient=go, transl=tr), ref(pose=pose, global_orient=go,
-                                                              transl=tr)
-    for name in ("vertices", "joints", "joints_mano", "transforms"):
+    shape = torch.tensor(rng.normal(size=(3, ref.num_shape_params)), dtype=torch.float32)
+    kw = dict(pose=pose, global_orient=go, transl=tr, shape=shape)
+    a, b = model(**kw), ref(**kw)
+    # the same hand, shape space included (the left file's shapedirs quirk undone by default)
+    np.testing.assert_allclose(a.vertices.numpy(), b.vertices.numpy()[:, :778], atol=2e-6)
+    for name in ("joints", "joints_mano", "transforms"):
         np.testing.assert_allclose(getattr(a, name).numpy(), getattr(b, name).numpy(),
                                    atol=2e-6, err_msg=name)
     # the LCS construction only needs the HandModel interface
@@ -424,3 +411,21 @@ def test_open_hand_in_mano_format_matches_hand_model(tmp_path, side):
     np.testing.assert_allclose(model.bone_radii, ref.bone_radii, rtol=0.15)
     colors = model.vertex_colors(tone=2, rng=0)
     assert colors.shape == (model.num_vertices, 3) and 0 <= colors.min() <= colors.max() <= 1
+
+
+def test_mano_format_params_have_the_official_layout():
+    """The testing module's MANO-format arrays: every key the loader needs with the official
+    files' shapes and types (sparse J_regressor, uint32 faces, 2**32 - 1 as the root parent),
+    and the left file's shapedirs quirk (x column negated against the true left hand)."""
+    right, left = mano_format_params("right"), mano_format_params("left")
+    for key, shape in M.MANO_KEYS.items():
+        want = tuple(778 if e == "V" else e for e in shape)
+        got = right[key].shape
+        assert all(w is None or w == g for w, g in zip(want, got, strict=True)), (key, got)
+    assert sp.issparse(right["J_regressor"]) and right["f"].dtype == np.uint32
+    assert right["kintree_table"][0, 0] == 2**32 - 1 and right["shapedirs"].shape[2] == 10
+    ref = pytest.importorskip("handmesh_tutorial.hand").HandModel("left").template
+    np.testing.assert_allclose(left["shapedirs"][:, 1:, :6], ref.shape_dirs[:778, 1:], atol=1e-7)
+    np.testing.assert_allclose(left["shapedirs"][:, 0, :6], -ref.shape_dirs[:778, 0], atol=1e-7)
+    with pytest.raises(ValueError, match="side must be"):
+        mano_format_params("both")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -252,3 +254,41 @@ def test_spiralconv_shape_errors():
         SpiralConv(4, 6, idx[:10])
     with pytest.raises(ValueError, match="integers"):
         SpiralConv(4, 6, idx.astype(float))
+
+
+SPIRALNET = Path(__file__).parent / "fixtures" / "spiralnet_spirals.npz"
+
+
+@pytest.mark.parametrize("mesh", ["icosphere", "grid"])
+@pytest.mark.parametrize(("length", "dilation"), [(9, 1), (12, 2)])
+def test_spiralnet_convention_equals_their_construction(mesh, length, dilation):
+    """convention="spiralnet" equals SpiralNet++'s own extract_spirals (run on OpenMesh by
+    tools/spiralnet_reference.py) row for row; the library's default differs on every row, and
+    its first ring is theirs read in the other direction from another start."""
+    with np.load(SPIRALNET) as z:
+        faces, ref = z[f"{mesh}_faces"], z[f"{mesh}_L{length}_d{dilation}"].astype(np.int64)
+    got = spiral_indices(faces, length, dilation, convention="spiralnet")
+    np.testing.assert_array_equal(got, ref)
+    ours = spiral_indices(faces, length, dilation)
+    assert (ours != ref).any(1).all()
+    if dilation == 1:
+        ring = rotational_neighbours(faces)
+        for v in range(len(ring)):
+            theirs = ref[v, 1:1 + len(ring[v])].tolist()
+            k = theirs.index(ring[v][0])
+            assert (theirs[k:] + theirs[:k])[::-1] == ring[v][1:] + ring[v][:1], v
+
+
+def test_spiralnet_convention_depends_on_face_order_and_refuses_bad_input():
+    faces = trimesh.creation.icosphere(subdivisions=1).faces
+    a = spiral_indices(faces, 9, convention="spiralnet")
+    b = spiral_indices(faces[::-1], 9, convention="spiralnet")
+    deg = [len(r) for r in rotational_neighbours(faces)]
+    assert (a != b).any()  # other starts, the same rings
+    assert all(set(x[:1 + k]) == set(y[:1 + k]) for x, y, k in zip(a, b, deg, strict=True))
+    np.testing.assert_array_equal(spiral_indices(faces, 9), spiral_indices(faces[::-1], 9))
+    with pytest.raises(ValueError, match="convention must be one of"):
+        spiral_indices(faces, 9, convention="openmesh")
+    bowtie = np.array([[0, 1, 2], [0, 3, 4]])  # vertex 0: two open fans
+    with pytest.raises(ValueError, match="vertex 0 is not manifold"):
+        spiral_indices(bowtie, 3, convention="spiralnet")

@@ -22,7 +22,12 @@ from handmesh_tutorial import train as T
 from handmesh_tutorial.budget import budget
 from handmesh_tutorial.cli import main as cli_main
 from handmesh_tutorial.dataset import InterSHDataset, generate_dataset
-from handmesh_tutorial.testing import synthetic_sample, toy_sample
+from handmesh_tutorial.testing import (
+    synthetic_sample,
+    toy_sample,
+    write_freihand_root,
+    write_mano_pickle,
+)
 
 torch.set_num_threads(1)
 
@@ -285,6 +290,77 @@ def test_template_file_round_trip_and_data_mismatch(tmp_path):
     with pytest.raises(ValueError, match=r"vertices \(114, 3\), the template has \(779, 3\)"):
         T.train(T.TrainConfig(out_dir=str(tmp_path / "o"), epochs=1, batch_size=2, **TINY),
                 dataset=ds)
+
+
+def _read_freihand_submission(path) -> tuple[np.ndarray, np.ndarray]:
+    """pred.json read as FreiHAND's published format says (eval.py: ``pred = json_load(...)``;
+    ``xyz_pred_list, verts_pred_list = pred[0], pred[1]``; one entry per evaluation sample, 21
+    keypoints and 778 MANO vertices of [x, y, z] in metres), written here without the library."""
+    with open(path) as fh:
+        pred = json.load(fh)
+    assert isinstance(pred, list) and len(pred) == 2, "pred.json must be [xyz_list, verts_list]"
+    xyz, verts = pred
+    assert len(xyz) == len(verts)
+    for j, v in zip(xyz, verts, strict=True):
+        assert len(j) == 21 and all(len(p) == 3 for p in j)
+        assert len(v) == 778 and all(len(p) == 3 for p in v)
+    return np.array(xyz, dtype=np.float64), np.array(verts, dtype=np.float64)
+
+
+def test_freihand_end_to_end_from_a_mano_pickle(tmp_path, capsys, mano_freihand):
+    """A user's MANO_RIGHT.pkl as the template of handmesh train on a FreiHAND-format root, then
+    handmesh evaluate --dataset freihand writes a pred.json that FreiHAND's format accepts."""
+    pkl, root = mano_freihand
+    run, ev_dir = tmp_path / "run", tmp_path / "eval"
+    code = cli_main(["train", "--data", str(root), "--dataset", "freihand", "--val-data",
+                     str(root), "--template", str(pkl), "--out", str(run), "--budget", "smoke",
+                     "--epochs", "1", "--batch-size", "4", "--image-size", "32", "--channels",
+                     "4,4,8,8,8", "--latent-channels", "8", "--threads", "1", "--no-augment",
+                     "--no-progress", "--no-fsync"])
+    assert code == 0, capsys.readouterr().err
+    code = cli_main(["evaluate", "--checkpoint", str(run / "checkpoint_last.pt"), "--data",
+                     str(root), "--dataset", "freihand", "--out", str(ev_dir), "--threads", "1",
+                     "--no-progress"])
+    out = capsys.readouterr().out
+    assert code == 0 and f"pred_json: {ev_dir / 'pred.json'}" in out
+    xyz, verts = _read_freihand_submission(ev_dir / "pred.json")
+    assert xyz.shape == (3, 21, 3) and verts.shape == (3, 778, 3)
+    with np.load(ev_dir / "predictions.npz") as z:   # the same predictions, camera frame
+        np.testing.assert_allclose(xyz, z["joints"], atol=1e-6)
+        np.testing.assert_allclose(verts, z["vertices"], atol=1e-6)
+    # scored independently against the raw annotation files: eval.json's root-relative MPJPE
+    gt = np.array(json.loads((root / "evaluation_xyz.json").read_text()))
+    mpjpe = 1000 * np.linalg.norm(xyz - gt, axis=2).mean()
+    got = json.loads((ev_dir / "eval.json").read_text())["scores"]["mpjpe"]
+    assert abs(got - mpjpe) < 1e-3 * max(1.0, mpjpe)
+    # predictions in the network frame cannot be a submission: no pred.json, a note says why
+    ev = T.evaluate(str(run / "checkpoint_last.pt"), root, kind="freihand", progress=False,
+                    camera_frame=False, out_dir=tmp_path / "net_frame")
+    assert "pred_json" not in ev["files"] and not (tmp_path / "net_frame" / "pred.json").exists()
+    assert any("network frame" in n for n in ev["notes"])
+
+
+def test_mano_pickle_is_a_template(tmp_path, mano_freihand):
+    """A user's MANO_RIGHT.pkl is a template wherever a .npz is: read through the restricted
+    MANO loader, the flat rest hand with MANO's 21-keypoint regressor; a left file is refused."""
+    from handmesh_tutorial.mano import UnsafePickleError, load_mano
+
+    pkl = mano_freihand[0]
+    t = T.resolve_template(pkl)
+    m = load_mano(pkl)
+    np.testing.assert_allclose(t.vertices, m.template_vertices, atol=1e-7)
+    np.testing.assert_array_equal(t.faces, m.faces)
+    np.testing.assert_allclose(t.joint_regressor @ t.vertices, m().joints[0].numpy(), atol=1e-6)
+    # save_template turns it into the .npz form: the same template, the same hash
+    npz = T.save_template(tmp_path / "mano.npz", str(pkl))
+    assert T.template_hash(npz) == T.template_hash(str(pkl)) == T.template_hash(t)
+    left = write_mano_pickle(tmp_path / "MANO_LEFT.pkl", "left")
+    with pytest.raises(ValueError, match=r"MANO_LEFT.pkl: a left-hand MANO file.*MANO_RIGHT"):
+        T.resolve_template(left)
+    evil = tmp_path / "evil_RIGHT.pkl"
+    evil.write_bytes(b"cos\nsystem\n(S'echo hacked'\ntR.")
+    with pytest.raises(UnsafePickleError, match="os.system"):
+        T.resolve_template(evil)
 
 
 def test_ddp_two_processes_match_micro_batch_semantics(toy_root, tmp_path):
@@ -588,7 +664,7 @@ def test_a_bad_sample_stops_train_and_evaluate_named_and_skip_bad_lists_it(toy_r
            "32", "--channels", "4,4,8,8,8", "--latent-channels", "8", "--threads", "1",
            "--no-progress", "--no-fsync", "--val-fraction", "0"]
     # default: fail fast, the file named in one line (also from a DataLoader worker process)
-    for extra in ([], ["--workers", "1"]):
+    for extra in ([], ["--loader-workers", "1"]):
         assert cli_main([*run, "--out", str(tmp_path / "stopped"), *extra]) == 3
         err = capsys.readouterr().err
         assert f"error: sample 3: {png}: not a readable PNG" in err, err
@@ -685,64 +761,24 @@ def test_random_states_restore_from_tensors_on_the_training_device():
     assert np.array_equal(want[0], got[0]) and torch.equal(want[1], got[1]) and want[2] == got[2]
 
 
-def _mano_size_template():
-    """The library's hand (779 vertices) with one interior edge collapsed: a valid 778-vertex
-    (MANO-size) template, so that a network's output fits FreiHAND's 778-vertex annotations."""
-    from handmesh_tutorial.model import as_template
-
-    t = as_template(None)
-    v, f, jr = t.vertices, t.faces, t.joint_regressor
-    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
-    uniq, cnt = np.unique(edges, axis=0, return_counts=True)
-    boundary = set(uniq[cnt == 1].ravel().tolist())
-    nbrs = [set() for _ in range(len(v))]
-    for a, b in uniq:
-        nbrs[a].add(b)
-        nbrs[b].add(a)
-    for a, b in uniq[cnt == 2]:  # an interior edge whose collapse keeps the mesh manifold
-        if (a not in boundary and b not in boundary and len(nbrs[a] & nbrs[b]) == 2
-                and min(len(nbrs[a]), len(nbrs[b])) > 3):
-            break
-    f2 = np.where(f == b, a, f)
-    f2 = f2[(f2[:, 0] != f2[:, 1]) & (f2[:, 1] != f2[:, 2]) & (f2[:, 2] != f2[:, 0])]
-    keep = np.delete(np.arange(len(v)), b)
-    remap = np.full(len(v), -1)
-    remap[keep] = np.arange(len(keep))
-    jr2 = jr.copy()
-    jr2[:, a] += jr2[:, b]
-    return v[keep], remap[f2], jr2[:, keep]
+@pytest.fixture(scope="module")
+def mano_freihand(tmp_path_factory):
+    """A MANO-format ``MANO_RIGHT.pkl`` and a 3-sample FreiHAND root of its posed hands, both
+    written by the library's testing module (as a user's own tests would)."""
+    tmp = tmp_path_factory.mktemp("mano_freihand")
+    pkl = write_mano_pickle(tmp / "MANO_RIGHT.pkl")
+    return pkl, write_freihand_root(tmp / "freihand", 3, image_size=32, seed=5)
 
 
-def _write_freihand_root(root: Path, template_vertices, joint_regressor, n: int = 3,
-                         size: int = 32) -> None:
-    """A tiny FreiHAND tree (evaluation split): ``n`` posed-by-noise hands 0.6 m away."""
-    from PIL import Image
-
-    rng = np.random.default_rng(5)
-    (root / "evaluation" / "rgb").mkdir(parents=True)
-    verts = (template_vertices - template_vertices.mean(0))[None] + [0.0, 0.0, 0.6]
-    verts = verts + rng.normal(scale=0.002, size=(n, *template_vertices.shape))
-    xyz = np.einsum("jv,nvc->njc", joint_regressor, verts)
-    K = np.tile([[60.0, 0.0, size / 2], [0.0, 60.0, size / 2], [0.0, 0.0, 1.0]], (n, 1, 1))
-    for key, arr in (("K", K), ("xyz", xyz), ("verts", verts)):
-        (root / f"evaluation_{key}.json").write_text(json.dumps(arr.tolist()))
-    for i in range(n):
-        img = rng.integers(0, 255, size=(size, size, 3), dtype=np.uint8)
-        Image.fromarray(img).save(root / "evaluation" / "rgb" / f"{i:08d}.jpg")
-
-
-def test_evaluate_on_freihand_data(tmp_path, capsys):
+def test_evaluate_on_freihand_data(tmp_path, capsys, mano_freihand):
     """A FreiHAND reader has an ``annotation`` method too; evaluate must not take it for an
     INTER-SH reader (it asked it for annotation 0 and failed). No scene kinds on FreiHAND."""
-    v, f, jr = _mano_size_template()
-    assert v.shape == (778, 3)
-    tpath = T.save_template(tmp_path / "mano_size.npz", (v, f, jr))
-    root = tmp_path / "freihand"
-    _write_freihand_root(root, v, jr)
+    tpath, root = mano_freihand
     cfg = T.TrainConfig(data=str(root), dataset="freihand", template=str(tpath),
                         out_dir=str(tmp_path / "run"), **TINY)
     torch.manual_seed(0)
     net = T.build_model_from_config(cfg)
+    assert net.template.shape == (778, 3)
     ds = A.FreiHANDTorchDataset(root, "evaluation", image_size=32, train=False)
     ev = T.evaluate(net, dataset=ds, progress=False, template=str(tpath))
     assert ev["num_samples"] == 3 and ev["kind_table"] == [] and ev["vr_table"] == []
@@ -760,7 +796,7 @@ def test_evaluate_on_freihand_data(tmp_path, capsys):
     # the command line, from a checkpoint trained on FreiHAND (its config says so) or told
     ck = T.save_checkpoint(tmp_path / "ck.pt", model=net, config=cfg,
                            template_id=T.template_hash(str(tpath)), durable=False)
-    for extra in ([], ["--kind", "freihand"], ["--dataset", "freihand"]):
+    for extra in ([], ["--dataset", "freihand"]):
         code = cli_main(["evaluate", "--checkpoint", str(ck), "--data", str(root),
                          "--no-progress", "--threads", "1", *extra])
         assert code == 0, extra

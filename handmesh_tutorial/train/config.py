@@ -67,8 +67,8 @@ class TrainConfig:
             (``spiral_length``, ``num_blocks``, ``num_heads``, ...).
         template: ``None`` = the open right hand; else a ``.npz`` path written by
             [`save_template`][handmesh_tutorial.train.templates.save_template] (``vertices``,
-            ``faces``,
-            ``joint_regressor``).
+            ``faces``, ``joint_regressor``) or a right-hand MANO pickle (``MANO_RIGHT.pkl``,
+            see [`resolve_template`][handmesh_tutorial.train.templates.resolve_template]).
         out_dir: output folder (checkpoints, ``metrics.csv``, ``steps.csv``, ``config.json``).
         seed: seed of initialisation, data order, split and augmentation.
         device: ``"auto"`` (CUDA when available), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``.

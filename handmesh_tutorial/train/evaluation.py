@@ -26,6 +26,7 @@ from .._optional import require
 from .._progress import progress_bar
 from ..dataset import KINDS, InterSHDataset
 from ..dataset import torch_views as TV
+from ..freihand import NUM_VERTICES, FreiHAND, write_predictions
 from ..losses import vertex_loss
 from ..surface import flipped_face_fraction, roughness_deg
 from ._distributed import _resolve_device
@@ -211,7 +212,11 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         device: ``"auto"``, ``"cpu"``, ``"cuda"``.
         out_dir: when given, writes ``eval.json``, ``predictions.npz``, ``pck.png``,
             ``vr.png`` (the figures need matplotlib, the ``notebooks`` extra: without it a
-            warning says so and the other two files are written).
+            warning says so and the other files are written), and on FreiHAND data
+            ``pred.json`` (the official submission format,
+            [`write_predictions`][handmesh_tutorial.freihand.write_predictions]: camera frame,
+            the evaluated items in order) when the network predicts MANO's 778 vertices; else
+            ``notes`` says why it was not written.
         camera_frame: predictions un-mirrored and moved back to the source camera frame
             (ground-truth root added); ``False``: the network's root-centred right-hand frame.
         num_samples: evaluate only the first ``num_samples`` items.
@@ -250,7 +255,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         overall; ``""`` without either baseline), ``predictions`` (``vertices`` (N, V, 3),
         ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
         ``skipped`` (``[{"index": reader index, "error": message}, ...]``, the items ``skip_bad``
-        left out; also in ``eval.json``).
+        left out; also in ``eval.json``), ``notes`` (list of str: files not written, and why).
 
     Shapes:
         ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
@@ -339,9 +344,36 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         "files": {},
         "skipped": skipped,
     }
+    result["notes"] = []
     if out_dir is not None:
         result["files"] = _write_eval(Path(out_dir), result, source, errors)
+        if _is_freihand(dataset):
+            _write_freihand_submission(Path(out_dir), result)
     return result
+
+
+def _is_freihand(dataset) -> bool:
+    base = dataset
+    while isinstance(base, torch.utils.data.Subset):
+        base = base.dataset
+    return isinstance(getattr(base, "source", None), FreiHAND)
+
+
+def _write_freihand_submission(out: Path, res: dict) -> None:
+    """``pred.json`` of the predictions when FreiHAND's evaluation can score it, else a note."""
+    p = res["predictions"]
+    nv = p["vertices"].shape[1]
+    if p["frame"] != "camera":
+        res["notes"].append("pred.json not written: the predictions are in the network frame; "
+                            "FreiHAND's evaluation wants the camera frame")
+    elif nv != NUM_VERTICES:
+        res["notes"].append(
+            f"pred.json not written: the network predicts {nv} vertices, FreiHAND's evaluation "
+            f"compares MANO's {NUM_VERTICES} vertex by vertex; train with a MANO template "
+            "(handmesh train --template MANO_RIGHT.pkl)")
+    else:
+        res["files"]["pred_json"] = write_predictions(out / "pred.json", p["joints"],
+                                                      p["vertices"])
 
 
 def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:

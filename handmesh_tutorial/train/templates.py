@@ -1,9 +1,11 @@
 """The mesh template of a run and the network a config describes.
 
 A run's template is the library's open right hand unless ``TrainConfig.template`` names a ``.npz``
-written by [`save_template`][handmesh_tutorial.train.templates.save_template]; checkpoints store
-only its [`template_hash`][handmesh_tutorial.train.templates.template_hash]. Vertices in metres, (V,
-3); faces (F, 3); joint regressor (21, V).
+written by [`save_template`][handmesh_tutorial.train.templates.save_template] or a user's MANO
+pickle (``MANO_RIGHT.pkl``, read by the restricted loader of
+[`handmesh_tutorial.mano`][handmesh_tutorial.mano]); checkpoints store only its
+[`template_hash`][handmesh_tutorial.train.templates.template_hash]. Vertices in metres, (V, 3);
+faces (F, 3); joint regressor (21, V).
 
 Taught in notebook 08 ("Training").
 """
@@ -28,28 +30,46 @@ def resolve_template(spec=None):
     """The mesh template of a run.
 
     Args:
-        spec: ``None`` (the open right hand), a path to a ``.npz`` with ``vertices``, ``faces``,
+        spec: ``None`` (the open right hand); a path to a ``.npz`` with ``vertices``, ``faces``,
             ``joint_regressor`` (see
-            [`save_template`][handmesh_tutorial.train.templates.save_template]), or anything
+            [`save_template`][handmesh_tutorial.train.templates.save_template]); a path to a
+            right-hand MANO pickle (``.pkl``: the flat rest hand of
+            [`load_mano`][handmesh_tutorial.mano.load_mano], its 21-keypoint regressor with
+            MANO's fingertip vertices in the ``"smplx"`` convention); or anything
             [`as_template`][handmesh_tutorial.model.as_template] accepts.
 
     Returns:
         A [`MeshTemplate`][handmesh_tutorial.model.MeshTemplate].
 
     Raises:
-        FileNotFoundError: the ``.npz`` does not exist.
-        ValueError: it lacks a key or has bad shapes.
+        FileNotFoundError: the file does not exist.
+        ValueError: the ``.npz`` lacks a key or has bad shapes; the ``.pkl`` is not a
+            MANO-format file or is a left hand (the network predicts right hands, left ones
+            mirrored: give ``MANO_RIGHT.pkl``).
+        UnsafePickleError: the ``.pkl`` names a class outside the MANO loader's whitelist.
     """
     if isinstance(spec, str | os.PathLike):
         path = Path(spec)
         if not path.is_file():
             raise FileNotFoundError(f"template file not found: {path}")
+        if path.suffix.lower() == ".pkl":
+            return as_template(_mano_template(path))
         with np.load(path, allow_pickle=False) as z:
             missing = {"vertices", "faces", "joint_regressor"} - set(z.files)
             if missing:
                 raise ValueError(f"{path}: template lacks keys {sorted(missing)}")
             spec = {k: z[k] for k in ("vertices", "faces", "joint_regressor")}
     return as_template(spec)
+
+
+def _mano_template(path: Path):
+    """A right-hand MANO model from a pickle, refused by name when it is a left hand."""
+    from ..mano import load_mano
+
+    if "left" in path.name.lower():  # load_mano's rule for the side
+        raise ValueError(f"{path}: a left-hand MANO file cannot be the template: the network "
+                         "predicts right hands (left ones are mirrored); give MANO_RIGHT.pkl")
+    return load_mano(path, side="right")
 
 
 def save_template(path: str | os.PathLike, template) -> Path:
