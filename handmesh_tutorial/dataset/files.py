@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_write_bytes, fsync_dir, json_safe
+from .._untrusted import open_npz
 from .schema import (
     _KNOWN_KEYS,
     FORMAT_VERSION,
@@ -34,7 +35,11 @@ from .schema import (
 )
 
 __all__ = ["npz_bytes", "encode_sample", "write_sample", "read_annotation", "read_sample",
-           "read_target"]
+           "read_target", "ANNOTATION_MAX_BYTES"]
+
+ANNOTATION_MAX_BYTES = 64 * 2**20
+"""Most bytes the arrays of one sample's ``annotation.npz`` may declare (a hand-chain scene holds
+well under 1 MB): a small file that declares more is refused before it is read."""
 
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip entry date: np.savez would store the wall clock
 _PNG_LEVEL = 6
@@ -307,7 +312,7 @@ def read_sample(directory: str | os.PathLike) -> dict:
     if not npz_path.is_file():
         raise FileNotFoundError(f"{npz_path} missing")
     try:
-        with np.load(npz_path, allow_pickle=False) as z:
+        with open_npz(npz_path, ANNOTATION_MAX_BYTES) as z:
             arrays = {k: z[k] for k in z.files}
     except Exception as e:  # BadZipFile, ValueError (pickled arrays), OSError, ...
         raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
@@ -388,7 +393,7 @@ def read_target(directory: str | os.PathLike) -> tuple:
         raise FileNotFoundError(f"{npz_path} missing")
     keys = ("K", f"vertices_{t}", f"joints_{t}")
     try:
-        with np.load(npz_path, allow_pickle=False) as z:
+        with open_npz(npz_path, ANNOTATION_MAX_BYTES) as z:
             found = {k: z[k] for k in keys if k in z.files}
     except Exception as e:  # BadZipFile, ValueError (pickled arrays), OSError, ...
         raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
