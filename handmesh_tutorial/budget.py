@@ -24,12 +24,13 @@ __all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")
 
-MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, 4096
-"""Range of every image side an argument sets, pixels: generated scenes
-(``generate --image-size``), network crops (``train`` / ``evaluate --image-size``) and
-pose-pretraining crops and renders. Below 32 a hand is a few pixels (and a ResNet's 32x
-downsampling leaves nothing); above 4096 one image or batch needs gigabytes.
-"""
+MIN_IMAGE_SIZE = 32
+"""Smallest image side an argument may set, pixels (below it a hand is a few pixels and a
+ResNet's 32x downsampling leaves nothing)."""
+MAX_IMAGE_SIZE = 4096
+"""Largest image side an argument may set, pixels: generated scenes (``generate --image-size``),
+network crops (``train`` / ``evaluate --image-size``) and pose-pretraining crops and renders
+(above it one image or batch needs gigabytes)."""
 
 
 def check_image_size(value, name: str = "image_size") -> int:
