@@ -18,10 +18,40 @@ from __future__ import annotations
 import os
 from dataclasses import asdict, dataclass
 
-__all__ = ["ENV_VAR", "TIERS", "Budget", "budget"]
+__all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE",
+           "check_image_size"]
 
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")
+
+MIN_IMAGE_SIZE = 32
+"""Smallest image side an argument may set, pixels (below it a hand is a few pixels and a
+ResNet's 32x downsampling leaves nothing)."""
+MAX_IMAGE_SIZE = 4096
+"""Largest image side an argument may set, pixels: generated scenes (``generate --image-size``),
+network crops (``train`` / ``evaluate --image-size``) and pose-pretraining crops and renders
+(above it one image or batch needs gigabytes)."""
+
+
+def check_image_size(value, name: str = "image_size") -> int:
+    """Check an image side against [`MIN_IMAGE_SIZE`][handmesh_tutorial.budget.MIN_IMAGE_SIZE] and
+    [`MAX_IMAGE_SIZE`][handmesh_tutorial.budget.MAX_IMAGE_SIZE] before anything is allocated.
+
+    Args:
+        value: the side, pixels.
+        name: the argument's name, for the message.
+
+    Returns:
+        ``value`` as an ``int``.
+
+    Raises:
+        ValueError: not an integer in the range (the message names ``name`` and the range).
+    """
+    if isinstance(value, bool) or not hasattr(value, "__index__") \
+            or not MIN_IMAGE_SIZE <= int(value) <= MAX_IMAGE_SIZE:
+        raise ValueError(f"{name} must be an integer in [{MIN_IMAGE_SIZE}, {MAX_IMAGE_SIZE}] "
+                         f"pixels, got {value!r}")
+    return int(value)
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from ._untrusted import load_torch_file
 from ._version import __version__, shipped_version
 from .encoder import build_encoder
 from .keypoints import KeypointEncoder, keypoint_loss, normalised_keypoints
@@ -179,7 +180,7 @@ def read_pose_encoder(path: str | os.PathLike) -> tuple[PoseNet, dict]:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such pose-encoder file")
     try:
-        blob = torch.load(path, map_location="cpu", weights_only=True)
+        blob = load_torch_file(path)
     except Exception as e:  # a truncated or foreign file: say which
         raise ValueError(f"{path}: not a readable pose-encoder file ({e})") from e
     if not isinstance(blob, dict) or blob.get("format") != FORMAT:

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_write_bytes, fsync_dir, json_safe
+from .._untrusted import open_npz
 from .schema import (
     _KNOWN_KEYS,
     FORMAT_VERSION,
@@ -34,7 +35,11 @@ from .schema import (
 )
 
 __all__ = ["npz_bytes", "encode_sample", "write_sample", "read_annotation", "read_sample",
-           "read_target"]
+           "read_target", "ANNOTATION_MAX_BYTES"]
+
+ANNOTATION_MAX_BYTES = 64 * 2**20
+"""Most bytes the arrays of one sample's ``annotation.npz`` may declare (a hand-chain scene holds
+well under 1 MB): a small file that declares more is refused before it is read."""
 
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip entry date: np.savez would store the wall clock
 _PNG_LEVEL = 6
@@ -286,6 +291,20 @@ def read_annotation(directory: str | os.PathLike) -> dict:
     return ann
 
 
+def _read_npz(npz_path: Path, keys=None) -> dict:
+    """The arrays of an ``annotation.npz`` (those of ``keys`` that it has, or all), its declared
+    sizes checked first (`ANNOTATION_MAX_BYTES`); any failure is a ValueError naming the file."""
+    try:
+        with open_npz(npz_path, ANNOTATION_MAX_BYTES) as z:
+            return {k: z[k] for k in (z.files if keys is None else keys) if k in z.files}
+    except ValueError as e:
+        if str(e).startswith(f"{npz_path}:"):  # open_npz's refusal names the file already
+            raise
+        raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
+    except Exception as e:  # BadZipFile, OSError, ...
+        raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
+
+
 def read_sample(directory: str | os.PathLike) -> dict:
     """Read and validate one sample folder.
 
@@ -306,11 +325,7 @@ def read_sample(directory: str | os.PathLike) -> dict:
     npz_path = d / "annotation.npz"
     if not npz_path.is_file():
         raise FileNotFoundError(f"{npz_path} missing")
-    try:
-        with np.load(npz_path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except Exception as e:  # BadZipFile, ValueError (pickled arrays), OSError, ...
-        raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
+    arrays = _read_npz(npz_path)
     labels, hands = ann["labels"], ann["hands"]
     need = ["K", *(f"{p}_{lab}" for lab in labels for p in ("vertices", "faces")),
             *(f"joints_{lab}" for lab in hands), *(f"pose_{lab}" for lab in ann["pose_labels"]),
@@ -387,11 +402,7 @@ def read_target(directory: str | os.PathLike) -> tuple:
     if not npz_path.is_file():
         raise FileNotFoundError(f"{npz_path} missing")
     keys = ("K", f"vertices_{t}", f"joints_{t}")
-    try:
-        with np.load(npz_path, allow_pickle=False) as z:
-            found = {k: z[k] for k in keys if k in z.files}
-    except Exception as e:  # BadZipFile, ValueError (pickled arrays), OSError, ...
-        raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
+    found = _read_npz(npz_path, keys)
     missing = [k for k in keys if k not in found]
     if missing:
         raise ValueError(f"{npz_path}: missing key '{missing[0]}' (annotation.json names target "

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from .._untrusted import open_npz
 from ..augment import (
     IMAGE_MEAN,
     IMAGE_STD,
@@ -38,6 +39,7 @@ from ..augment import (
 from ..camera import project
 from ..freihand import FreiHAND
 from ..metrics import ROOT_INDEX
+from .files import ANNOTATION_MAX_BYTES
 from .reader import InterSHDataset
 
 __all__ = [
@@ -402,7 +404,7 @@ class InterSHTorchDataset(HandCropDataset):
         ann = self.source.annotation(index)
         t = ann["target"]
         path = self.source.sample_dir(index) / "annotation.npz"
-        with np.load(path, allow_pickle=False) as z:
+        with open_npz(path, ANNOTATION_MAX_BYTES) as z:
             key = f"vertices_{t}"
             if key not in z.files:
                 raise ValueError(f"{path}: no {key!r} (keys {sorted(z.files)})")

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import atomic_savez
+from .._untrusted import open_npz
 from .joints import MIRROR_AXIS
 
 __all__ = [
@@ -156,7 +157,7 @@ def load_template(path: str | os.PathLike | None = None) -> HandTemplate:
     if not path.exists():
         raise FileNotFoundError(f"hand template asset not found: {path} (rebuild it with "
                                 "python -m handmesh_tutorial.makehuman)")
-    with np.load(path, allow_pickle=False) as data:
+    with open_npz(path) as data:
         names = [fl.name for fl in fields(HandTemplate) if fl.name != "side"]
         missing = [n for n in names if n not in data]
         if missing:

@@ -11,6 +11,7 @@ from dataclasses import asdict
 
 import numpy as np
 
+from ..budget import MAX_IMAGE_SIZE, MIN_IMAGE_SIZE  # one source of the image-size range
 from ..dataset import KINDS, generate_dataset
 from ..lcs import THUMB_ZERO_ELEVATION_DEG
 from .config import InteractionConfig
@@ -19,14 +20,6 @@ from .sample import init_worker, make_sample
 
 __all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
 
-
-
-
-MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, 4096
-"""Range of ``image_size`` that
-[`generate_interactions`][handmesh_tutorial.interact.generate.generate_interactions] accepts,
-pixels: below 32 a hand is a few pixels; above 4096 one image needs gigabytes of render buffers.
-"""
 
 
 def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: int = 224,

@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._io import atomic_savez
+from .._untrusted import open_npz
 from ._common import _check_mesh
 from .matrices import barycentric_upsampling, selection_matrix
 from .qslim import decimate
@@ -143,7 +144,7 @@ def _save(path: Path, hier: MeshHierarchy) -> None:
 
 
 def _load(path: Path) -> MeshHierarchy:
-    with np.load(path, allow_pickle=False) as z:
+    with open_npz(path) as z:
         factors = tuple(float(x) for x in z["factors"])
         n = len(factors) + 1
         vertices = [z[f"vertices_{l}"] for l in range(n)]

@@ -26,6 +26,7 @@ from torch import nn
 
 from .._io import atomic_write_bytes as _atomic_write_bytes
 from .._io import leftover_temporaries
+from .._untrusted import load_torch_file
 from .._version import __version__
 from ._distributed import _resolve_device
 from .config import TrainConfig
@@ -196,7 +197,7 @@ def _read_checkpoint(path: str | os.PathLike, map_location="cpu") -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
     try:
-        ck = torch.load(path, map_location=map_location, weights_only=True)
+        ck = load_torch_file(path, map_location=map_location)
     except pickle.UnpicklingError as err:
         # torch's text advises weights_only=False, i.e. running the file's code: say otherwise
         what = [ln.strip().split(". Please")[0][:120] for ln in str(err).splitlines()

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 
 from ..budget import budget as _budget
+from ..budget import check_image_size
 
 __all__ = ["TrainConfig", "changed_settings", "RESUMABLE_KEYS"]
 
@@ -173,6 +174,7 @@ class TrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        check_image_size(self.image_size)
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
         if not self.lr > 0:

@@ -24,6 +24,7 @@ from .. import viz
 from .._io import atomic_savez, write_json
 from .._optional import require
 from .._progress import progress_bar
+from ..budget import check_image_size
 from ..dataset import KINDS, InterSHDataset
 from ..dataset import torch_views as TV
 from ..freihand import NUM_VERTICES, FreiHAND, write_predictions
@@ -261,6 +262,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
         ``per_sample`` entries ``(N,)``.
     """
+    if image_size is not None:  # before anything is read or allocated
+        check_image_size(image_size)
     if threads is not None:
         torch.set_num_threads(int(threads))
     dev = _resolve_device(device)
@@ -269,7 +272,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         source = str(checkpoint_or_model)
         net, ck = load_checkpoint(checkpoint_or_model, dev, template)
         cfg = ck["config"]
-        image_size = image_size or cfg["image_size"]
+        image_size = check_image_size(image_size or cfg["image_size"])
         box_scale = cfg.get("box_scale", 1.5)
         kind = kind or cfg.get("dataset", "intersh")
     else:

@@ -27,6 +27,8 @@ import torch
 
 from .._io import atomic_write_bytes, atomic_write_with, single_writer, write_json
 from .._progress import progress_bar
+from .._untrusted import load_torch_file
+from ..budget import check_image_size
 from ..losses import similarity_align
 from ..pose_encoder import (
     _JOINT_SCALE,
@@ -101,8 +103,11 @@ class PosePretrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        if not self.image_sizes or min(self.image_sizes) < 32:
-            raise ValueError(f"image_sizes must be sides >= 32 pixels, got {self.image_sizes}")
+        if not self.image_sizes:
+            raise ValueError("image_sizes must name at least one crop side")
+        for side in self.image_sizes:
+            check_image_size(side, "image_sizes")
+        check_image_size(self.render_size, "render_size")
         if not self.lr > 0:
             raise ValueError(f"lr must be positive, got {self.lr}")
 
@@ -252,7 +257,7 @@ def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.Path
         ck_path = out / "checkpoint.pt"
         ck = None
         if ck_path.exists():
-            ck = torch.load(ck_path, map_location="cpu", weights_only=True)
+            ck = load_torch_file(ck_path)
             saved = {k: v for k, v in ck["config"].items() if k not in ("device", "workers")}
             now = {k: v for k, v in _jsonable(asdict(config)).items()
                    if k not in ("device", "workers")}
@@ -415,7 +420,7 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     for split, r in (("train", tr), ("val", val)):
         path = out / f"crops_{split}.pt"
         if path.exists():
-            caches[split] = torch.load(path, map_location="cpu", weights_only=True)
+            caches[split] = load_torch_file(path)
             if len(caches[split]["image"]) == r["scenes"]:
                 continue
         caches[split] = crop_cache(r["root"], workers=max(0, workers - 1), progress=progress)

@@ -20,6 +20,7 @@ import numpy as np
 from torch import nn
 
 from .._io import atomic_savez
+from .._untrusted import open_npz
 from ..model import as_template, build_model
 from .config import TrainConfig
 
@@ -54,7 +55,7 @@ def resolve_template(spec=None):
             raise FileNotFoundError(f"template file not found: {path}")
         if path.suffix.lower() == ".pkl":
             return as_template(_mano_template(path))
-        with np.load(path, allow_pickle=False) as z:
+        with open_npz(path) as z:
             missing = {"vertices", "faces", "joint_regressor"} - set(z.files)
             if missing:
                 raise ValueError(f"{path}: template lacks keys {sorted(missing)}")
