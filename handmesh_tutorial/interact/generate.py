@@ -12,6 +12,7 @@ from dataclasses import asdict
 import numpy as np
 
 from ..dataset import KINDS, generate_dataset
+from ..dataset.schema import MAX_IMAGE_SIZE as _MAX_READABLE
 from ..lcs import THUMB_ZERO_ELEVATION_DEG
 from .config import InteractionConfig
 from .framing import _check_share
@@ -22,10 +23,12 @@ __all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
 
 
 
-MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, 4096
+MIN_IMAGE_SIZE, MAX_IMAGE_SIZE = 32, _MAX_READABLE
 """Range of ``image_size`` that
 [`generate_interactions`][handmesh_tutorial.interact.generate.generate_interactions] accepts,
-pixels: below 32 a hand is a few pixels; above 4096 one image needs gigabytes of render buffers.
+pixels: below 32 a hand is a few pixels; above 4096 one image needs gigabytes of render buffers
+(the largest the readers accept,
+[`MAX_IMAGE_SIZE`][handmesh_tutorial.dataset.schema.MAX_IMAGE_SIZE]).
 """
 
 
