@@ -733,7 +733,10 @@ def test_dataset_level_errors(small_root, tmp_path):
     for change, pattern in (({"index_width": "6"}, "'index_width' must be an integer"),
                             ({"num_samples": 10**11}, "'num_samples' must be an integer"),
                             ({"ranges": [[0, 10**11]]}, "'ranges' must be"),
-                            ({"ranges": "0-3"}, "'ranges' must be")):
+                            ({"ranges": "0-3"}, "'ranges' must be"),
+                            ({"kinds": "hand-hand"}, "'kinds' must be a non-empty list"),
+                            ({"image_size": [32, "32"]}, "'image_size' must be null or"),
+                            ({"seed": -1}, "'seed' must be a non-negative integer")):
         (small_root / "meta.json").write_text(good)
         _rewrite_json(small_root / "meta.json", **change)
         with pytest.raises(ValueError, match=r"meta\.json: " + pattern):

@@ -39,6 +39,7 @@ from ..camera import project
 from ..freihand import FreiHAND
 from ..metrics import ROOT_INDEX
 from .reader import InterSHDataset
+from .schema import _check_points
 
 __all__ = [
     "HandCropDataset", "BAD_SAMPLE_ERRORS", "BadSampleError", "find_bad_items", "drop_bad_items",
@@ -430,6 +431,9 @@ class InterSHTorchDataset(HandCropDataset):
             if key not in z.files:
                 raise ValueError(f"{path}: no {key!r} (keys {sorted(z.files)})")
             v = z[key].astype(np.float64)
+        if v.ndim != 2 or v.shape[1:] != (3,) or not np.isfinite(v).all():
+            raise ValueError(f"{path}: key {key!r} has shape {v.shape} or non-finite values")
+        _check_points(v, f"{path}: key {key!r}", hand=True)  # the reader's plausibility range
         if ann["sides"][t] == "left" and self.mirror_left:
             v = v * np.array([-1.0, 1.0, 1.0])
         return v
