@@ -108,7 +108,9 @@ def _cmd_verify(args: argparse.Namespace) -> int:
     print(f"handmesh verify: {report}")
     if report.removed:
         print("rerun the same `handmesh generate` command to write the removed samples again")
-    return EXIT_CODES["bad-input"] if report.bad and not report.removed else 0
+    if report.disagree:
+        raise ValueError(report.advice())
+    return 0 if report.ok else EXIT_CODES["bad-input"]
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
@@ -118,6 +120,9 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     if args.verify and (Path(args.out) / META_FILE).exists():
         report = verify_dataset(args.out, remove=True, progress=not args.quiet)
         print(f"handmesh generate --verify: {report}")
+        if not report.ok:  # nothing generated: the samples left would count as done
+            raise ValueError(report.advice() or "some bad samples could not be removed (see "
+                             "above); fix their permissions, then rerun this command")
 
     s = interact.generate_interactions(
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,
@@ -192,7 +197,7 @@ def _print_skipped(command: str, skipped: list) -> None:
     print(f"handmesh {command}: skipped {len(skipped)} bad sample(s) (--skip-bad):")
     for s in skipped:
         where = f"{s['split']} " if "split" in s else ""
-        print(f"  {where}sample {s['index']}: {s['error']}")
+        print(f"  {where}sample {s.get('sample', s['index'])}: {s['error']}")
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -283,16 +288,19 @@ def build_parser() -> argparse.ArgumentParser:
                      help="skip fsync of every file (faster, not safe against power cuts)")
     gen.add_argument("--verify", action="store_true",
                      help="before resuming, re-read every sample already in OUT and remove "
-                     "the unreadable or foreign ones, so that this run writes them again")
+                     "the unreadable ones, so that this run writes them again (a meta.json "
+                     "that disagrees with the samples stops it: nothing removed)")
     gen.add_argument("--quiet", action="store_true", help="no progress bar")
     gen.set_defaults(func=_cmd_generate)
 
     ver = sub.add_parser("verify", help="re-read every sample of an INTER-SH root and list the "
-                         "unreadable or foreign ones (exit code 3 if any)")
+                         "unreadable ones and those that disagree with meta.json (exit code 3 "
+                         "if any)")
     ver.add_argument("root", help="the dataset folder (with meta.json)")
     ver.add_argument("--remove-bad", action="store_true",
-                     help="delete the bad samples; rerunning the same generate command writes "
-                     "them again, byte for byte")
+                     help="delete the unreadable samples; rerunning the same generate command "
+                     "writes them again, byte for byte (samples that read correctly but "
+                     "disagree with meta.json are never removed)")
     ver.add_argument("--quiet", action="store_true", help="no progress bar")
     ver.set_defaults(func=_cmd_verify)
 

@@ -288,15 +288,29 @@ class FreiHAND:
         return f"FreiHAND(root={str(self.root)!r}, split={self.split!r}, versions={self.versions})"
 
 
+_MAX_IMAGE_SIDE = 4096  # = dataset.MAX_IMAGE_SIZE (tested); FreiHAND's images are 224 x 224
+
+
 def _read_image(path: Path, mode: str = "RGB") -> np.ndarray:
+    """Decode an image; one over 4096 pixels a side is refused from its header, before decoding
+    (a decompression bomb), as is anything PIL calls one."""
+    import warnings
+
     from PIL import Image, UnidentifiedImageError
 
     if not path.is_file():
         raise FileNotFoundError(f"FreiHAND image not found: {path}")
     try:
-        with Image.open(path) as im:
-            return np.asarray(im.convert(mode), dtype=np.uint8)
-    except (UnidentifiedImageError, OSError) as err:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                if max(im.size) > _MAX_IMAGE_SIDE:
+                    raise ValueError(f"{path}: {im.width} x {im.height} pixels, over "
+                                     f"{_MAX_IMAGE_SIDE} a side: not decoded (FreiHAND images "
+                                     "are 224 x 224)")
+                return np.asarray(im.convert(mode), dtype=np.uint8)
+    except (UnidentifiedImageError, OSError, Image.DecompressionBombError,
+            Image.DecompressionBombWarning) as err:
         raise ValueError(f"{path}: cannot decode image: {err}") from None
 
 

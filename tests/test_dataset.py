@@ -733,7 +733,10 @@ def test_dataset_level_errors(small_root, tmp_path):
     for change, pattern in (({"index_width": "6"}, "'index_width' must be an integer"),
                             ({"num_samples": 10**11}, "'num_samples' must be an integer"),
                             ({"ranges": [[0, 10**11]]}, "'ranges' must be"),
-                            ({"ranges": "0-3"}, "'ranges' must be")):
+                            ({"ranges": "0-3"}, "'ranges' must be"),
+                            ({"kinds": "hand-hand"}, "'kinds' must be a non-empty list"),
+                            ({"image_size": [32, "32"]}, "'image_size' must be null or"),
+                            ({"seed": -1}, "'seed' must be a non-negative integer")):
         (small_root / "meta.json").write_text(good)
         _rewrite_json(small_root / "meta.json", **change)
         with pytest.raises(ValueError, match=r"meta\.json: " + pattern):
@@ -874,3 +877,26 @@ def test_verify_lists_bad_samples_and_regenerating_them_restores_the_bytes(tmp_p
     assert gen(root, num=6).written == 3
     assert tree(root) == tree(tmp_path / "ref")
     assert D.verify_dataset(root, progress=False).bad == []
+
+
+@pytest.mark.parametrize("key, value", [("seed", SEED + 1), ("image_size", [48, 48]),
+                                        ("kinds", ["hand-object"]), ("index_width", 7)])
+def test_a_meta_json_that_disagrees_with_every_sample_removes_nothing(tmp_path, key, value):
+    """One edited field of meta.json makes every sample disagree: verify names the field and
+    the samples, and `remove=True` deletes none of them (they read correctly on their own)."""
+    root = tmp_path / "r"
+    gen(root, num=3)
+    before = tree(root)
+    npz = root / "samples" / "000002" / "annotation.npz"
+    npz.write_bytes(npz.read_bytes()[:100])  # one truly bad sample: that one is removed
+    good = (root / "meta.json").read_text()
+    _rewrite_json(root / "meta.json", **{key: value})
+    report = D.verify_dataset(root, remove=True, progress=False)
+    assert [n for n, _ in report.bad] == ["000002"] and report.removed == ["000002"]
+    assert report.disagreements() == {key: ["000000", "000001"]} and not report.ok
+    assert f"meta.json '{key}' disagrees with 2 sample(s) (000000, 000001)" in str(report)
+    assert "none of them was removed" in report.advice() and key in report.advice()
+    assert sample_dirs(root) == ["000000", "000001"]  # the readable samples are all kept
+    (root / "meta.json").write_text(good)  # the user restores meta.json: the run completes
+    assert gen(root, num=3).written == 1 and tree(root) == before
+    assert D.verify_dataset(root, progress=False).ok

@@ -258,3 +258,32 @@ def test_evaluate_predictions_equals_freihand_scores(data, tmp_path):
     fh.write_predictions(tmp_path / "short.json", pj[:2], pv[:2])
     with pytest.raises(ValueError, match="2 samples"):
         fh.evaluate_predictions(tmp_path / "short.json", root)
+
+
+def _jpeg_declaring(width, height):
+    """A valid small JPEG whose frame header (SOF0) declares ``width`` x ``height``."""
+    import io
+    import struct
+
+    buf = io.BytesIO()
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(buf, format="JPEG")
+    data = bytearray(buf.getvalue())
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5:sof + 9] = struct.pack(">HH", height, width)
+    return bytes(data)
+
+
+@pytest.mark.parametrize("side, pattern", [(20_000, "DecompressionBombError|exceeds limit"),
+                                           (10_000, "could be decompression bomb"),
+                                           (5_000, "5000 x 5000 pixels, over 4096 a side")])
+def test_a_jpeg_bomb_is_refused_before_decoding_and_named(root, side, pattern):
+    from handmesh_tutorial.dataset import MAX_IMAGE_SIZE, torch_views
+
+    assert fh._MAX_IMAGE_SIDE == MAX_IMAGE_SIZE  # one limit for both readers
+    path = root / "training" / "rgb" / "00000001.jpg"
+    path.write_bytes(_jpeg_declaring(side, side))
+    with pytest.raises(ValueError, match=f"00000001.jpg.*({pattern})"):
+        fh.FreiHAND(root, "training")[1]
+    ds = torch_views.FreiHANDTorchDataset(root, image_size=16, train=False)
+    bad = torch_views.find_bad_items(ds)  # --skip-bad: named by the image's id
+    assert [(b["position"], b["sample"]) for b in bad] == [(1, "00000001")]

@@ -229,3 +229,35 @@ def test_thumb_zero_elevation_flag_is_recorded_and_none_is_the_earlier_generator
         cli.main(["generate", *args, "--out", str(tmp_path / "x"), "--thumb-zero-elevation",
                   "flat"])
     assert e.value.code == 2 and "degrees or 'none'" in capsys.readouterr().err
+
+
+def test_repair_commands_never_delete_samples_when_meta_json_disagrees(tmp_path, capsys):
+    root = tmp_path / "r"
+    argv = ["generate", "--kind", "hand-object", "--num", "2", "--seed", "4", "--out", str(root),
+            "--image-size", "32", "--quiet", "--no-fsync"]
+    assert cli.main(argv) == 0
+    before = _hashes(root)
+    good = (root / "meta.json").read_text()
+    (root / "meta.json").write_text(good.replace('"seed": 4', '"seed": 5'))  # one edited field
+    capsys.readouterr()
+    assert cli.main(["verify", str(root), "--remove-bad", "--quiet"]) == \
+        cli.EXIT_CODES["bad-input"]
+    out, err = capsys.readouterr()
+    assert "0 bad" in out and "meta.json 'seed' disagrees with 2 sample(s) (000000, 000001)" in out
+    assert "none of them was removed" in err and "restore those keys" in err
+    assert cli.main([*argv, "--verify"]) == cli.EXIT_CODES["bad-input"]  # no data loss either
+    assert "'seed'" in capsys.readouterr().err
+    (root / "meta.json").write_text(good)
+    assert _hashes(root) == before  # every sample is still there, unchanged
+    assert cli.main([*argv, "--verify"]) == 0
+    assert "0 samples written, 2 already present" in capsys.readouterr().out
+
+
+def test_a_num_above_the_readers_maximum_is_refused_before_anything_is_written(tmp_path, capsys):
+    out = tmp_path / "root"  # a 2-sample shard of it would be quick to write: nothing is
+    code = cli.main(["generate", "--kind", "hand-hand", "--num", str(dataset.MAX_SAMPLES + 1),
+                     "--shard", f"0/{dataset.MAX_SAMPLES // 2}", "--out", str(out),
+                     "--image-size", "32", "--quiet", "--no-fsync"])
+    assert code == cli.EXIT_CODES["bad-input"]
+    assert "num must be an integer in [1, 100,000,000] (MAX_SAMPLES" in capsys.readouterr().err
+    assert not out.exists()  # no meta.json that read_meta would refuse

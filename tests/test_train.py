@@ -667,16 +667,16 @@ def test_a_bad_sample_stops_train_and_evaluate_named_and_skip_bad_lists_it(toy_r
     for extra in ([], ["--loader-workers", "1"]):
         assert cli_main([*run, "--out", str(tmp_path / "stopped"), *extra]) == 3
         err = capsys.readouterr().err
-        assert f"error: sample 3: {png}: not a readable PNG" in err, err
+        assert f"error: sample 000003: {png}: not a readable PNG" in err, err
         assert "Caught" not in err and "Traceback" not in err
     assert not (tmp_path / "stopped" / "checkpoint_last.pt").exists()
 
     out = tmp_path / "skipping"
     assert cli_main([*run, "--out", str(out), "--skip-bad"]) == 0
     text = capsys.readouterr().out
-    assert "skipped 1 bad sample(s)" in text and f"train sample 3: {png}" in text
+    assert "skipped 1 bad sample(s)" in text and f"train sample 000003: {png}" in text
     listed = json.loads((out / "skipped.json").read_text())["skipped"]
-    assert [(s["split"], s["index"]) for s in listed] == [("train", 3)]
+    assert [(s["split"], s["index"], s["sample"]) for s in listed] == [("train", 3, "000003")]
     ck = torch.load(out / "checkpoint_last.pt", weights_only=True)
 
     # the same run on the 7 good samples, given as a dataset, reaches the same weights
@@ -689,9 +689,9 @@ def test_a_bad_sample_stops_train_and_evaluate_named_and_skip_bad_lists_it(toy_r
     ev = ["evaluate", "--checkpoint", str(out / "checkpoint_last.pt"), "--data", str(root),
           "--no-progress", "--threads", "1"]
     assert cli_main(ev) == 3
-    assert f"sample 3: {png}" in capsys.readouterr().err
+    assert f"sample 000003: {png}" in capsys.readouterr().err
     assert cli_main([*ev, "--skip-bad", "--out", str(tmp_path / "ev")]) == 0
-    assert f"sample 3: {png}" in capsys.readouterr().out
+    assert f"sample 000003: {png}" in capsys.readouterr().out
     saved = json.loads((tmp_path / "ev" / "eval.json").read_text())
     assert saved["num_samples"] == 7 and [s["index"] for s in saved["skipped"]] == [3]
     assert saved["per_sample"]["index"] == [0, 1, 2, 4, 5, 6, 7]

@@ -22,7 +22,8 @@ format in full. Taught in notebook 05 ("Rendering and the visibility ratio").
 
 Submodules (every public name is re-exported here, ``hmt.dataset.InterSHDataset`` etc.):
 
-* ``schema``: format names, versions and limits (``KINDS``, ``META_FILE``...), sample validation.
+* ``schema``: format names, versions and limits (``KINDS``, ``META_FILE``...), sample validation
+  and its plausibility ranges (``MAX_DISTANCE_M``, ``FOCAL_RANGE``...).
 * ``seeds``: ``sample_seed``, ``probe_seed``, ``shard_range``, ``index_width``, VR bins.
 * ``files``: one sample folder: ``encode_sample``, ``write_sample``, ``read_sample``,
   ``read_annotation``, ``npz_bytes``; atomic writes and the names of temporaries.
@@ -58,14 +59,19 @@ from .generate import GenerationSummary, generate_dataset
 from .reader import InterSHDataset, VerifyReport, read_meta, verify_dataset
 from .root import merge_shards
 from .schema import (
+    FOCAL_RANGE,
     FORMAT_NAME,
     FORMAT_VERSION,
     KINDS,
     LOCK_FILE,
+    MAX_DISTANCE_M,
+    MAX_IMAGE_SIZE,
     MAX_LABEL,
     MAX_SAMPLES,
     META_FILE,
+    MIN_DEPTH_M,
     MIN_INDEX_WIDTH,
+    PRINCIPAL_POINT_MARGIN,
     READABLE_FORMAT_VERSIONS,
     SAMPLES_DIR,
     TMP_PREFIX,
@@ -75,6 +81,7 @@ from .seeds import index_width, probe_seed, sample_seed, shard_range, vr_bins, v
 __all__ = [
     "FORMAT_NAME", "FORMAT_VERSION", "READABLE_FORMAT_VERSIONS", "KINDS", "META_FILE",
     "SAMPLES_DIR", "TMP_PREFIX", "LOCK_FILE", "MIN_INDEX_WIDTH", "MAX_SAMPLES", "MAX_LABEL",
+    "MAX_IMAGE_SIZE", "MAX_DISTANCE_M", "MIN_DEPTH_M", "FOCAL_RANGE", "PRINCIPAL_POINT_MARGIN",
     "PROBE_MIN_HITS", "SampleRejected", "sample_seed", "probe_seed", "shard_range", "index_width",
     "vr_bins", "vr_histogram", "npz_bytes", "encode_sample", "write_sample", "read_annotation",
     "read_sample", "read_meta", "InterSHDataset", "VerifyReport", "verify_dataset",

@@ -9,6 +9,7 @@ notebook 05 ("Rendering and the visibility ratio").
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 import os
@@ -27,10 +28,13 @@ from .._untrusted import open_npz
 from .schema import (
     _KNOWN_KEYS,
     FORMAT_VERSION,
+    MAX_IMAGE_SIZE,
     META_FILE,
     READABLE_FORMAT_VERSIONS,
     TMP_PREFIX,
     _canonical,
+    _check_camera,
+    _check_points,
     _label,
 )
 
@@ -222,6 +226,24 @@ def write_sample(directory: str | os.PathLike, sample: Mapping, *, overwrite: bo
 # --------------------------------------------------------------------------------------------
 # reading
 # --------------------------------------------------------------------------------------------
+def _named_errors(read):
+    """Make a reader of one (untrusted) sample folder raise only ``OSError`` or ``ValueError``:
+    anything else parsing it raises (``TypeError``, ``IndexError``...) becomes a ``ValueError``
+    naming the folder, a bad sample for `verify_dataset` and ``--skip-bad``."""
+
+    @functools.wraps(read)
+    def wrapper(directory: str | os.PathLike, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return read(directory, *args, **kwargs)
+        except (OSError, ValueError, MemoryError):
+            raise
+        except Exception as e:  # noqa: BLE001 - any other error of a damaged file
+            raise ValueError(f"{directory}: not a readable sample folder ({type(e).__name__}: "
+                             f"{e})") from e
+
+    return wrapper
+
+
 def _read_json(path: Path) -> Any:
     if not path.is_file():
         raise FileNotFoundError(f"{path} missing")
@@ -229,24 +251,43 @@ def _read_json(path: Path) -> Any:
         return json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ValueError(f"{path}: not valid JSON ({e})") from e
+    except RecursionError as e:  # '[[[[...' deeper than the interpreter's stack
+        raise ValueError(f"{path}: not valid JSON (nested too deeply: {e})") from e
 
 
-def _read_png(path: Path, modes: Sequence[str]) -> np.ndarray:
+def _read_png(path: Path, modes: Sequence[str], size: Sequence[int] | None = None) -> np.ndarray:
+    """Decode a PNG of mode in ``modes``; with ``size`` = (H, W), check the header's size first,
+    so that no other size is decoded (a decompression bomb costs nothing)."""
+    import warnings
+
     from PIL import Image
 
     if not path.is_file():
         raise FileNotFoundError(f"{path} missing")
     try:
-        with Image.open(path) as im:
-            im.load()
-            mode, arr = im.mode, np.array(im)
-    except Exception as e:  # PIL raises OSError, SyntaxError, zlib.error, ... on bad files
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                if size is not None and (im.height, im.width) != tuple(size):
+                    got, want = (im.height, im.width), tuple(int(x) for x in size)
+                    raise _SizeError(f"{path} has shape {got}, expected {want} (the image size "
+                                     "annotation.json declares; not decoded)")
+                im.load()
+                mode, arr = im.mode, np.array(im)
+    except _SizeError:
+        raise
+    except Exception as e:  # PIL raises OSError, SyntaxError, zlib.error, DecompressionBomb...
         raise ValueError(f"{path}: not a readable PNG ({type(e).__name__}: {e})") from e
     if mode not in modes:
         raise ValueError(f"{path}: PNG mode {mode}, expected one of {list(modes)}")
     return arr
 
 
+class _SizeError(ValueError):
+    """A PNG whose header declares another size than the sample's (raised before decoding)."""
+
+
+@_named_errors
 def read_annotation(directory: str | os.PathLike) -> dict:
     """Read only ``annotation.json`` of a sample folder (fast: no images, no arrays).
 
@@ -284,6 +325,23 @@ def read_annotation(directory: str | os.PathLike) -> dict:
         if isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= 1.0:
             raise ValueError(f"{path}: 'vr' of label {lab} must be a number in [0, 1], got "
                              f"{v!r}")
+    size = ann["image_size"]
+    if not (isinstance(size, list) and len(size) == 2 and all(
+            type(x) is int and 1 <= x <= MAX_IMAGE_SIZE for x in size)):
+        raise ValueError(f"{path}: 'image_size' must be [height, width], integers in [1, "
+                         f"{MAX_IMAGE_SIZE}] (MAX_IMAGE_SIZE), got {str(size)[:80]}")
+    for key, kind in (("stats", dict), ("extra", dict), ("extra_arrays", list)):
+        if ann.get(key) is not None and not isinstance(ann[key], kind):
+            what = "object" if kind is dict else "list"
+            raise ValueError(f"{path}: '{key}' must be a JSON {what}, got "
+                             f"{type(ann[key]).__name__}")
+    if not all(isinstance(k, str) and re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", k)
+               for k in ann.get("extra_arrays") or []):
+        raise ValueError(f"{path}: 'extra_arrays' must list identifiers, got "
+                         f"{str(ann['extra_arrays'])[:80]}")
+    if ann.get("scene_mask_bits", 8) not in (8, 16):
+        raise ValueError(f"{path}: 'scene_mask_bits' must be 8 or 16, got "
+                         f"{str(ann['scene_mask_bits'])[:20]}")
     ann["target"] = _label(ann["target"], f"{where}: 'target'")
     if ann["target"] not in ann["hands"] or ann["target"] not in ann["vr"]:
         raise ValueError(f"{path}: 'target' {ann['target']} is not a hand label with a VR "
@@ -305,6 +363,7 @@ def _read_npz(npz_path: Path, keys=None) -> dict:
         raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
 
 
+@_named_errors
 def read_sample(directory: str | os.PathLike) -> dict:
     """Read and validate one sample folder.
 
@@ -335,12 +394,13 @@ def read_sample(directory: str | os.PathLike) -> dict:
             raise ValueError(f"{npz_path}: missing key '{key}' (annotation.json lists it)")
 
     mask_modes = ("L",) if ann.get("scene_mask_bits", 8) == 8 else ("I;16", "I")
+    hw = ann["image_size"]
     sample: dict[str, Any] = {
-        "image": _read_png(d / "image.png", ("RGB",)),
-        "scene_mask": _read_png(d / "scene_mask.png", mask_modes),
-        "alone_masks": {lab: _read_png(d / f"alone_{lab}.png", ("1", "L")) != 0
+        "image": _read_png(d / "image.png", ("RGB",), hw),
+        "scene_mask": _read_png(d / "scene_mask.png", mask_modes, hw),
+        "alone_masks": {lab: _read_png(d / f"alone_{lab}.png", ("1", "L"), hw) != 0
                         for lab in labels},
-        "alone_images": {lab: _read_png(d / f"alone_rgb_{lab}.png", ("RGB",))
+        "alone_images": {lab: _read_png(d / f"alone_rgb_{lab}.png", ("RGB",), hw)
                          for lab in ann["alone_image_labels"]},
         "meshes": {lab: (arrays[f"vertices_{lab}"], arrays[f"faces_{lab}"]) for lab in labels},
         "joints": {lab: arrays[f"joints_{lab}"] for lab in hands},
@@ -376,7 +436,7 @@ def read_sample(directory: str | os.PathLike) -> dict:
     return s
 
 
-
+@_named_errors
 def read_target(directory: str | os.PathLike) -> tuple:
     """Read only what a training crop of the target hand needs (a lean
     [`read_sample`][handmesh_tutorial.dataset.files.read_sample]).
@@ -410,13 +470,13 @@ def read_target(directory: str | os.PathLike) -> tuple:
     K, verts, joints = (found[k] for k in keys)
     for key, arr, shape in (("K", K, (3, 3)), (keys[1], verts, None), (keys[2], joints, (21, 3))):
         ok = arr.shape == shape if shape else (arr.ndim == 2 and arr.shape[1] == 3)
-        if not ok or not np.all(np.isfinite(arr)):
-            raise ValueError(f"{npz_path}: key '{key}' has shape {arr.shape} or non-finite "
-                             f"values (expected {shape or '(V, 3)'})")
-    image = _read_png(d / "image.png", ("RGB",))
-    if list(image.shape[:2]) != list(ann["image_size"]):
-        raise ValueError(f"{d / 'image.png'}: size {image.shape[:2]}, annotation.json says "
-                         f"{ann['image_size']}")
+        if not ok or arr.dtype.kind not in "fiu" or not np.all(np.isfinite(arr)):
+            raise ValueError(f"{npz_path}: key '{key}' has shape {arr.shape}, dtype {arr.dtype} "
+                             f"or non-finite values (expected {shape or '(V, 3)'}, numbers)")
+    _check_camera(K.astype(np.float64), ann["image_size"], f"{npz_path}: key 'K'")
+    _check_points(verts, f"{npz_path}: key '{keys[1]}'", hand=True)
+    _check_points(joints, f"{npz_path}: key '{keys[2]}'", hand=True)
+    image = _read_png(d / "image.png", ("RGB",), ann["image_size"])
     side = ann["sides"].get(t)
     if side not in ("left", "right"):
         raise ValueError(f"{d / 'annotation.json'}: side of target {t} is {side!r}")

@@ -22,7 +22,15 @@ from .candidates import _probe, _probe_summary, _Task
 from .files import read_annotation
 from .reader import _present, read_meta
 from .root import _coalesce, _lock, _open_root
-from .schema import FORMAT_NAME, FORMAT_VERSION, KINDS, MAX_LABEL, META_FILE, SAMPLES_DIR
+from .schema import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    KINDS,
+    MAX_LABEL,
+    MAX_SAMPLES,
+    META_FILE,
+    SAMPLES_DIR,
+)
 from .seeds import _SEED_RULE, index_width, sample_seed, shard_range, vr_bins, vr_histogram
 from .workers import _callable_name, _check_for_workers, _Pool, _run, _start_method, _worker_probe
 
@@ -132,7 +140,8 @@ def generate_dataset(
             ``index``/``seed``). Must be deterministic in its seed and, for ``workers > 1``,
             importable by the worker processes (a function of a module, or a ``functools.partial``
             of one; not one defined in a notebook cell).
-        num: number of samples of the whole dataset (all shards).
+        num: number of samples of the whole dataset (all shards), at most
+            [`MAX_SAMPLES`][handmesh_tutorial.dataset.schema.MAX_SAMPLES].
         seed: base seed, non-negative.
         kind: the kind(s) of scene ``make_sample`` produces (see ``KINDS``).
         shard: ``(shard_index, num_shards)``: make only
@@ -190,8 +199,9 @@ def generate_dataset(
     kinds = (kind,) if isinstance(kind, str) else tuple(kind)
     if not kinds or any(k not in KINDS for k in kinds):
         raise ValueError(f"kind must be one of {KINDS} (or a list of them), got {kind!r}")
-    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
-        raise ValueError(f"num must be a positive integer, got {num!r}")
+    if isinstance(num, bool) or not isinstance(num, int) or not 1 <= num <= MAX_SAMPLES:
+        raise ValueError(f"num must be an integer in [1, {MAX_SAMPLES:,}] (MAX_SAMPLES: the "
+                         f"most samples a meta.json may declare), got {num!r}")
     sample_seed(seed, 0)  # validates seed
     if workers < 1 or max_attempts < 1 or vr_probe < 1:
         raise ValueError(f"workers, max_attempts and vr_probe must be >= 1, got {workers}, "

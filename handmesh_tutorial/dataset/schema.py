@@ -18,10 +18,12 @@ from typing import Any
 import numpy as np
 
 from .._io import json_safe
+from ..budget import MAX_IMAGE_SIZE as _MAX_IMAGE_SIZE
 
 __all__ = [
     "FORMAT_NAME", "FORMAT_VERSION", "READABLE_FORMAT_VERSIONS", "KINDS", "META_FILE",
     "SAMPLES_DIR", "TMP_PREFIX", "LOCK_FILE", "MIN_INDEX_WIDTH", "MAX_SAMPLES", "MAX_LABEL",
+    "MAX_IMAGE_SIZE", "MAX_DISTANCE_M", "MIN_DEPTH_M", "FOCAL_RANGE", "PRINCIPAL_POINT_MARGIN",
 ]
 
 FORMAT_NAME = "INTER-SH"
@@ -47,6 +49,26 @@ MAX_SAMPLES = 100_000_000
 or hostile file must not make the reader build a list of 1e11 indices).
 """
 MAX_LABEL = 65535
+MAX_IMAGE_SIZE = _MAX_IMAGE_SIZE
+"""Largest image side (pixels) of a sample, written or read: the library's one image-size bound,
+[`budget.MAX_IMAGE_SIZE`][handmesh_tutorial.budget.MAX_IMAGE_SIZE]. A reader checks a PNG's size
+before decoding it, so a crafted file cannot make it decode gigapixels (a decompression bomb).
+"""
+
+# Plausibility ranges: finite but absurd values (a damaged or hostile file) are refused by the
+# reader, so that `verify_dataset` and ``--skip-bad`` find them. Generous on purpose.
+MAX_DISTANCE_M = 10.0
+"""Largest ``|x|``, ``|y|`` or ``|z|`` (metres, camera frame) of a vertex or joint: the bodies of
+an image are within metres of its camera (the generator's are within about 1 m)."""
+MIN_DEPTH_M = 0.001
+"""Smallest ``z`` (metres) of a hand's vertex or joint: a hand in the image is in front of the
+camera (the projection divides by ``z``)."""
+FOCAL_RANGE = (0.1, 100.0)
+"""``fx`` and ``fy`` of ``K`` as multiples of the image's larger side: fields of view from about
+157 degrees down to 0.6 (the generator's are about 1.6, FreiHAND's about 2)."""
+PRINCIPAL_POINT_MARGIN = 5.0
+"""``cx`` (``cy``) of ``K`` may lie up to this many image widths (heights) outside the image (a
+crop of a larger photo moves it off-centre)."""
 
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip entry date: np.savez would store the wall clock
 _PNG_LEVEL = 6
@@ -96,6 +118,36 @@ def _array(a: Any, where: str, shape: tuple, kind: str, dtype: Any) -> np.ndarra
     return out
 
 
+def _check_points(p: np.ndarray, where: str, hand: bool) -> None:
+    """Refuse coordinates beyond `MAX_DISTANCE_M` and, for a hand, depths below `MIN_DEPTH_M`."""
+    far = float(np.abs(p).max(initial=0.0))
+    if far > MAX_DISTANCE_M:
+        raise _fail(where, f"holds a coordinate of {far:.3g} m, beyond +-{MAX_DISTANCE_M:g} m of "
+                           "the camera (MAX_DISTANCE_M): a damaged or foreign file")
+    if hand and p.size and float(p[:, 2].min()) < MIN_DEPTH_M:
+        raise _fail(where, f"has a hand point at z = {float(p[:, 2].min()):.3g} m, not in front "
+                           f"of the camera (z >= {MIN_DEPTH_M:g} m, MIN_DEPTH_M)")
+
+
+def _check_camera(K: np.ndarray, hw: Sequence[int], where: str) -> None:
+    """Refuse a ``K`` that is not an OpenCV pinhole matrix of plausible focal lengths
+    (`FOCAL_RANGE`) and principal point (`PRINCIPAL_POINT_MARGIN`) for an image of ``hw``."""
+    h, w = (int(x) for x in hw)
+    if K[0, 1] != 0 or K[1, 0] != 0 or tuple(K[2]) != (0.0, 0.0, 1.0):
+        raise _fail(where, f"is not a pinhole matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]: "
+                           f"{np.round(K, 6).tolist()}")
+    side, (lo, hi) = max(h, w), FOCAL_RANGE
+    fx, fy, cx, cy = (float(K[i, j]) for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)))
+    if not (lo * side <= fx <= hi * side and lo * side <= fy <= hi * side):
+        raise _fail(where, f"focal lengths fx={fx:.6g}, fy={fy:.6g} px are outside [{lo:g}, "
+                           f"{hi:g}] x the image's larger side {side} px (FOCAL_RANGE): a "
+                           "singular or absurd camera")
+    m = PRINCIPAL_POINT_MARGIN
+    if not (-m * w <= cx <= (1 + m) * w and -m * h <= cy <= (1 + m) * h):
+        raise _fail(where, f"principal point ({cx:.6g}, {cy:.6g}) px lies more than {m:g} image "
+                           f"sizes outside the {w} x {h} image (PRINCIPAL_POINT_MARGIN)")
+
+
 def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
     """Validate a sample and return it with the documented dtypes.
 
@@ -109,6 +161,8 @@ def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
     s: dict[str, Any] = {}
     image = _array(sample["image"], loc("image"), (None, None, 3), "u8", np.uint8)
     hw = image.shape[:2]
+    if max(hw) > MAX_IMAGE_SIZE:
+        raise _fail(loc("image"), f"size {hw} exceeds MAX_IMAGE_SIZE {MAX_IMAGE_SIZE} pixels")
     s["image"] = image
     mask = _array(sample["scene_mask"], loc("scene_mask"), hw, "i", np.int64)
     if mask.size and (mask.min() < 0 or mask.max() > MAX_LABEL):
@@ -171,7 +225,12 @@ def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
         raise _fail(loc("pose"), f"labels {sorted(pose)} are not all hands {hands}")
     s["pose"] = {lab: _array(p, loc(f"pose_{lab}"), (15, 3), "f", np.float32)
                  for lab, p in sorted(pose.items())}
+    for lab, (v, _) in s["meshes"].items():
+        _check_points(v, loc(f"vertices_{lab}"), hand=lab in sides)
+    for lab, j in s["joints"].items():
+        _check_points(j, loc(f"joints_{lab}"), hand=True)
     s["K"] = _array(sample["K"], loc("K"), (3, 3), "f", np.float64)
+    _check_camera(s["K"], hw, loc("K"))
     if sample["kind"] not in KINDS:
         raise _fail(loc("kind"), f"{sample['kind']!r} is not one of {KINDS}")
     s["kind"] = str(sample["kind"])

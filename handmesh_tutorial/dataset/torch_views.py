@@ -41,6 +41,7 @@ from ..freihand import FreiHAND
 from ..metrics import ROOT_INDEX
 from .files import ANNOTATION_MAX_BYTES
 from .reader import InterSHDataset
+from .schema import _check_points
 
 __all__ = [
     "HandCropDataset", "BAD_SAMPLE_ERRORS", "BadSampleError", "find_bad_items", "drop_bad_items",
@@ -126,6 +127,11 @@ class HandCropDataset(torch.utils.data.Dataset):
         """
         raise NotImplementedError
 
+    def sample_name(self, index: int) -> str:
+        """The name of raw sample ``index`` that errors and ``--skip-bad`` lists show: its folder
+        or file name where the reader has one (``"000015"``), else ``str(index)``."""
+        return str(index)
+
     # -- torch Dataset -----------------------------------------------------------------------
     def set_epoch(self, epoch: int) -> None:
         """Select the augmentation draws of ``epoch`` (call before iterating each epoch)."""
@@ -153,12 +159,13 @@ class HandCropDataset(torch.utils.data.Dataset):
         index = self.indices[i] if self._indices is not None else int(i) % n
         try:
             image, K, verts, joints, side, vr = self._raw(index)
-        except BAD_SAMPLE_ERRORS as e:
-            raise BadSampleError(f"sample {index}: {e} (leave such samples out with "
+            rng = np.random.default_rng([self.seed, self.epoch, index]) if self.train else None
+            return self.make_item(image, K, verts, joints, side, vr, rng, index)
+        except BAD_SAMPLE_ERRORS as e:  # also a crop the sample's values make impossible
+            name = self.sample_name(index)
+            raise BadSampleError(f"sample {name}: {e} (leave such samples out with "
                                  "skip_bad=True / --skip-bad; list them with handmesh verify)",
-                                 index=index, reason=str(e)) from e
-        rng = np.random.default_rng([self.seed, self.epoch, index]) if self.train else None
-        return self.make_item(image, K, verts, joints, side, vr, rng, index)
+                                 index=index, reason=str(e), sample=name) from e
 
     def make_item(self, image, K, vertices, joints, side: str, vr: float,
                   rng: np.random.Generator | None, index: int = -1) -> dict:
@@ -258,8 +265,12 @@ class HandCropDataset(torch.utils.data.Dataset):
         return np.array([self._raw(i)[5] for i in self.indices], dtype=np.float64)
 
 
-BAD_SAMPLE_ERRORS = (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile)
-"""What the readers raise for a sample whose files are missing, unreadable or inconsistent."""
+BAD_SAMPLE_ERRORS = (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile, TypeError,
+                     IndexError, AttributeError, RecursionError)
+"""What a reader raises for a sample whose files are missing, unreadable, inconsistent or
+implausible. The INTER-SH readers raise only ``ValueError`` and ``OSError`` (they convert the
+rest); the others cover a custom dataset's ``load``. ``np.linalg.LinAlgError`` is a
+``ValueError``."""
 
 
 class BadSampleError(ValueError):
@@ -268,12 +279,17 @@ class BadSampleError(ValueError):
     Attributes:
         index: the sample's position in the underlying reader (``None`` when unknown).
         reason: what is wrong with it (the reader's message, naming the file).
+        sample: the sample's name
+            ([`sample_name`][handmesh_tutorial.dataset.torch_views.HandCropDataset.sample_name]:
+            the folder ``"000015"`` of an INTER-SH sample); ``None`` when unknown.
     """
 
-    def __init__(self, message: str, index: int | None = None, reason: str | None = None):
+    def __init__(self, message: str, index: int | None = None, reason: str | None = None,
+                 sample: str | None = None):
         super().__init__(message)
         self.index = index
         self.reason = message if reason is None else reason
+        self.sample = sample
 
 
 def find_bad_items(dataset, progress: bool = False, desc: str = "checking samples") -> list:
@@ -288,9 +304,10 @@ def find_bad_items(dataset, progress: bool = False, desc: str = "checking sample
         desc: the bar's label.
 
     Returns:
-        ``[{"position": i, "index": reader index or i, "error": message}, ...]`` in item order;
-        ``position`` is the item's position in ``dataset``, ``index`` the sample's position in
-        the underlying reader (what ``handmesh verify`` and the sample folders number).
+        ``[{"position": i, "index": reader index or i, "sample": name, "error": message}, ...]``
+        in item order; ``position`` is the item's position in ``dataset``, ``index`` the
+        sample's position in the underlying reader, ``sample`` its name (the folder that
+        ``handmesh verify`` lists, e.g. ``"000015"``; ``str(index)`` when the reader has none).
     """
     from .._progress import progress_bar
 
@@ -300,7 +317,9 @@ def find_bad_items(dataset, progress: bool = False, desc: str = "checking sample
             dataset[i]
         except BAD_SAMPLE_ERRORS as e:
             index = getattr(e, "index", None)
-            bad.append({"position": i, "index": i if index is None else int(index),
+            index = i if index is None else int(index)
+            bad.append({"position": i, "index": index,
+                        "sample": getattr(e, "sample", None) or str(index),
                         "error": getattr(e, "reason", str(e))})
     return bad
 
@@ -381,6 +400,11 @@ class InterSHTorchDataset(HandCropDataset):
     def num_raw(self) -> int:
         return len(self.source)
 
+    def sample_name(self, index: int) -> str:
+        if hasattr(self.source, "sample_dir"):
+            return self.source.sample_dir(index).name
+        return super().sample_name(index)
+
     def load(self, index: int) -> tuple:
         if isinstance(self.source, InterSHDataset) and self.source.transform is None:
             return self.source.target(index)  # lean read: no masks, no other bodies
@@ -409,6 +433,9 @@ class InterSHTorchDataset(HandCropDataset):
             if key not in z.files:
                 raise ValueError(f"{path}: no {key!r} (keys {sorted(z.files)})")
             v = z[key].astype(np.float64)
+        if v.ndim != 2 or v.shape[1:] != (3,) or not np.isfinite(v).all():
+            raise ValueError(f"{path}: key {key!r} has shape {v.shape} or non-finite values")
+        _check_points(v, f"{path}: key {key!r}", hand=True)  # the reader's plausibility range
         if ann["sides"][t] == "left" and self.mirror_left:
             v = v * np.array([-1.0, 1.0, 1.0])
         return v
@@ -457,6 +484,9 @@ class FreiHANDTorchDataset(HandCropDataset):
 
     def num_raw(self) -> int:
         return len(self.source)
+
+    def sample_name(self, index: int) -> str:
+        return self.source.image_path(index).stem
 
     def load(self, index: int) -> tuple:
         s = self.source[index]

@@ -21,7 +21,6 @@ from .sample import init_worker, make_sample
 __all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
 
 
-
 def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: int = 224,
                           workers: int = 1, balance_vr: bool = False,
                           shard: tuple[int, int] | None = None, limits: str = "anatomical",

@@ -255,8 +255,9 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``comparison`` (markdown, model / rest hand / mean hand, those scored, per VR bin, kind and
         overall; ``""`` without either baseline), ``predictions`` (``vertices`` (N, V, 3),
         ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
-        ``skipped`` (``[{"index": reader index, "error": message}, ...]``, the items ``skip_bad``
-        left out; also in ``eval.json``), ``notes`` (list of str: files not written, and why).
+        ``skipped`` (``[{"index": reader index, "sample": folder name such as "000015",
+        "error": message}, ...]``, the items ``skip_bad`` left out; also in ``eval.json``),
+        ``notes`` (list of str: files not written, and why).
 
     Shapes:
         ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
@@ -297,7 +298,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     skipped = []
     if skip_bad:
         dataset, bad = TV.drop_bad_items(dataset, progress, "evaluation")
-        skipped = [{"index": b["index"], "error": b["error"]} for b in bad]
+        skipped = [{"index": b["index"], "sample": b["sample"], "error": b["error"]}
+                   for b in bad]
     if len(dataset) == 0:
         raise ValueError("the evaluation set is empty")
 

@@ -109,7 +109,8 @@ class TrainResult:
         rank: this process's rank.
         world_size: the number of processes.
         skipped: with ``TrainConfig.skip_bad``, the items left out:
-            ``[{"split": "train" | "val", "index": reader index, "error": message}, ...]``.
+            ``[{"split": "train" | "val", "index": reader index, "sample": folder name
+            such as "000015", "error": message}, ...]``.
     """
 
     out_dir: Path
@@ -490,7 +491,8 @@ def _skip_bad_items(train_ds, val_ds, progress: bool):
             continue
         found[split], bad = TV.drop_bad_items(ds, progress, "training" if split == "train"
                                              else "validation", allow_empty=split == "val")
-        skipped += [{"split": split, "index": b["index"], "error": b["error"]} for b in bad]
+        skipped += [{"split": split, "index": b["index"], "sample": b["sample"],
+                     "error": b["error"]} for b in bad]
         if bad:
             warnings.warn(f"skipping {len(bad)} of {len(ds)} {split} samples that cannot be "
                           f"read (first: {bad[0]['error']})", stacklevel=4)
