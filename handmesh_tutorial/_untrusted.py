@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MAX_NPZ_BYTES", "MAX_CHECKPOINT_BYTES", "check_npz", "open_npz", "check_checkpoint",
-           "load_torch_file"]
+__all__ = ["MAX_NPZ_BYTES", "MAX_CHECKPOINT_BYTES", "check_npz", "open_npz", "read_npz",
+           "check_checkpoint", "load_torch_file"]
 
 MAX_NPZ_BYTES = 256 * 2**20
 """Most bytes the arrays of one ``.npz`` may declare, all members together (the largest the
@@ -106,6 +106,33 @@ def open_npz(path: str | os.PathLike, max_bytes: int = MAX_NPZ_BYTES) -> Iterato
         fh.seek(0)
         with np.load(fh, allow_pickle=False) as z:
             yield z
+
+
+def read_npz(path: str | os.PathLike, keys=None, max_bytes: int = MAX_NPZ_BYTES) -> dict:
+    """The arrays of an untrusted ``.npz`` through `open_npz`, every failure a ValueError.
+
+    Args:
+        path: the ``.npz``.
+        keys: names to read (those the file has); ``None``: all.
+        max_bytes: most bytes all its arrays together may declare.
+
+    Returns:
+        ``{name: array}``.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: refused by `check_npz`, or unreadable (a damaged zip, a short member...):
+            the message names the file.
+    """
+    try:
+        with open_npz(path, max_bytes) as z:
+            return {k: z[k] for k in (z.files if keys is None else keys) if k in z.files}
+    except FileNotFoundError:
+        raise
+    except Exception as e:  # BadZipFile, OSError, numpy's ValueError...
+        if isinstance(e, ValueError) and str(e).startswith(f"{path}:"):
+            raise  # check_npz's refusal names the file already
+        raise ValueError(f"{path}: not a readable npz ({type(e).__name__}: {e})") from e
 
 
 def check_checkpoint(path: str | os.PathLike, max_bytes: int = MAX_CHECKPOINT_BYTES) -> None:

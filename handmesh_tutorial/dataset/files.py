@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_write_bytes, fsync_dir, json_safe
-from .._untrusted import open_npz
+from .._untrusted import read_npz
 from .schema import (
     _KNOWN_KEYS,
     FORMAT_VERSION,
@@ -350,17 +350,8 @@ def read_annotation(directory: str | os.PathLike) -> dict:
 
 
 def _read_npz(npz_path: Path, keys=None) -> dict:
-    """The arrays of an ``annotation.npz`` (those of ``keys`` that it has, or all), its declared
-    sizes checked first (`ANNOTATION_MAX_BYTES`); any failure is a ValueError naming the file."""
-    try:
-        with open_npz(npz_path, ANNOTATION_MAX_BYTES) as z:
-            return {k: z[k] for k in (z.files if keys is None else keys) if k in z.files}
-    except ValueError as e:
-        if str(e).startswith(f"{npz_path}:"):  # open_npz's refusal names the file already
-            raise
-        raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
-    except Exception as e:  # BadZipFile, OSError, ...
-        raise ValueError(f"{npz_path}: not a readable npz ({type(e).__name__}: {e})") from e
+    """An ``annotation.npz``'s arrays, declared sizes checked first (`ANNOTATION_MAX_BYTES`)."""
+    return read_npz(npz_path, keys, ANNOTATION_MAX_BYTES)
 
 
 @_named_errors
