@@ -13,10 +13,10 @@ baseline measured in the same run):
    and ``onnxscript`` are importable) and the first call of ``torch.compile(fullgraph=True)``
    with the ``aot_eager`` and ``inductor`` backends, with the largest difference from eager.
 
-Batch = ``hmt.budget().batch_size``, threads = ``--threads`` (default 1). Times are the fastest
-of ``--repeats`` round-robin runs.
+Batch = ``--batch`` (default ``hmt.budget().batch_size``), threads = ``--threads`` (default 1).
+Times are the fastest of ``--repeats`` round-robin runs.
 
-    .venv/bin/python benchmarks/export.py [--repeats 5] [--threads 1] [--no-export]
+    .venv/bin/python benchmarks/export.py [--repeats 5] [--threads 1] [--batch B] [--no-export]
 """
 
 from __future__ import annotations
@@ -124,11 +124,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--batch", type=int, default=None,
+                        help="batch size (default: the budget's)")
     parser.add_argument("--no-export", action="store_true", help="skip the export timings")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
-    batch = hmt.budget().batch_size
+    batch = hmt.budget().batch_size if args.batch is None else args.batch
     print(f"torch {torch.__version__}, threads {args.threads}, batch {batch}")
     hand = hmt.hand.HandModel("right")
     hier = hmt.sampling.mesh_hierarchy(hand.template_vertices, hand.faces)

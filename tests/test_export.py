@@ -112,18 +112,20 @@ def test_torch_export_equals_eager_at_any_batch(nets, programs, name):
     ep = programs(name)
     assert "sparse" not in str(ep.graph)
     _assert_equal_to_eager(net, x, ep.module()(x))
-    x3 = torch.cat([x, x[:1].flip(-1)])  # another batch size than the example's
+    x3 = torch.cat([x, x[:1].flip(-1)])  # other batch sizes than the example's
     _assert_equal_to_eager(net, x3, ep.module()(x3))
+    _assert_equal_to_eager(net, x3[2:], ep.module()(x3[2:]))
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "pretrained"
+                                  else n for n in NAMES])
 def test_onnx_export_runs_in_onnxruntime_equal_to_eager(nets, programs, name, tmp_path):
     pytest.importorskip("onnxscript", reason="ONNX export needs onnxscript (the dev extra)")
     ort = pytest.importorskip("onnxruntime", reason="running ONNX needs onnxruntime (dev extra)")
     net, x = nets[name]
     path = tmp_path / "net.onnx"
-    torch.onnx.export(programs(name), f=path, dynamo=True, verbose=False,
-                      input_names=["images"], output_names=list(net(x[:1]))).save(path)
+    torch.onnx.export(programs(name), f=path, verbose=False, input_names=["images"],
+                      output_names=list(net(x[:1])))
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
     assert [o.name for o in session.get_outputs()] == list(net(x[:1]))
     x3 = torch.cat([x, x[:1].flip(-1)])
@@ -139,22 +141,33 @@ def test_compile_fullgraph_equals_eager(nets, name):
     _assert_equal_to_eager(net, x, out)
 
 
-def test_inductor_compiles_the_smallest_decoder_forward_and_backward(nets):
+def test_compiled_training_gives_the_eager_gradients(nets):
+    # what torch.compile is used for in training: the captured backward equals eager's
     net, x = nets["single"]
     torch._dynamo.reset()
-    compiled = torch.compile(net, fullgraph=True)  # inductor, the default backend
+    compiled = torch.compile(net, fullgraph=True, backend="aot_eager")
     grads = []
     for fn in (net, compiled):
         net.zero_grad()
         out = fn(x)
         (out["vertices"].square().sum() + out["joints"].sum()).backward()
         grads.append({n: p.grad.clone() for n, p in net.named_parameters()})
-    _assert_equal_to_eager(net, x, {k: v.detach() for k, v in out.items()})
     for n, g in grads[0].items():
         torch.testing.assert_close(grads[1][n], g, rtol=1e-4, atol=1e-6, msg=n)
 
 
-def test_jit_trace_of_the_pretrained_network_equals_eager(nets):
+@pytest.mark.slow
+def test_inductor_compiles_the_smallest_decoder(nets):
+    # inductor's fixed cost (C++ kernels) is tens of seconds on 2 CPUs even for one map: one run
+    net, x = nets["single"]
+    torch._dynamo.reset()
+    with torch.no_grad():
+        out = torch.compile(net, fullgraph=True)(x)  # inductor, the default backend
+    _assert_equal_to_eager(net, x, out)
+
+
+def test_jit_trace_of_the_pretrained_network_saves_and_equals_eager(nets, tmp_path):
     net, x = nets["pretrained"]
     traced = torch.jit.trace(net, (x,), strict=False, check_trace=False)
-    _assert_equal_to_eager(net, x, traced(x))
+    torch.jit.save(traced, tmp_path / "net.pt")  # a graph with no Python calls left in it
+    _assert_equal_to_eager(net, x, torch.jit.load(tmp_path / "net.pt")(x))
