@@ -17,8 +17,10 @@ with the transpose precomputed), on features laid out vertex-major ``(V, B*C)``:
 product per map and batch instead of a gather of ``(B, V, K, C)`` and a scatter-add in the
 backward pass (about 8x faster on a CPU at the demo's sizes, ``benchmarks/train.py``). The
 original formulation (a gather and a weighted sum over at most ``K`` non-zeros per row) stays as
-``method="gather"``, the reference the tests compare against. No ``torch_scatter`` is needed,
-the result is deterministic and the matrices are buffers that follow ``.to(device)``.
+``method="gather"``, the reference the tests compare against, and the path taken while
+``torch.compile``, ``torch.export``, the ONNX exporter or ``torch.jit.trace`` capture a graph
+(sparse tensors cannot be traced). No ``torch_scatter`` is needed, the result is deterministic
+and the matrices are buffers that follow ``.to(device)``.
 
 Taught in notebook 07 ("The multi-path decoder").
 
@@ -59,6 +61,12 @@ def _csr(crow, col, values, shape) -> torch.Tensor:
         return torch.sparse_csr_tensor(crow, col, values, shape, check_invariants=False)
 
 
+def _tracing() -> bool:
+    """A graph is being captured (``torch.compile``, ``torch.export`` and the ONNX exporter
+    built on it, ``torch.jit.trace``): sparse CSR tensors cannot be traced."""
+    return torch.compiler.is_compiling() or torch.jit.is_tracing()
+
+
 class _VertexMatmul(torch.autograd.Function):
     """``y[b] = M @ x[b]`` for a fixed sparse ``M``: x ``(B, V_in, C)`` -> ``(B, V_out, C)``.
 
@@ -94,6 +102,10 @@ class SparseVertexMap(nn.Module):
     default; the CSR parts of ``M`` and ``M^T``, float32, are non-persistent buffers too) or by
     the original gather and weighted sum over the padded rows (``method="gather"``, the
     reference); both give the same values up to float rounding (the order of the sums differs).
+    While a graph is captured (``torch.compile``, ``torch.export`` and the ONNX export built on
+    it, ``torch.jit.trace``) the map uses the gather path whatever ``method`` says: sparse
+    tensors cannot be traced, so exported and compiled networks hold only dense operations
+    (``docs/concepts/export.md``).
 
     Args:
         matrix: scipy sparse matrix or dense array, shape ``(V_out, V_in)``.
@@ -158,7 +170,7 @@ class SparseVertexMap(nn.Module):
             raise ValueError(f"expected features (B, {self.in_vertices}, C), got {tuple(x.shape)}")
         if self.is_selection:
             return x.index_select(1, self.index[:, 0])
-        if self.method == "csr":
+        if self.method == "csr" and not _tracing():
             # sparse products exist for float32/float64 only: half precision (autocast) is
             # computed in float32 and cast back
             dt = x.dtype if x.dtype in (torch.float32, torch.float64) else torch.float32
