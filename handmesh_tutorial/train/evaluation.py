@@ -20,7 +20,7 @@ from torch import nn
 from .. import augment as A
 from .. import metrics as M
 from .. import viz
-from .._io import atomic_savez, write_json
+from .._io import atomic_savez, check_writable, write_json
 from .._progress import progress_bar
 from ..dataset import KINDS, InterSHDataset
 from ..dataset import torch_views as TV
@@ -254,8 +254,12 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``per_sample`` entries ``(N,)``.
     """
     if threads is not None:
-        torch.set_num_threads(int(threads))
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+            raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
+        torch.set_num_threads(threads)
     dev = _resolve_device(device)
+    if out_dir is not None:  # a folder we cannot write is found now, not after evaluating
+        check_writable(out_dir)
     source = None
     if isinstance(checkpoint_or_model, str | os.PathLike):
         source = str(checkpoint_or_model)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -38,12 +39,15 @@ def resolve_template(spec=None):
 
     Raises:
         FileNotFoundError: the ``.npz`` does not exist.
-        ValueError: it lacks a key or has bad shapes.
+        ValueError: it is not a ``.npz``, lacks a key or has bad shapes.
     """
     if isinstance(spec, str | os.PathLike):
         path = Path(spec)
         if not path.is_file():
             raise FileNotFoundError(f"template file not found: {path}")
+        if not zipfile.is_zipfile(path):  # numpy's own message would suggest allow_pickle
+            raise ValueError(f"{path}: not a template file: give a .npz written by "
+                             "train.save_template (vertices, faces, joint_regressor)")
         with np.load(path, allow_pickle=False) as z:
             missing = {"vertices", "faces", "joint_regressor"} - set(z.files)
             if missing:
