@@ -22,10 +22,35 @@ from typing import IO, Any
 import numpy as np
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
-           "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer"]
+           "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer",
+           "EnvironmentFailure", "names_path", "check_writable"]
 
 
 _TMP_SUFFIX = ".tmp"
+
+
+class EnvironmentFailure(RuntimeError):
+    """A run stopped by its surroundings, not by its inputs or a bug: another process holds the
+    writer lock, a worker process was killed. Resolve the cause and rerun the same command (it
+    resumes). ``handmesh`` exits with code 6 (``cli.EXIT_CODES["environment"]``), as for a full
+    disk or a read-only folder."""
+
+
+@contextlib.contextmanager
+def names_path(path: str | os.PathLike):
+    """Re-raise an ``OSError`` that names no file (``write`` on a full disk: ``[Errno 28] No
+    space left on device``) as the same error type and errno naming ``path``.
+
+    Raises:
+        OSError: the original error with ``filename=path`` (same subclass, e.g.
+            ``PermissionError``), chained to it.
+    """
+    try:
+        yield
+    except OSError as err:
+        if err.filename is not None or err.errno is None:
+            raise
+        raise OSError(err.errno, err.strerror or str(err), os.fspath(path)) from err
 
 
 @contextlib.contextmanager
@@ -38,7 +63,8 @@ def single_writer(lock_file: str | os.PathLike, what: str):
         what: the resource, for the message (e.g. ``"runs/demo/data"``).
 
     Raises:
-        RuntimeError: another process holds the lock (the message names ``what`` and the file).
+        EnvironmentFailure: another process holds the lock (a ``RuntimeError``; the message
+            names ``what`` and the file).
     """
     try:
         import fcntl
@@ -49,12 +75,31 @@ def single_writer(lock_file: str | os.PathLike, what: str):
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise RuntimeError(f"{what} is being written by another process ({lock_file} is "
-                               "locked)") from None
+            raise EnvironmentFailure(f"{what} is being written by another process ({lock_file} "
+                                     "is locked); wait for it to end, or stop it") from None
         try:
             yield
         finally:
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
+def check_writable(folder: str | os.PathLike) -> Path:
+    """Create ``folder`` (and its parents) and check that a file can be written in it, before a
+    long computation whose results go there.
+
+    Returns:
+        The folder.
+
+    Raises:
+        OSError: it cannot be created or written (read-only file system, no permission, a file
+            in the way); the error names the folder.
+    """
+    folder = Path(folder)
+    with names_path(folder):
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder, prefix=".write-check-"):
+            pass
+    return folder
 
 
 def leftover_temporaries(path: str | os.PathLike) -> list[Path]:
@@ -91,6 +136,10 @@ def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, bi
 
     Returns:
         The written path.
+
+    Raises:
+        OSError: the write failed (full disk, read-only or forbidden folder); the error names
+            ``path`` (see `names_path`).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -101,7 +150,8 @@ def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, bi
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     try:
         mode = "wb" if binary else "w"
-        with os.fdopen(fd, mode, **({} if binary else {"encoding": "utf-8"})) as fh:
+        with names_path(path), os.fdopen(fd, mode, **({} if binary else {"encoding": "utf-8"})) \
+                as fh:
             write(fh)
             if durable:
                 fh.flush()

@@ -21,7 +21,9 @@ Taught in notebook 00 ("Quickstart") and notebook 08 ("Training").
 from __future__ import annotations
 
 import argparse
+import errno
 import pickle
+import re
 import sys
 import traceback
 import zipfile
@@ -33,8 +35,15 @@ from .budget import budget
 __all__ = ["EXIT_CODES", "build_parser", "main", "error_kind", "error_message"]
 
 EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4,
-              "exists": 5, "interrupted": 130}
-"""Exit codes of ``handmesh`` (argparse's own usage errors exit with 2)."""
+              "exists": 5, "environment": 6, "interrupted": 130}
+"""Exit codes of ``handmesh`` (argparse's own usage errors exit with 2). ``environment``: the
+run was stopped by its surroundings, not its inputs: a full disk, a read-only or forbidden
+folder, another process holding the writer lock, a killed worker process; fix that and rerun the
+same command (it resumes)."""
+
+# errnos of an OSError that mean the machine, not the input or the code (exit code 6)
+_ENVIRONMENT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM,
+                       errno.EIO, errno.EMFILE, errno.ENFILE, errno.EBUSY, errno.ETXTBSY}
 
 
 class _DeprecatedAlias(argparse.Action):
@@ -147,11 +156,33 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
 def _channels(text: str) -> tuple[int, ...]:
     try:
-        return tuple(int(x) for x in text.split(","))
+        channels = tuple(int(x) for x in text.split(","))
     except ValueError:
+        channels = ()
+    if not channels or min(channels) < 1:
         raise argparse.ArgumentTypeError(
-            f"--channels must be comma-separated integers (e.g. 16,24,32,48,64), got {text!r}"
-        ) from None
+            f"--channels must be comma-separated positive integers (e.g. 16,24,32,48,64), got "
+            f"{text!r}")
+    return channels
+
+
+def _positive_int(text: str) -> int:
+    """An integer >= 1 (``--threads``, ``--batch-size``...); argparse names the option."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return value
+
+
+def _device(text: str) -> str:
+    """``auto``, ``cpu``, ``cuda``, ``cuda:N`` or ``mps`` (torch's other device types are not
+    trained on)."""
+    if not re.fullmatch(r"auto|cpu|cuda(:\d+)?|mps", text):
+        raise argparse.ArgumentTypeError(f"must be auto, cpu, cuda, cuda:N or mps, got {text!r}")
+    return text
 
 
 _TRAIN_OPTIONS = ("data", "dataset", "val_data", "val_fraction", "epochs", "batch_size",
@@ -316,8 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--budget", choices=("smoke", "default", "full"), default=None,
                     help="size tier for epochs / batch / image size / threads (default: "
                     "HANDMESH_BUDGET)")
-    tr.add_argument("--epochs", type=int)
-    tr.add_argument("--batch-size", type=int, help="global batch size")
+    tr.add_argument("--epochs", type=_positive_int)
+    tr.add_argument("--batch-size", type=_positive_int, help="global batch size")
     tr.add_argument("--image-size", type=int)
     tr.add_argument("--lr", type=float, help="Adam learning rate (default: 1e-4)")
     tr.add_argument("--lr-step", type=int, help="epochs between halvings (default: epochs/4)")
@@ -330,8 +361,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--template", help="mesh template: a .npz of train.save_template or your "
                     "MANO_RIGHT.pkl (default: the MakeHuman hand)")
     tr.add_argument("--seed", type=int)
-    tr.add_argument("--device", help="auto | cpu | cuda")
-    tr.add_argument("--threads", type=int, help="torch threads")
+    tr.add_argument("--device", type=_device, help="auto | cpu | cuda | cuda:N | mps")
+    tr.add_argument("--threads", type=_positive_int, help="torch threads")
     tr.add_argument("--precision", choices=("float32", "bfloat16"),
                     help="bfloat16: autocast forward pass (faster on CPUs with bf16 units)")
     tr.add_argument("--loader-workers", dest="num_workers", type=int,
@@ -380,10 +411,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--split", default="evaluation", help="FreiHAND split (default: evaluation)")
     ev.add_argument("--out", default=None, help="write eval.json, predictions.npz and figures")
     ev.add_argument("--image-size", type=int, default=None, help="default: the checkpoint's")
-    ev.add_argument("--batch-size", type=int, default=16)
+    ev.add_argument("--batch-size", type=_positive_int, default=16)
     ev.add_argument("--num", type=int, default=None, help="only the first N samples")
-    ev.add_argument("--device", default="auto")
-    ev.add_argument("--threads", type=int, default=None)
+    ev.add_argument("--device", type=_device, default="auto")
+    ev.add_argument("--threads", type=_positive_int, default=None)
     ev.add_argument("--template", default=None, help="the template used for training (.npz "
                     "or MANO_RIGHT.pkl; default: the one the checkpoint names)")
     ev.add_argument("--network-frame", action="store_true",
@@ -422,20 +453,39 @@ def main(argv: list[str] | None = None) -> int:
 
 def error_kind(err: BaseException) -> str:
     """The [`EXIT_CODES`][handmesh_tutorial.cli.EXIT_CODES] key of an exception raised by a
-    sub-command."""
+    sub-command: bad input (3, 4, 5) vs the environment (6: disk, permissions, lock, a killed
+    worker) vs a bug (1)."""
+    from ._io import EnvironmentFailure
+
     if isinstance(err, FileExistsError):
         return "exists"
     if isinstance(err, FileNotFoundError | NotADirectoryError | IsADirectoryError):
         return "not-found"
+    if isinstance(err, EnvironmentFailure) or (isinstance(err, OSError)
+                                               and err.errno in _ENVIRONMENT_ERRNOS):
+        return "environment"
     if isinstance(err, ValueError | KeyError | pickle.UnpicklingError | zipfile.BadZipFile
                   | EOFError | FloatingPointError):
         return "bad-input"
     return "unexpected"  # TypeError, IndexError, ...: most likely a bug of ours
 
 
+_ENVIRONMENT_HINTS = {
+    errno.ENOSPC: "free some space or choose another output folder",
+    errno.EDQUOT: "free some space or choose another output folder",
+    errno.EROFS: "the file system is read-only: choose another output folder",
+    errno.EACCES: "no permission: choose another output folder or fix its permissions",
+    errno.EPERM: "no permission: choose another output folder or fix its permissions",
+}
+
+
 def error_message(err: BaseException) -> str:
     """One line for a user: the library's message (at most its first three lines joined)."""
     text = str(err) if str(err) else type(err).__name__
+    if isinstance(err, OSError) and err.errno in _ENVIRONMENT_ERRNOS and err.strerror:
+        where = f": {err.filename}" if err.filename is not None else ""
+        text = f"{err.strerror}{where} ({_ENVIRONMENT_HINTS.get(err.errno, 'fix that')}, then " \
+               "rerun the same command: it resumes)"
     if isinstance(err, KeyError) and err.args:
         text = f"missing key {err.args[0]!r}"
     if text.startswith("Caught ") and "Original Traceback" in text:

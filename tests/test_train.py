@@ -150,6 +150,42 @@ def test_resume_continues_exactly(samples, tmp_path):
                 dataset=tr)
 
 
+def test_resume_refuses_data_replaced_at_the_same_path(tmp_path):
+    data = tmp_path / "data"
+
+    def make(root, seed, num=8):
+        generate_dataset(root, functools.partial(toy_sample, image_size=64), num=num, seed=seed,
+                         kind="hand-hand", progress=False, durable=False)
+
+    make(data, 11)
+    cfg = dict(data=str(data), out_dir=str(tmp_path / "run"), batch_size=4, **TINY)
+    T.train(T.TrainConfig(epochs=1, **cfg))
+    ck = torch.load(tmp_path / "run" / "checkpoint_last.pt", weights_only=True)
+    fp = ck["data_fingerprint"]["data"]
+    assert fp["meta"]["seed"] == 11 and fp["samples"] == 8
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["data_fingerprint"] == \
+        ck["data_fingerprint"]
+    data.rename(tmp_path / "first")
+    make(data, 12)  # another set at the same path: only the path used to be compared
+    with pytest.raises(ValueError, match=r"data changed since this run started \(data "
+                       r"meta.json: seed 11 -> 12\).*mix two data sets"):
+        T.train(T.TrainConfig(epochs=2, **cfg), resume=True)
+    import shutil
+
+    shutil.rmtree(data)
+    make(data, 11, num=9)  # the same generator settings, one sample more
+    with pytest.raises(ValueError, match=r"num_samples 8 -> 9.*data sample ids: 8 -> 9 "):
+        T.train(T.TrainConfig(epochs=2, **cfg), resume=True)
+    shutil.rmtree(data)
+    (tmp_path / "first").rename(data)
+    # a checkpoint written before fingerprints: resumes, with a warning
+    del ck["data_fingerprint"]
+    torch.save(ck, tmp_path / "run" / "checkpoint_last.pt")
+    with pytest.warns(UserWarning, match="predates data fingerprints"):
+        res = T.train(T.TrainConfig(epochs=2, **cfg), resume=True)
+    assert res.epochs == 2
+
+
 def test_fresh_run_refuses_an_existing_run_and_cleans_only_its_own_temp_files(samples, tmp_path):
     tr, va = _data(samples, n_train=4)
     cfg = T.TrainConfig(out_dir=str(tmp_path / "run"), epochs=1, batch_size=2, **TINY)

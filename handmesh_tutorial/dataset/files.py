@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write_bytes, fsync_dir, json_safe
+from .._io import atomic_write_bytes, fsync_dir, json_safe, names_path
 from .._untrusted import read_npz
 from .schema import (
     _KNOWN_KEYS,
@@ -173,8 +173,9 @@ def _write_folder(directory: Path, files: Mapping[str, bytes], durable: bool) ->
     tmp = _temporary(directory)
     tmp.mkdir()
     try:
-        for name, data in files.items():
-            _write_file(tmp / name, data, durable)
+        with names_path(directory):  # a full disk's error names no file otherwise
+            for name, data in files.items():
+                _write_file(tmp / name, data, durable)
         if durable:
             fsync_dir(tmp)
         try:

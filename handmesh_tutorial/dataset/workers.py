@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from .._io import EnvironmentFailure
 from .candidates import _make_and_write, _probe_outcome, _Task
 
 __all__: list[str] = []  # private helpers only; see the package
@@ -40,7 +42,6 @@ def _die_with_parent(parent_pid: int) -> None:
     when its parent dies (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread polls the
     parent's pid once a second.
     """
-    import signal
     import threading
 
     if sys.platform.startswith("linux"):
@@ -147,9 +148,32 @@ def _check_for_workers(fns: Sequence[Callable | None], mp_context: str) -> None:
                              "Move it to a module, or use workers=1")
 
 
+_POLL_S = 0.5
+"""Seconds between the checks `_Pool.map` makes that every worker process is alive."""
+_CLOSE_S = 30.0
+"""Seconds `_Pool.close` gives idle workers to exit before it kills them."""
+
+
+def _how_it_ended(exitcode: int | None) -> str:
+    if exitcode is None:
+        return "unknown exit"
+    if exitcode < 0:
+        try:
+            return f"killed by {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"killed by signal {-exitcode}"
+    return f"exit code {exitcode}"
+
+
 class _Pool:
     """The worker processes of one ``generate_dataset`` call (a ``ProcessPoolExecutor`` whose
     workers hold the task), for the VR probe and then the samples.
+
+    A worker that dies (``kill -9``, the out-of-memory killer) ends the run within seconds with
+    ``_io.EnvironmentFailure`` naming it, and the other workers are killed: a dead worker can
+    leave the pool's queues locked, and ``ProcessPoolExecutor`` alone can then wait for the
+    others forever. Killing a worker loses nothing: samples are written atomically and a rerun
+    resumes.
 
     Args:
         task: the `_Task` every worker receives once.
@@ -165,16 +189,54 @@ class _Pool:
 
         self.workers = workers
         self._failed = False   # after an error: shut down without waiting for queued work
+        self._seen: dict = {}  # pid -> worker process
         self._ex = ProcessPoolExecutor(max_workers=workers,
                                        mp_context=multiprocessing.get_context(
                                            _start_method(mp_context)),
                                        initializer=_init_worker,
                                        initargs=(task, worker_init, os.getpid()))
 
+    def _processes(self) -> list:
+        """The worker processes so far (the executor's own table, which starts with the first
+        task and is dropped at shutdown)."""
+        self._seen.update(getattr(self._ex, "_processes", None) or {})
+        return list(self._seen.values())
+
+    def _dead_now(self) -> list:
+        """The workers that have died (their sentinel is ready; nothing is reaped here)."""
+        from multiprocessing.connection import wait
+
+        procs = self._processes()
+        ready = set(wait([p.sentinel for p in procs], timeout=0)) if procs else set()
+        return [p for p in procs if p.sentinel in ready]
+
+    def _death(self, dead: list) -> EnvironmentFailure:
+        """Kill the workers and return the error that names the ``dead`` ones and how they
+        ended."""
+        self._failed = True
+        self._kill()
+        deadline = time.monotonic() + 5.0  # the executor's thread may be reaping them
+        while any(p.exitcode is None for p in dead) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        # once one died the executor terminates the others (SIGTERM): name the first victim
+        first = [p for p in dead if p.exitcode != -signal.SIGTERM] or dead
+        who = ", ".join(f"{p.pid} ({_how_it_ended(p.exitcode)})" for p in first) or "?"
+        text = (f"generation worker process {who} died; the samples on disk are complete: "
+                "rerun the same command to resume (a worker killed by the system was likely "
+                "out of memory: use fewer workers)")
+        if any(p.exitcode is not None and p.exitcode > 0 for p in first):
+            text += ("; a worker that exits at once may have failed to start (a script using "
+                     "workers needs an `if __name__ == '__main__':` guard)")
+        return EnvironmentFailure(text)
+
     def map(self, fn: Callable, args: Sequence[tuple], on_result: Callable[[Any], None]) -> None:
         """Run ``fn(*a)`` for every ``a`` of ``args`` in the workers; ``on_result`` gets each
         result as it comes (any order). A worker's exception is raised here, and then the pool
-        is shut down (its queued work cancelled)."""
+        is shut down (its queued work cancelled, its workers killed).
+
+        Raises:
+            EnvironmentFailure: a worker process died (named, with its signal or exit code).
+        """
         from concurrent.futures import FIRST_COMPLETED, wait
         from concurrent.futures.process import BrokenProcessPool
 
@@ -186,29 +248,50 @@ class _Pool:
                 if len(pending) >= 2 * self.workers:
                     break
             while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                finished, pending = wait(pending, timeout=_POLL_S,
+                                         return_when=FIRST_COMPLETED)
+                if not finished and (dead := self._dead_now()):
+                    raise self._death(dead)  # a death the executor has not noticed (yet)
                 for fut in finished:
                     try:
                         result = fut.result()  # re-raises a worker's error here
                     except BrokenProcessPool as e:
-                        note = getattr(e, "add_note", lambda _: None)  # Python >= 3.11
-                        note("a worker process died: out of memory, killed, or it could not "
-                             "start (a script using workers needs an "
-                             "`if __name__ == '__main__':` guard)")
-                        raise
+                        raise self._death(self._dead_now()) from e
                     on_result(result)
                     nxt = next(it, None)
                     if nxt is not None:
                         pending.add(self._ex.submit(fn, *nxt))
         except BaseException:
             self._failed = True
-            self._ex.shutdown(wait=False, cancel_futures=True)
+            self._kill()
             raise
 
+    def _kill(self) -> None:
+        """Cancel the queued work and kill the workers (what they wrote is complete)."""
+        procs = self._processes()
+        self._ex.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            if p.exitcode is None:
+                p.kill()
+        for p in procs:
+            p.join(timeout=5.0)
+
     def close(self) -> None:
-        """Wait for the workers to finish and end them (idempotent; after an error, end them
-        without waiting)."""
-        self._ex.shutdown(wait=not self._failed, cancel_futures=self._failed)
+        """End the workers (idempotent): after an error, kill them; else let them exit, and
+        kill them if one died meanwhile (the others may then never get their stop message) or
+        after `_CLOSE_S` seconds."""
+        if self._failed:
+            self._kill()
+            return
+        procs = self._processes()
+        self._ex.shutdown(wait=False)
+        deadline = time.monotonic() + _CLOSE_S
+        while any(p.exitcode is None for p in procs) and time.monotonic() < deadline:
+            if any(p.exitcode not in (None, 0) for p in procs):
+                break
+            time.sleep(0.02)
+        if any(p.exitcode is None for p in procs):
+            self._kill()
 
 
 def _run(task: _Task, todo: list[int], workers: int, worker_init: Callable | None,

@@ -23,7 +23,11 @@ def _resolve_device(device: str | torch.device, local_rank: int = 0) -> torch.de
         if not torch.cuda.is_available():
             raise ValueError("device 'cuda' requested but torch.cuda.is_available() is False")
         return torch.device("cuda", local_rank)
-    return torch.device(device)
+    try:
+        return torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"device must be 'auto', 'cpu', 'cuda', 'cuda:N' or 'mps', got "
+                         f"{device!r}") from None
 
 
 def _init_distributed(device: torch.device) -> tuple[int, int, bool]:

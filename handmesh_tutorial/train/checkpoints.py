@@ -188,6 +188,10 @@ def dequantize_state_dict(stored: Mapping[str, torch.Tensor],
     return out
 
 
+# what every checkpoint holds (save_checkpoint; a weights-only one has optimizer None)
+_REQUIRED_KEYS = ("model", "config", "template_hash", "epoch", "step", "history", "best")
+
+
 def _read_checkpoint(path: str | os.PathLike, map_location="cpu") -> dict:
     if str(path) == "pretrained":
         from ..pretrained import pretrained_path
@@ -207,13 +211,18 @@ def _read_checkpoint(path: str | os.PathLike, map_location="cpu") -> dict:
             + (f" ({what[0]})" if what else "") + ". It was not written by handmesh_tutorial "
             "or was altered; never load it with weights_only=False, which runs any code it "
             "carries.") from None
-    except (RuntimeError, EOFError, OSError) as err:
+    except (RuntimeError, EOFError, OSError, KeyError, IndexError, ValueError, TypeError,
+            AttributeError) as err:  # garbage makes torch's unpickler fail in many ways
+        why = (str(err).strip().splitlines() or [type(err).__name__])[0][:120]
         raise ValueError(f"{path}: unreadable checkpoint (truncated or not a torch file: "
-                         f"{str(err).strip().splitlines()[0][:120]})") from err
+                         f"{type(err).__name__}: {why})") from err
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT:
         got = ck.get("format") if isinstance(ck, dict) else type(ck).__name__
         raise ValueError(f"{path}: not a handmesh_tutorial checkpoint (format {got!r}, "
                          f"expected {CHECKPOINT_FORMAT!r})")
+    missing = sorted(k for k in _REQUIRED_KEYS if k not in ck)
+    if missing:
+        raise ValueError(f"{path}: not a handmesh_tutorial checkpoint (missing keys {missing})")
     if ck.get("weights") == "int8":  # an exported, quantized file (pretrained.export_pretrained)
         ck["model"] = dequantize_state_dict(ck["model"], ck["scales"])
     return ck

@@ -164,6 +164,11 @@ class TrainConfig:
         self.out_dir = str(self.out_dir)
         if self.channels is not None:
             self.channels = tuple(int(c) for c in self.channels)
+            if not self.channels or min(self.channels) < 1:
+                raise ValueError(f"channels must be positive integers, got {self.channels}")
+        if self.threads is not None and (isinstance(self.threads, bool)
+                                         or not isinstance(self.threads, int) or self.threads < 1):
+            raise ValueError(f"threads must be a positive integer or None, got {self.threads!r}")
         self.model_kwargs = dict(self.model_kwargs or {})
         if self.precision not in ("float32", "bfloat16"):
             raise ValueError(f"precision must be 'float32' or 'bfloat16', got {self.precision!r}")

@@ -9,13 +9,17 @@ Taught in notebook 08 ("Training").
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from ..dataset import InterSHDataset
+from ..dataset import InterSHDataset, read_meta
 from ..dataset import torch_views as TV
+from ..dataset.reader import _present
+from ..dataset.schema import SAMPLES_DIR
 from ..freihand import FreiHAND
 from .config import TrainConfig
 
@@ -135,3 +139,56 @@ def make_datasets(config: TrainConfig):
     tr = [u + nu * r for r in range(reps) for u in tr_u]
     va = [u + nu * r for r in range(reps) for u in va_u]
     return make_fh(src, tr, True), (make_fh(src, va, False) if va else None)
+
+
+def _root_fingerprint(root: str, dataset: str) -> dict:
+    """A cheap identity of a data root: its ``meta.json`` (less ``generator_version``) and a
+    hash of its sample ids (INTER-SH), or the names and sizes of its ``*.json`` annotation files
+    (FreiHAND). No image is read."""
+    path = Path(root)
+    if dataset == "intersh":
+        meta = {k: v for k, v in read_meta(path).items() if k != "generator_version"}
+        ids = _present(path / SAMPLES_DIR)
+        digest = hashlib.sha256(",".join(map(str, ids)).encode()).hexdigest()[:16]
+        return {"format": dataset, "meta": meta, "samples": len(ids), "ids_sha256": digest}
+    files = {p.name: p.stat().st_size for p in sorted(path.glob("*.json"))}
+    return {"format": dataset, "files": files}
+
+
+def _data_fingerprint(config: TrainConfig) -> dict | None:
+    """``{"data": ..., "val_data": ...}`` fingerprints of a config's roots (`_root_fingerprint`),
+    stored in checkpoints and compared on resume; ``None`` without ``config.data``."""
+    if config.data is None:
+        return None
+    return {"data": _root_fingerprint(config.data, config.dataset),
+            "val_data": None if config.val_data is None
+            else _root_fingerprint(config.val_data, config.dataset)}
+
+
+def _fingerprint_changes(saved: dict, now: dict) -> list[str]:
+    """What differs between two `_data_fingerprint` results, one phrase per difference."""
+    out = []
+    for role in ("data", "val_data"):
+        a, b = saved.get(role), now.get(role)
+        if a == b:
+            continue
+        if a is None or b is None or a.get("format") != b.get("format"):
+            out.append(f"{role}: {'none' if a is None else a.get('format')} -> "
+                       f"{'none' if b is None else b.get('format')}")
+            continue
+        ma, mb = a.get("meta") or {}, b.get("meta") or {}
+        keys = sorted(k for k in set(ma) | set(mb) if ma.get(k) != mb.get(k))
+        shown = [f"{k} {ma.get(k)!r} -> {mb.get(k)!r}" for k in keys
+                 if len(repr(ma.get(k))) + len(repr(mb.get(k))) < 60]
+        if keys:
+            out.append(f"{role} meta.json: {', '.join(shown)}"
+                       + (f" (differing keys {keys})" if len(shown) < len(keys) else ""))
+        if a.get("ids_sha256") != b.get("ids_sha256"):
+            same = a.get("samples") == b.get("samples")
+            out.append(f"{role} sample ids: {a.get('samples')} -> {b.get('samples')} samples"
+                       + (" (as many, other ids)" if same else ""))
+        fa, fb = a.get("files") or {}, b.get("files") or {}
+        if fa != fb:
+            names = sorted(k for k in set(fa) | set(fb) if fa.get(k) != fb.get(k))
+            out.append(f"{role} annotation files differ (names or sizes): {names}")
+    return out

@@ -21,7 +21,7 @@ from torch import nn
 from .. import augment as A
 from .. import metrics as M
 from .. import viz
-from .._io import atomic_savez, write_json
+from .._io import atomic_savez, check_writable, write_json
 from .._optional import require
 from .._progress import progress_bar
 from ..budget import check_image_size
@@ -266,8 +266,12 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     if image_size is not None:  # before anything is read or allocated
         check_image_size(image_size)
     if threads is not None:
-        torch.set_num_threads(int(threads))
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+            raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
+        torch.set_num_threads(threads)
     dev = _resolve_device(device)
+    if out_dir is not None:  # a folder we cannot write is found now, not after evaluating
+        check_writable(out_dir)
     source = None
     if isinstance(checkpoint_or_model, str | os.PathLike):
         source = str(checkpoint_or_model)

@@ -74,7 +74,7 @@ from .checkpoints import (
     save_checkpoint,
 )
 from .config import RESUMABLE_KEYS, TrainConfig, changed_settings
-from .data import EpochBatchSampler, make_datasets
+from .data import EpochBatchSampler, _data_fingerprint, _fingerprint_changes, make_datasets
 from .evaluation import validate
 from .features import EncodedDataset, is_deterministic, model_outputs
 from .templates import build_model_from_config, resolve_template, template_hash
@@ -242,8 +242,9 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         FileExistsError: ``out_dir`` holds a run's checkpoints and neither ``resume`` nor
             ``overwrite`` was given.
         RuntimeError: another process is training into ``out_dir`` (it holds ``.train.lock``).
-        ValueError: inconsistent config, template/data vertex counts that differ, or a
-            checkpoint of another architecture.
+        ValueError: inconsistent config, template/data vertex counts that differ, a
+            checkpoint of another architecture, or (``resume``) data that changed since the
+            run started (its ``meta.json`` or sample ids; the message lists what differs).
     """
     t_start = time.perf_counter()
     if config.threads is not None:
@@ -299,6 +300,18 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
                 f"{last}: cannot resume with other settings (checkpoint, now): {changed}. "
                 f"Resume with the run's settings (only {', '.join(RESUMABLE_KEYS)} may "
                 "change), or start a new run in another out_dir")
+    # the data itself, not only its path: a folder replaced by another set is refused
+    fingerprint = _data_fingerprint(config) if dataset is None else None
+    if ck is not None and fingerprint is not None:
+        if "data_fingerprint" not in ck:
+            warnings.warn(f"{last} predates data fingerprints: cannot check that {config.data} "
+                          "holds the data this run started with", stacklevel=3)
+        elif ck["data_fingerprint"] is not None and \
+                (diff := _fingerprint_changes(ck["data_fingerprint"], fingerprint)):
+            raise ValueError(
+                f"{last}: the data changed since this run started ({'; '.join(diff)}): "
+                "resuming would mix two data sets in one run. Restore the run's data, or "
+                "start a new run in another out_dir")
 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it
@@ -370,7 +383,8 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         _set_rng_state(rng_to_restore)
     if is_main:
         write_json(out / "config.json", {"config": config.to_dict(), "template_hash": t_id,
-                                          "world_size": world})
+                                          "world_size": world,
+                                          "data_fingerprint": fingerprint})
     sampler = EpochBatchSampler(len(train_ds), config.batch_size, config.seed, rank, world,
                                 config.micro_batches)
     val_bs = config.val_batch_size or config.batch_size
@@ -429,7 +443,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         if is_main:
             kw = dict(model=net, config=config, template_id=t_id, epoch=epoch + 1, step=step,
                       history=history, step_losses=step_losses, best=best,
-                      durable=config.durable)
+                      durable=config.durable, extra={"data_fingerprint": fingerprint})
             # Order matters for a kill between two writes: best before last, so that a resume
             # from the older last checkpoint redoes this epoch and rewrites best; the CSVs
             # after both, and a resume rewrites them from the checkpoint's history.

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -44,9 +45,9 @@ def resolve_template(spec=None):
 
     Raises:
         FileNotFoundError: the file does not exist.
-        ValueError: the ``.npz`` lacks a key or has bad shapes; the ``.pkl`` is not a
-            MANO-format file or is a left hand (the network predicts right hands, left ones
-            mirrored: give ``MANO_RIGHT.pkl``).
+        ValueError: the file is neither a ``.npz`` nor a ``.pkl``; the ``.npz`` lacks a key or
+            has bad shapes; the ``.pkl`` is not a MANO-format file or is a left hand (the
+            network predicts right hands, left ones mirrored: give ``MANO_RIGHT.pkl``).
         UnsafePickleError: the ``.pkl`` names a class outside the MANO loader's whitelist.
     """
     if isinstance(spec, str | os.PathLike):
@@ -55,6 +56,10 @@ def resolve_template(spec=None):
             raise FileNotFoundError(f"template file not found: {path}")
         if path.suffix.lower() == ".pkl":
             return as_template(_mano_template(path))
+        if not zipfile.is_zipfile(path):  # numpy's own message would suggest allow_pickle
+            raise ValueError(f"{path}: not a template file: give a .npz written by "
+                             "train.save_template (vertices, faces, joint_regressor) or a "
+                             "MANO_RIGHT.pkl")
         with open_npz(path) as z:
             missing = {"vertices", "faces", "joint_regressor"} - set(z.files)
             if missing:

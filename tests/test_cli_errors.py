@@ -1,0 +1,168 @@
+"""Exit codes and one-line messages of ``handmesh``: bad input vs the environment vs a bug."""
+
+from __future__ import annotations
+
+import errno
+import functools
+import tempfile
+
+import pytest
+import torch
+
+from handmesh_tutorial import _io, cli
+from handmesh_tutorial import train as T
+from handmesh_tutorial.dataset import files as F
+from handmesh_tutorial.dataset import generate_dataset
+from handmesh_tutorial.testing import toy_sample
+
+TRAIN = ["--epochs", "1", "--batch-size", "4", "--image-size", "32", "--channels", "4,4,8,8,8",
+         "--latent-channels", "8", "--threads", "1", "--no-progress", "--no-fsync"]
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory):
+    r = tmp_path_factory.mktemp("toy_intersh")
+    generate_dataset(r, functools.partial(toy_sample, image_size=64), num=8, seed=11,
+                     kind="hand-hand", progress=False, durable=False)
+    return r
+
+
+def _fail_with(monkeypatch, err):
+    def command(args):
+        raise err
+
+    monkeypatch.setattr(cli, "_cmd_verify", command)
+    return cli.main(["verify", "some/root"])
+
+
+@pytest.mark.parametrize("err, kind, words", [
+    (OSError(errno.ENOSPC, "No space left on device", "runs/data/samples/000003"),
+     "environment", ["No space left on device: runs/data/samples/000003", "free some space",
+                     "rerun the same command"]),
+    (PermissionError(errno.EACCES, "Permission denied", "/ro/out/eval.json"), "environment",
+     ["Permission denied: /ro/out/eval.json", "permissions"]),
+    (OSError(errno.EROFS, "Read-only file system", "/ro/out"), "environment",
+     ["Read-only file system: /ro/out", "another output folder"]),
+    (_io.EnvironmentFailure("runs/x is being written by another process"), "environment",
+     ["runs/x is being written by another process"]),
+    (ValueError("meta.json: bad seed"), "bad-input", ["meta.json: bad seed"]),
+    (FileNotFoundError("template file not found: t.npz"), "not-found", ["t.npz"]),
+    (TypeError("unsupported operand"), "unexpected", ["unsupported operand"]),
+])
+def test_exit_codes_tell_bad_input_the_environment_and_a_bug_apart(monkeypatch, capsys, err,
+                                                                   kind, words):
+    assert cli.EXIT_CODES["environment"] == 6  # the other codes keep their numbers
+    assert {k: cli.EXIT_CODES[k] for k in ("ok", "unexpected", "usage", "bad-input",
+                                           "not-found", "exists", "interrupted")} == {
+        "ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4, "exists": 5,
+        "interrupted": 130}
+    assert _fail_with(monkeypatch, err) == cli.EXIT_CODES[kind]
+    line = capsys.readouterr().err.splitlines()[0]
+    assert line.startswith("handmesh verify: error: ")
+    for w in words:
+        assert w in line, line
+
+
+def test_a_full_disk_error_names_the_file(tmp_path, monkeypatch):
+    def full(fh):
+        raise OSError(errno.ENOSPC, "No space left on device")  # as write() raises it
+
+    target = tmp_path / "out" / "metrics.csv"
+    with pytest.raises(OSError) as e:
+        _io.atomic_write_with(target, full)
+    assert e.value.errno == errno.ENOSPC and e.value.filename == str(target)
+    assert not list(target.parent.iterdir())  # no temporary left
+    # a sample folder: the error names the sample, and its temporary folder is gone
+    monkeypatch.setattr(F, "_write_file", lambda path, data, durable: full(None))
+    (tmp_path / "samples").mkdir()
+    with pytest.raises(OSError) as e:
+        F._write_folder(tmp_path / "samples" / "000007", {"image.png": b"x"}, durable=False)
+    assert e.value.errno == errno.ENOSPC
+    assert e.value.filename == str(tmp_path / "samples" / "000007")
+    assert not list((tmp_path / "samples").iterdir())
+
+
+def test_a_held_lock_exits_with_the_environment_code(root, tmp_path, capsys):
+    out = tmp_path / "run"
+    out.mkdir()
+    with _io.single_writer(out / ".train.lock", "test"):
+        code = cli.main(["train", "--data", str(root), "--out", str(out), *TRAIN])
+    assert code == cli.EXIT_CODES["environment"] == 6
+    err = capsys.readouterr().err
+    assert f"{out} (training) is being written by another process" in err
+
+
+@pytest.mark.parametrize("option, value", [("--threads", "0"), ("--device", "banana"),
+                                           ("--channels", "0,4,8,8,8"), ("--batch-size", "-1")])
+def test_bad_option_values_are_usage_errors_naming_the_option(root, tmp_path, capsys, option,
+                                                              value):
+    argv = ["train", "--data", str(root), "--out", str(tmp_path / "run"), *TRAIN, option, value]
+    with pytest.raises(SystemExit) as e:
+        cli.main(argv)
+    assert e.value.code == cli.EXIT_CODES["usage"] == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}" in err and repr(value) in err, err
+    assert not (tmp_path / "run").exists()  # refused before anything was written
+
+
+def test_bad_values_from_python_are_value_errors():
+    with pytest.raises(ValueError, match="threads must be a positive integer"):
+        T.TrainConfig(threads=0)
+    with pytest.raises(ValueError, match="channels must be positive"):
+        T.TrainConfig(channels=(0, 4, 8, 8, 8))
+    from handmesh_tutorial.train._distributed import _resolve_device
+
+    with pytest.raises(ValueError, match="device must be .*got 'banana'"):
+        _resolve_device("banana")
+
+
+def test_a_garbage_checkpoint_is_named_not_a_missing_key(root, tmp_path, capsys):
+    text = tmp_path / "notes.pt"
+    text.write_text("hello, this is not a checkpoint\n")  # torch's unpickler: KeyError 101
+    empty = tmp_path / "empty.pt"
+    torch.save({"format": T.CHECKPOINT_FORMAT}, empty)
+    for path, words in ((text, "unreadable checkpoint (truncated or not a torch file"),
+                        (empty, "not a handmesh_tutorial checkpoint (missing keys ['best', "
+                                "'config', 'epoch', 'history', 'model', 'step', "
+                                "'template_hash'])")):
+        code = cli.main(["evaluate", "--checkpoint", str(path), "--data", str(root),
+                         "--no-progress"])
+        err = capsys.readouterr().err
+        assert code == cli.EXIT_CODES["bad-input"], err
+        assert f"error: {path}: {words}" in err and "missing key 101" not in err, err
+
+
+def test_a_template_that_is_not_an_npz_is_named(root, tmp_path, capsys):
+    notes = tmp_path / "template.txt"
+    notes.write_text("vertices: many\n")
+    code = cli.main(["train", "--data", str(root), "--out", str(tmp_path / "run"), *TRAIN,
+                     "--template", str(notes)])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["bad-input"]
+    assert f"{notes}: not a template file" in err and "allow_pickle" not in err, err
+
+
+def test_evaluate_checks_its_output_folder_before_evaluating(root, tmp_path, capsys,
+                                                             monkeypatch):
+    from handmesh_tutorial.train import evaluation
+
+    ck = T.train(T.TrainConfig(data=str(root), out_dir=str(tmp_path / "run"), epochs=1,
+                               batch_size=4, image_size=32, channels=(4, 4, 8, 8, 8),
+                               latent_channels=8, threads=1, progress=False,
+                               durable=False)).checkpoint
+
+    def read_only(*args, dir=None, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    def never(*args, **kwargs):
+        raise AssertionError("evaluated before finding that --out cannot be written")
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", read_only)
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    monkeypatch.setattr(evaluation, "_run_dataset", never)
+    out = tmp_path / "eval"
+    code = cli.main(["evaluate", "--checkpoint", str(ck), "--data", str(root), "--out", str(out),
+                     "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["environment"], err
+    assert f"Read-only file system: {out}" in err
