@@ -247,6 +247,9 @@ class _Pool:
                 pending.add(self._ex.submit(fn, *a))
                 if len(pending) >= 2 * self.workers:
                     break
+            # note the workers now: once one dies the executor drops its table, and `close`
+            # must still find (and end) the others
+            self._processes()
             while pending:
                 finished, pending = wait(pending, timeout=_POLL_S,
                                          return_when=FIRST_COMPLETED)
