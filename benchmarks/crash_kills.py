@@ -41,7 +41,7 @@ from pathlib import Path
 
 import torch
 
-HANDMESH = [sys.executable, "-m", "handmesh_tutorial.cli"]
+HANDMESH = [sys.executable, "-m", "handmesh_tutorial.apps.cli"]
 PHASES = ("generate", "workers", "writers", "train", "replaced")
 
 

@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from handmesh_tutorial.dataset import InterSHDataset
-from handmesh_tutorial.dataset.torch_views import InterSHTorchDataset
-from handmesh_tutorial.demo import generate_scenes
+from handmesh_tutorial.apps.demo import generate_scenes
+from handmesh_tutorial.data import InterSHDataset
+from handmesh_tutorial.data.torch_views import InterSHTorchDataset
 
 
 def time_items(ds, repeats: int) -> float:

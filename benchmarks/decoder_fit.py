@@ -1,8 +1,8 @@
 """Benchmark: the decoder fit test (auto-decoder on posed hands) for the levers of issue 11.
 
-Each row builds the model's mesh part with some :func:`handmesh_tutorial.model.build_model`
+Each row builds the model's mesh part with some :func:`handmesh_tutorial.nn.model.build_model`
 options, fits it to ``--num`` posed hands of the library's hand with
-:func:`handmesh_tutorial.fit.fit_decoder` (one learnable code per hand, L1 vertex loss, Adam,
+``fit_decoder`` of ``benchmarks/fit_probe.py`` (one learnable code per hand, L1 vertex loss, Adam,
 cosine decay) and prints the mean vertex error (mm), the roughness (mean |dihedral-angle
 difference|, degrees), the flipped-face fraction and the CPU time of the optimisation.
 
@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import argparse
 
+import fit_probe as fit
 import torch
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import fit
 
 OLD = dict(output="xyz", smoothing_length=0.0, zero_head=False, head="spiral")
 ROWS = {

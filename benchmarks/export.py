@@ -6,7 +6,7 @@ what that path would cost if it were the eager default too, in one run (ratios a
 baseline measured in the same run):
 
 1. the decoder part (``MSMRNet.decode``: FC, transformer, decoder, output smoothing) of the
-   single-path, multi-path and multi-path + attention networks (``hmt.model.build_model``
+   single-path, multi-path and multi-path + attention networks (``hmt.nn.model.build_model``
    defaults) and of the shipped pretrained network: forward (no grad) and forward+backward;
 2. the full pretrained network, forward at its crop size;
 3. export costs of the pretrained network: ``torch.export.export``, ONNX export (when ``onnx``
@@ -29,8 +29,8 @@ from pathlib import Path
 import torch
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import model as M
-from handmesh_tutorial.blocks import SparseVertexMap
+from handmesh_tutorial.nn import model as M
+from handmesh_tutorial.nn.blocks import SparseVertexMap
 
 
 def timeit(fns: dict, repeats: int) -> dict:
@@ -133,7 +133,7 @@ def main() -> None:
     batch = hmt.budget().batch_size if args.batch is None else args.batch
     print(f"torch {torch.__version__}, threads {args.threads}, batch {batch}")
     hand = hmt.hand.HandModel("right")
-    hier = hmt.sampling.mesh_hierarchy(hand.template_vertices, hand.faces)
+    hier = hmt.nn.hierarchy.mesh_hierarchy(hand.template_vertices, hand.faces)
     nets = {"single": M.build_model("resnet10", "single", False, hand, hierarchy=hier),
             "multi": M.build_model("resnet10", "multi", False, hand, hierarchy=hier),
             "multi+attention": M.build_model("resnet10", "multi", True, hand, hierarchy=hier),

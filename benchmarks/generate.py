@@ -37,7 +37,8 @@ SIZE = 224
 def split(kind: str, n: int) -> dict:
     import torch
 
-    from handmesh_tutorial import dataset, interact
+    from handmesh_tutorial import data as dataset
+    from handmesh_tutorial import scenes as interact
 
     torch.set_num_threads(1)
     r = interact.get_renderer(SIZE)
@@ -89,12 +90,12 @@ def end_to_end(kind: str, num: int, workers: int, start: str = "cli") -> dict:
     tmp = Path(tempfile.mkdtemp(prefix="bench_gen_e2e_"))
     try:
         if start == "cli":
-            cmd = [sys.executable, "-m", "handmesh_tutorial.cli", "generate", "--kind", kind,
+            cmd = [sys.executable, "-m", "handmesh_tutorial.apps.cli", "generate", "--kind", kind,
                    "--num", str(num), "--seed", "0", "--out", str(tmp / "ds"), "--image-size",
                    str(SIZE), "--workers", str(workers), "--quiet", "--no-fsync"]
         else:
             cmd = [sys.executable, "-c",
-                   "import sys; from handmesh_tutorial.interact import generate_interactions as g; "
+                   "import sys; from handmesh_tutorial.scenes import generate_interactions as g; "
                    f"g(sys.argv[1], {kind!r}, {num}, 0, image_size={SIZE}, workers={workers}, "
                    f"progress=False, durable=False, mp_context={start!r})", str(tmp / "ds")]
         t = time.perf_counter()
@@ -127,8 +128,8 @@ def kernels(kinds: list[str], n: int) -> None:
     import torch
 
     import handmesh_tutorial as hmt
-    from handmesh_tutorial import interact
-    from handmesh_tutorial.interact.contact import _MeshSDF
+    from handmesh_tutorial import scenes as interact
+    from handmesh_tutorial.scenes.contact import _MeshSDF
 
     torch.set_num_threads(1)
     for backend in ("numpy", "numba"):   # warm-up: hand models, numba's cache

@@ -30,8 +30,8 @@ import torch
 
 import handmesh_tutorial as hmt
 from handmesh_tutorial import inference as I
-from handmesh_tutorial.augment import unmirror
-from handmesh_tutorial.camera import project
+from handmesh_tutorial.data.augment import unmirror
+from handmesh_tutorial.render.camera import project
 
 
 def _scores(pred, gt) -> tuple[float, float]:
@@ -54,12 +54,12 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     if not (Path(args.data) / "meta.json").is_file():
-        from handmesh_tutorial.cli import main as cli
+        from handmesh_tutorial.apps.cli import main as cli
 
         cli(["generate", "--kind", "mixed", "--num", str(args.num), "--seed", str(args.seed),
              "--out", args.data, "--quiet"])
-    ds = hmt.dataset.InterSHDataset(args.data)
-    net = hmt.model.pretrained()
+    ds = hmt.data.InterSHDataset(args.data)
+    net = hmt.pretrained.pretrained()
     rows: dict[str, list] = {k: [] for k in (
         "correct", "float in [0, 1]", "BGR", "wrong side", "box_scale 1.0", "160-px crop")}
     gt, cam_err, root_xy, root_z = [], [], [], []

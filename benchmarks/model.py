@@ -7,7 +7,7 @@ Prints, measured in the same run:
 2. Parameters of the mesh part (FC, transformer, decoder) for single-path, multi-path, and
    multi-path + attention (the paper's Table 3 rows), with the ratio to single-path. Target:
    multi-path + attention adds at most ~30% decoder parameters ("minor additional parameter
-   cost", paper) with the default channels of :mod:`handmesh_tutorial.model`.
+   cost", paper) with the default channels of :mod:`handmesh_tutorial.nn.model`.
 2b. ``SparseVertexMap`` (the up/down maps between hierarchy levels) forward+backward: the
    library's broadcast multiply-and-sum vs ``torch.einsum("bvkc,vk->bvc")`` (which PyTorch runs
    as V tiny batched matmuls), on the finest up map (779 <- 390 vertices, 3 weights per row).
@@ -31,10 +31,10 @@ import torch
 import torch.nn.functional as F
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import model as M
 from handmesh_tutorial.hand import HandModel
-from handmesh_tutorial.sampling import mesh_hierarchy
-from handmesh_tutorial.spiral import SpiralConv
+from handmesh_tutorial.nn import model as M
+from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+from handmesh_tutorial.nn.spiral import SpiralConv
 
 
 def timeit(fns: dict, repeats: int) -> dict:
@@ -75,7 +75,7 @@ def bench_spiralconv(spirals, batch: int, repeats: int) -> None:
 
 
 def bench_sparse_map(hier, batch: int, repeats: int) -> None:
-    from handmesh_tutorial.blocks import SparseVertexMap
+    from handmesh_tutorial.nn.blocks import SparseVertexMap
 
     up = SparseVertexMap(hier.up[0])
     x = torch.randn(batch, up.in_vertices, 16, requires_grad=True)

@@ -16,8 +16,8 @@ import torch
 import trimesh
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial.sampling import mesh_hierarchy
-from handmesh_tutorial.spiral import SpiralConv, spiral_indices
+from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+from handmesh_tutorial.nn.spiral import SpiralConv, spiral_indices
 
 
 def best_of(fn, repeat: int = 3) -> float:

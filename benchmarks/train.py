@@ -1,6 +1,6 @@
 """Training throughput at the demo's recipe: the optimised path against the original, one run.
 
-The network and batch are the demo's (``hmt.demo.DemoConfig.from_budget(budget("default"))``:
+The network and batch are the demo's (``hmt.apps.demo.DemoConfig.from_budget(budget("default"))``:
 ResNet-10 encoder, multi-path decoder, coarse-mesh attention, the CPU recipe's keypoint and
 rotation heads and losses, batch 16, 64-px crops) at the demo's torch threads (2). One step =
 forward, the recipe's loss, backward, Adam. Variants, timed in interleaved repeats (medians):
@@ -30,9 +30,11 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from handmesh_tutorial import augment, demo, testing, train
-from handmesh_tutorial.blocks import SparseVertexMap
+from handmesh_tutorial import testing, train
+from handmesh_tutorial.apps import demo
 from handmesh_tutorial.budget import budget
+from handmesh_tutorial.data import augment
+from handmesh_tutorial.nn.blocks import SparseVertexMap
 
 VARIANTS = {  # name: (sparse map method, fused Adam, precision)
     "reference": ("gather", False, "float32"),

@@ -1,6 +1,6 @@
 """handmesh_tutorial: rebuild, understand and reuse MSMR-Net, INTER-SH and the visibility ratio.
 
-Import it as ``import handmesh_tutorial as hmt``. Submodules (``hmt.hand``, ``hmt.spiral``, ...)
+Import it as ``import handmesh_tutorial as hmt``. Submodules (``hmt.hand``, ``hmt.nn.spiral``, ...)
 are imported on first attribute access, so ``import handmesh_tutorial`` stays fast and does not
 start an OpenGL context or load torch until a module that needs it is used.
 """
@@ -9,24 +9,26 @@ from __future__ import annotations
 
 import importlib
 
+from . import _aliases
 from ._version import __version__
 from .budget import Budget, budget
 
-# One module per concept; see docs/index.md for the data flow between them.
+# The library in the paper's data-flow order (docs page "The pipeline"); `apps` sits on top.
 _SUBMODULES = (
-    "augment", "blocks", "budget", "camera", "cli", "collision", "dataset", "decoder", "demo",
-    "encoder", "fit", "freihand", "hand", "inference", "interact", "keypoints", "lcs", "losses",
-    "makehuman",
-    "mano", "metrics", "model", "objects", "pose_encoder", "pretrained", "render", "rotation",
-    "sampling", "skinned", "spiral", "surface", "testing", "train", "visibility", "viz",
+    "hand", "lcs", "collision", "objects", "scenes", "render", "visibility", "data", "nn",
+    "train", "metrics", "viz", "pretrained", "inference", "budget", "testing", "apps",
 )
 
 __all__ = ["Budget", "budget", "__version__", *_SUBMODULES]
+
+_aliases.install()  # the module paths of 0.1 (``hmt.spiral``, ``hmt.dataset``...) until 0.3
 
 
 def __getattr__(name: str):
     if name in _SUBMODULES:
         return importlib.import_module(f"{__name__}.{name}")
+    if name in _aliases.MOVED:
+        return importlib.import_module(f"{__name__}.{name}")  # a stand-in, with a FutureWarning
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -14,7 +14,8 @@ import hashlib
 import os
 from pathlib import Path
 
-__all__ = ["SHIPPED_ASSETS", "__version__", "shipped_version"]
+__all__ = ["ASSET_DIR", "PRETRAINED_FILE", "SHIPPED_ASSETS", "__version__", "shipped_file",
+           "shipped_version"]
 
 __version__ = "0.2.0"
 
@@ -31,6 +32,27 @@ SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
 
 Replacing a file (new weights, a rebuilt template) means a new version: bump `__version__`, record
 the new hash with it here and add the CHANGELOG entry."""
+
+ASSET_DIR = Path(__file__).resolve().parent / "assets"
+"""The folder of the shipped files (package data)."""
+PRETRAINED_FILE = "msmr_net_pretrained.pt"
+"""The shipped pretrained MSMR-Net in `ASSET_DIR` (``load_checkpoint("pretrained")`` reads it)."""
+
+
+def shipped_file(name: str, how_to_make: str) -> Path:
+    """Path of a shipped file in `ASSET_DIR`.
+
+    Args:
+        name: its file name.
+        how_to_make: what makes it (for the error), e.g. ``"make pretrained"``.
+
+    Raises:
+        FileNotFoundError: this installation does not have it.
+    """
+    path = ASSET_DIR / name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: not in this installation; make it with `{how_to_make}`")
+    return path
 
 
 def shipped_version(path: str | os.PathLike) -> str | None:

@@ -3,15 +3,15 @@
 [`predict_hand`][handmesh_tutorial.inference.predict_hand] (one hand) and
 [`predict_hands`][handmesh_tutorial.inference.predict_hands] (several hands of one image, one
 forward pass) prepare the image exactly as the evaluation crops of
-[`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] are prepared, with
-the transforms of [`augment`][handmesh_tutorial.augment]: a square crop of ``box_scale`` (1.5)
+[`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset] are prepared, with
+the transforms of [`augment`][handmesh_tutorial.data.augment]: a square crop of ``box_scale`` (1.5)
 times the longer side of the hand's box, resized to the network's side (128 px for the shipped
 network), left hands mirrored to right ones, ``x / 255 - 0.5``. They run the network and undo
 the mirror. Given the camera intrinsics ``K``, they also place the hand in the camera frame: the
 network predicts root-relative 3D joints and, with its 2D keypoint head, where they are in the
 crop; the root is the translation that projects the one onto the other (a linear least-squares
 fit, [`root_from_keypoints`][handmesh_tutorial.inference.root_from_keypoints]), and
-[`to_camera`][handmesh_tutorial.augment.to_camera] maps the points back as in the evaluation.
+[`to_camera`][handmesh_tutorial.data.augment.to_camera] maps the points back as in the evaluation.
 
 Inputs it cannot interpret are refused with a message that says what to do
 ([`check_image`][handmesh_tutorial.inference.check_image]): these mistakes run without error
@@ -30,9 +30,16 @@ import numpy as np
 import torch
 from torch import nn
 
-from .augment import IMAGE_MEAN, IMAGE_STD, crop_transform, flip_intrinsics, to_camera, warp_image
-from .camera import check_intrinsics
+from .data.augment import (
+    IMAGE_MEAN,
+    IMAGE_STD,
+    crop_transform,
+    flip_intrinsics,
+    to_camera,
+    warp_image,
+)
 from .metrics import ROOT_INDEX
+from .render.camera import check_intrinsics
 
 __all__ = ["HandCrop", "HandPrediction", "check_image", "crop_hand", "root_from_keypoints",
            "predict_hands", "predict_hand"]
@@ -201,7 +208,7 @@ def crop_hand(image, box, side: str, *, image_size: int = 128, box_scale: float 
     A square of ``box_scale`` times the box's longer side around its centre, mirrored for a left
     hand, resized to ``image_size`` (bilinear, box-filtered when shrinking), ``x / 255 - 0.5``;
     parts outside the image are black. The same arithmetic as
-    [`HandCropDataset.make_item`][handmesh_tutorial.dataset.torch_views.HandCropDataset.make_item]
+    [`HandCropDataset.make_item`][handmesh_tutorial.data.torch_views.HandCropDataset.make_item]
     without augmentation, whose box is that of the projected hand mesh.
 
     Args:

@@ -1,46 +1,32 @@
-"""The pretrained MSMR-Net that ships with the package: the recipe and the one command that make
-it, the export to a small file, and the loader.
+"""The shipped, trained weights: the pretrained MSMR-Net and the pretrained hand encoder.
 
-* [`pretrained`][handmesh_tutorial.pretrained.pretrained] (also ``hmt.model.pretrained``) loads the
-  shipped network; ``handmesh evaluate --checkpoint pretrained`` and
-  ``load_checkpoint("pretrained")`` read the same file (``torch.load(weights_only=True)``).
-* [`PretrainedRecipe`][handmesh_tutorial.pretrained.PretrainedRecipe] is the recipe, and
-  [`build_pretrained`][handmesh_tutorial.pretrained.build_pretrained] (``handmesh pretrain``,
-  ``make pretrained``) runs it: generate mixed-kind INTER-SH scenes, train, export.
-* [`export_pretrained`][handmesh_tutorial.pretrained.export_pretrained] turns a training checkpoint
-  into the shipped file: int8 weights per output channel
-  ([`quantize_state_dict`][handmesh_tutorial.train.checkpoints.quantize_state_dict]), no optimiser
-  state, plus what made it (data seeds and counts, recipe, seconds, hardware, commit).
+* [`pretrained`][handmesh_tutorial.pretrained.pretrained] loads the shipped network (eval mode);
+  ``handmesh evaluate --checkpoint pretrained`` and ``load_checkpoint("pretrained")`` read the same
+  file (``torch.load(weights_only=True)``);
+  [`pretrained_info`][handmesh_tutorial.pretrained.pretrained_info] says what made it.
+* [`pretrained_encoder`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder] and its info: the
+  hand encoder that training runs start from (``TrainConfig.init_encoder="pretrained"``).
 
-Why a separate recipe from the demo's, and how the shipped weights were made (runs, data, times,
-scores): docs page "The pretrained model".
-
-Taught in notebook 00 ("Quickstart") and notebook 09 ("Evaluation").
+A loader only: the recipes that make these files are the apps' (``handmesh pretrain``,
+``handmesh pretrain-encoder``; [`apps.pretrain_network`][handmesh_tutorial.apps.pretrain_network]).
+How the shipped weights were made: docs pages "The pretrained model" and "Why the paper starts from
+pretrained weights". Taught in notebook 00 ("Quickstart") and notebook 09 ("Evaluation").
 """
 
 from __future__ import annotations
 
-import datetime
-import math
-import os
-import platform
-import shutil
-import subprocess
-import time
-from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from ._version import __version__, shipped_version
-from .pretraining_data import generate_train_val, generate_training_scenes
+from ._version import PRETRAINED_FILE, shipped_file, shipped_version
+from .nn.pose_encoder import (
+    ENCODER_FILE,
+    pretrained_encoder,
+    pretrained_encoder_info,
+    pretrained_encoder_path,
+)
 
-__all__ = ["PRETRAINED_FILE", "PretrainedRecipe", "pretrained", "pretrained_path",
-           "pretrained_info", "build_pretrained", "export_pretrained", "generate_training_scenes",
-           "generate_train_val"]
-
-PRETRAINED_FILE = "msmr_net_pretrained.pt"
-"""Name of the shipped file in ``handmesh_tutorial/assets/``."""
-
-_ASSET_DIR = Path(__file__).resolve().parent / "assets"
+__all__ = ["PRETRAINED_FILE", "ENCODER_FILE", "pretrained", "pretrained_path", "pretrained_info",
+           "pretrained_encoder", "pretrained_encoder_info", "pretrained_encoder_path"]
 
 
 def pretrained_path() -> Path:
@@ -50,11 +36,7 @@ def pretrained_path() -> Path:
         FileNotFoundError: this installation has no pretrained file (make one with
             ``make pretrained``).
     """
-    path = _ASSET_DIR / PRETRAINED_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no pretrained MSMR-Net in this installation; make one "
-                                "with `make pretrained` (handmesh pretrain --install)")
-    return path
+    return shipped_file(PRETRAINED_FILE, "make pretrained")
 
 
 def pretrained(device: str = "cpu"):
@@ -64,10 +46,10 @@ def pretrained(device: str = "cpu"):
         device: ``"cpu"``, ``"cuda"`` or ``"auto"``.
 
     Returns:
-        The [`MSMRNet`][handmesh_tutorial.model.MSMRNet]; its input is a crop of
+        The [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet]; its input is a crop of
         ``pretrained_info()["config"]["image_size"]`` pixels around one hand, normalised as the
         training crops are
-        ([`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]);
+        ([`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset]);
         [`predict_hand`][handmesh_tutorial.inference.predict_hand] prepares one's own image so.
     """
     from .train import load_checkpoint
@@ -92,324 +74,8 @@ def pretrained_info() -> dict:
     return info
 
 
-@dataclass
-class PretrainedRecipe:
-    """How the shipped network is made (defaults: the shipped file's recipe).
+def __getattr__(name: str):
+    # the recipe's names moved to the apps layer in 0.2: the old path works until 0.3
+    from ._aliases import moved_attribute
 
-    Attributes:
-        train_scenes: mixed-kind training scenes (hand-hand, hand-object, hand-chain).
-        val_scenes: validation scenes (their own seed), scored after every epoch.
-        data_seed: seed of the training scenes; validation uses ``data_seed + 1``. Evaluate on
-            other seeds (the demo and the notebooks use 0 to 10).
-        render_size: scene image side, pixels (FreiHAND's 224).
-        image_size: network input crop side, pixels.
-        encoder: image encoder; ``resnet10`` keeps the int8 file under 10 MB.
-        recipe: ``"cpu"`` or ``"paper"`` ([`RECIPES`][handmesh_tutorial.demo.config.RECIPES]).
-        epochs: training epochs.
-        batch_size: training batch size.
-        lr: Adam learning rate; multiplied by ``lr_gamma`` after every third of the epochs.
-        lr_gamma: learning-rate decay factor.
-        augment: random rotation, scale, shift and colour of the training crops.
-        precision: ``"bfloat16"`` (autocast; on GPUs and CPUs with bfloat16 units) or
-            ``"float32"``.
-        workers: scene-generator processes (0: one per CPU).
-        loader_workers: data-loader processes while training (0: one per CPU, less one).
-        seed: network initialisation, data order and augmentation seed.
-        device: ``"auto"`` (CUDA when available), ``"cuda"`` or ``"cpu"``.
-        init: start from these weights instead of random ones (``"pretrained"``: the shipped
-            network, so that each run on new seeds adds to the last; or a checkpoint path). The
-            architecture fields above must then be the file's.
-    """
-
-    train_scenes: int = 20_000
-    val_scenes: int = 300
-    data_seed: int = 100
-    render_size: int = 224
-    image_size: int = 128
-    encoder: str = "resnet10"
-    recipe: str = "cpu"
-    epochs: int = 16
-    batch_size: int = 128
-    lr: float = 1e-3
-    lr_gamma: float = 0.3
-    augment: bool = True
-    precision: str = "bfloat16"
-    workers: int = 0
-    loader_workers: int = 0
-    seed: int = 0
-    device: str = "auto"
-    init: str | None = None
-
-    def __post_init__(self):
-        from .demo.config import RECIPES
-
-        if self.recipe not in RECIPES:
-            raise ValueError(f"recipe must be one of {sorted(RECIPES)}, got {self.recipe!r}")
-        for name in ("train_scenes", "val_scenes", "epochs", "batch_size", "render_size",
-                     "image_size"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        for name in ("workers", "loader_workers"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-
-    def train_config(self, data, val_data, out_dir, progress: bool = True):
-        """The [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] of the training run."""
-        from .demo.config import RECIPES
-        from .train import TrainConfig
-
-        cpus = os.cpu_count() or 1
-        return TrainConfig(
-            data=str(data), val_data=str(val_data), val_fraction=0.0,
-            image_size=self.image_size, epochs=self.epochs, batch_size=self.batch_size,
-            lr=self.lr, lr_step=max(1, math.ceil(self.epochs / 3)), lr_gamma=self.lr_gamma,
-            augment=self.augment, encoder=self.encoder, decoder="multi", attention=True,
-            seed=self.seed, device=self.device, threads=None,
-            num_workers=self.loader_workers or max(0, cpus - 1), cache_data=False,
-            val_batch_size=256, precision=self.precision, out_dir=str(out_dir),
-            progress=progress, init=self.init, **RECIPES[self.recipe])
-
-
-def _resumed_plan(saved: dict, history: list, epochs: int,
-                  max_train_seconds: float) -> tuple[int, int]:
-    """``(epochs, lr_step)`` for resuming a time-budgeted run from its checkpoint.
-
-    A run's first epoch is timed alone (its checkpoint says ``epochs=1``); the run then plans the
-    epochs that fit and continues, and every later checkpoint holds that plan, which a resume
-    keeps. A run stopped before its second epoch wrote a checkpoint plans now, from the first
-    epoch's training seconds in ``history`` (validation not included: the plan may be an epoch
-    long, and the budget check after each epoch still stops it in time).
-
-    Args:
-        saved: the checkpoint's config (a dict). history: its rows (``seconds`` per epoch).
-        epochs: the recipe's epochs, the most a plan may give. max_train_seconds: the budget.
-    """
-    if int(saved["epochs"]) > 1 or epochs == 1:
-        return int(saved["epochs"]), int(saved["lr_step"])
-    return _plan(epochs, float(history[0]["seconds"]), max_train_seconds)
-
-
-def _plan(epochs: int, per_epoch: float, max_train_seconds: float) -> tuple[int, int]:
-    """``(epochs, lr_step)`` that fit the budget at ``per_epoch`` seconds each: at least one, at
-    most ``epochs``, the learning rate decayed after every third of them."""
-    fit = max(1, min(epochs, int(max_train_seconds // max(per_epoch, 1e-9))))
-    return fit, max(1, math.ceil(fit / 3))
-
-
-def _hardware(device) -> str:
-    import torch
-
-    name = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            name = next(ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    cpu = f"{name}, {os.cpu_count()} CPUs"
-    if str(device).startswith("cuda") and torch.cuda.is_available():
-        return f"{torch.cuda.get_device_name(0)}; {cpu}"
-    return cpu
-
-
-def _commit() -> str | None:
-    """The library's git commit: ``HANDMESH_COMMIT`` when set (a copied tree whose ``.git`` is
-    not the code's), else ``git rev-parse HEAD``."""
-    if os.environ.get("HANDMESH_COMMIT"):
-        return os.environ["HANDMESH_COMMIT"]
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent,
-                             capture_output=True, text=True, timeout=10, check=True)
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def export_pretrained(checkpoint: str | os.PathLike, out: str | os.PathLike, *,
-                      weights: str = "int8", info: dict | None = None) -> Path:
-    """Write a training checkpoint as a small, loadable pretrained file (atomically).
-
-    Keeps the config, template hash, epoch, step and history; drops the optimiser, scheduler,
-    random states and per-step losses. ``weights="int8"``: per-channel int8 weights
-    ([`quantize_state_dict`][handmesh_tutorial.train.checkpoints.quantize_state_dict]), about a
-    quarter of float32; ``"float16"``: half. Both load with ``load_checkpoint`` (float32 again).
-
-    Args:
-        checkpoint: a ``checkpoint_*.pt`` of [`train`][handmesh_tutorial.train.loop.train].
-        out: the file to write.
-        weights: ``"int8"`` or ``"float16"``.
-        info: stored as ``pretrained`` (recipe, data, seconds, hardware...).
-
-    Returns:
-        ``out`` as a ``Path``.
-    """
-    import io
-
-    import torch
-
-    from ._io import atomic_write_bytes
-    from .train.checkpoints import _read_checkpoint, quantize_state_dict
-    from .train.config import TrainConfig
-    from .train.templates import build_model_from_config, resolve_template
-
-    if weights not in ("int8", "float16"):
-        raise ValueError(f"weights must be 'int8' or 'float16', got {weights!r}")
-    ck = _read_checkpoint(checkpoint)
-    cfg = TrainConfig.from_dict(ck["config"])
-    net = build_model_from_config(cfg, resolve_template(cfg.template))
-    names = {n for n, _ in net.named_parameters()}
-    if weights == "int8":
-        model, scales = quantize_state_dict(ck["model"], names)
-    else:
-        model = {k: (v.half() if k in names and v.is_floating_point() else v)
-                 for k, v in ck["model"].items()}
-        scales = {}
-    small = {k: ck[k] for k in ("format", "config", "template_hash", "num_vertices", "epoch",
-                                "step", "history", "best", "torch_version")}
-    small.update(model=model, scales=scales, weights=weights, optimizer=None, scheduler=None,
-                 pretrained=dict(info or {}), library_version=__version__)
-    buf = io.BytesIO()
-    torch.save(small, buf)
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(out, buf.getvalue(), True)
-    return out
-
-
-class _OutOfTime(Exception):
-    pass
-
-
-def build_pretrained(out: str | os.PathLike = "runs/pretrained",
-                     recipe: PretrainedRecipe | None = None, *,
-                     max_generate_seconds: float | None = None,
-                     max_train_seconds: float | None = None, install: bool = False,
-                     export_every: float = 60.0, progress: bool = True, log=print) -> dict:
-    """Make the pretrained MSMR-Net: generate the scenes, train, export (``handmesh pretrain``).
-
-    Steps: ``out/data/train`` (``recipe.train_scenes``, seed ``data_seed``) and ``out/data/val``
-    (``val_scenes``, seed ``data_seed + 1``); training in ``out/train`` (a normal run of
-    [`train`][handmesh_tutorial.train.loop.train]); the last checkpoint is exported to
-    ``out/msmr_net_pretrained.pt`` (int8) and ``out/msmr_net_float16.pt`` after the first epoch,
-    then after each epoch that ends ``export_every`` seconds or more after the last export, and
-    after the last epoch, so a run cut short still leaves a usable file. ``install=True`` copies
-    the int8 file into the package (``handmesh_tutorial/assets/``), where
-    [`pretrained`][handmesh_tutorial.pretrained.pretrained] finds it.
-
-    Calling it again with the same ``out`` resumes: the scenes already generated are kept (also
-    under another ``max_generate_seconds``; other seeds or counts are refused), and training
-    continues from ``out/train/checkpoint_last.pt`` with the epochs and schedule planned for it
-    (``_resumed_plan``); the training budget counts from the resumed call.
-
-    Args:
-        out: output folder.
-        recipe: the recipe (default: the shipped file's).
-        max_generate_seconds: stop generating training scenes when the next of 10 shards would
-            end past this budget (``None``: all ``train_scenes``).
-        max_train_seconds: fit the training to this budget (``None``: all ``epochs``). The
-            first epoch is timed alone; then as many epochs as fit (at most ``epochs``) are
-            planned, with the learning-rate schedule of that many (``epochs_planned`` in the
-            file). Training also stops after an epoch that leaves less than one epoch's time.
-        install: copy the result into the package.
-        export_every: seconds between exports while training (they cost seconds each).
-        progress: tqdm bars.
-        log: one-line messages (``None``: silent).
-
-    Returns:
-        dict with ``file`` (the int8 export), ``float16``, ``info`` (what the file records) and
-        ``history``.
-    """
-    recipe = recipe or PretrainedRecipe()
-    say = log or (lambda *_: None)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
-                                        recipe.data_seed, render_size=recipe.render_size,
-                                        workers=recipe.workers,
-                                        max_generate_seconds=max_generate_seconds,
-                                        progress=progress, log=log)
-
-    # torch only now: the generator's workers fork only from a process without torch
-    import torch
-
-    from .train import train
-    from .train.checkpoints import _read_checkpoint
-
-    config = recipe.train_config(tr["root"], val["root"], out / "train", progress)
-    info = {"recipe": asdict(recipe), "max_generate_seconds": max_generate_seconds,
-            "max_train_seconds": max_train_seconds,
-            "data": {"train_seed": recipe.data_seed, "train_scenes": tr["scenes"],
-                     "val_seed": recipe.data_seed + 1, "val_scenes": val["scenes"],
-                     "kinds": "mixed (hand-hand, hand-object, hand-chain)",
-                     "render_size": recipe.render_size},
-            "seconds": {"generate": round(t_gen, 1)}, "torch": str(torch.__version__),
-            "commit": _commit(), "date": datetime.date.today().isoformat()}
-    if recipe.init is not None:  # the chain of runs: what the starting weights were made of
-        info["init_from"] = _read_checkpoint(recipe.init).get("pretrained") or str(recipe.init)
-    files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
-    plan = {"config": config}  # the run's config; its epochs may be fitted to the time budget
-    t_train = time.perf_counter()
-    last = out / "train" / "checkpoint_last.pt"
-    exported = [-math.inf]  # when the files were last written
-
-    def export(epoch: int) -> None:
-        info["seconds"]["train"] = round(time.perf_counter() - t_train, 1)
-        info["epochs_done"] = int(epoch)
-        info["hardware"] = _hardware(config.device if config.device != "auto" else
-                                     ("cuda" if torch.cuda.is_available() else "cpu"))
-        export_pretrained(last, files["file"], weights="int8", info=info)
-        export_pretrained(last, files["float16"], weights="float16", info=info)
-        exported[0] = time.perf_counter()
-
-    def after_epoch(row):
-        spent = time.perf_counter() - t_train
-        final = row["epoch"] >= plan["config"].epochs
-        stop = (max_train_seconds is not None and not final
-                and spent * (1 + 1 / row["epoch"]) > max_train_seconds)
-        # exports cost seconds (two files from a checkpoint with optimiser state): not after
-        # every short epoch, but always after the last one and before stopping
-        if final or stop or time.perf_counter() - exported[0] >= export_every:
-            export(row["epoch"])
-        say(f"      epoch {row['epoch']}: train loss {1000 * row['train_loss']:.2f} mm, val "
-            f"PA-MPJPE {row.get('val_pa_mpjpe', float('nan')):.2f} mm, {spent:.0f} s")
-        if stop:
-            raise _OutOfTime
-
-    say(f"[2/3] training ({recipe.epochs} epochs, batch {recipe.batch_size}, "
-        f"{recipe.image_size}-px crops, {recipe.encoder}) in {out / 'train'}")
-    resume = last.exists()
-    if resume and max_train_seconds is not None:  # keep the plan of the run being resumed
-        ck = _read_checkpoint(last)
-        fit, lr_step = _resumed_plan(ck["config"], ck["history"], config.epochs,
-                                     max_train_seconds)
-        plan["config"] = replace(config, epochs=fit, lr_step=lr_step)
-        info["epochs_planned"] = fit
-        say(f"      resuming after epoch {int(ck['epoch'])} of the {fit} planned")
-    try:
-        if max_train_seconds is not None and not resume and config.epochs > 1:
-            # One epoch first, to see how many fit the budget; then the learning-rate schedule
-            # is planned for that many (a resumed run may change epochs and lr_step, and it
-            # continues exactly where the first epoch ended).
-            plan["config"] = replace(config, epochs=1)
-            train(plan["config"], callback=after_epoch)
-            per_epoch = time.perf_counter() - t_train
-            fit, lr_step = _plan(config.epochs, per_epoch, max_train_seconds)
-            plan["config"] = replace(config, epochs=fit, lr_step=lr_step)
-            info["epochs_planned"] = fit
-            say(f"      the first epoch took {per_epoch:.0f} s: {fit} of {config.epochs} epochs "
-                f"fit the {max_train_seconds:.0f} s budget, the schedule is planned for {fit}")
-            resume = True
-        train(plan["config"], resume=resume, callback=after_epoch)
-    except _OutOfTime:
-        say(f"      stopped after epoch {info['epochs_done']} of {plan['config'].epochs}: the "
-            f"next would end past the {max_train_seconds:.0f} s budget")
-    if not files["file"].exists():  # a finished run resumed: nothing trained, export it now
-        export(int(_read_checkpoint(last)["epoch"]))
-    say(f"[3/3] exported {files['file']} ({files['file'].stat().st_size / 1e6:.1f} MB, int8) and "
-        f"{files['float16'].name}")
-    if install:
-        _ASSET_DIR.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(files["file"], _ASSET_DIR / PRETRAINED_FILE)
-        say(f"      installed as {_ASSET_DIR / PRETRAINED_FILE}")
-    return {**files, "info": info}
+    return moved_attribute(__name__, name)

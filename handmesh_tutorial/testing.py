@@ -4,17 +4,17 @@
 * `toy_sample`: two posed hands of the hand model, point-splatted, no OpenGL (training tests).
 * `mano_format_params` / `write_mano_pickle`: a tiny MANO-format pickle built from the MakeHuman
   hand (its 778 skin vertices, open at the wrist like MANO), for code that reads
-  ``MANO_RIGHT.pkl`` / ``MANO_LEFT.pkl`` ([`load_mano`][handmesh_tutorial.mano.load_mano],
+  ``MANO_RIGHT.pkl`` / ``MANO_LEFT.pkl`` ([`load_mano`][handmesh_tutorial.hand.mano.load_mano],
   ``handmesh train --template``) where the licence-gated files are absent.
 * `write_freihand_root`: a tiny FreiHAND-format folder (both splits, official file names and
   layout) of posed MANO-format hands, for code that reads FreiHAND
-  ([`FreiHAND`][handmesh_tutorial.freihand.FreiHAND], ``handmesh train/evaluate --dataset
+  ([`FreiHAND`][handmesh_tutorial.data.freihand.FreiHAND], ``handmesh train/evaluate --dataset
   freihand``).
 
-The samples are dicts that [`write_sample`][handmesh_tutorial.dataset.write_sample] and
-[`generate_dataset`][handmesh_tutorial.dataset.generate_dataset] accept, with masks, VR, meshes
+The samples are dicts that [`write_sample`][handmesh_tutorial.data.write_sample] and
+[`generate_dataset`][handmesh_tutorial.data.generate_dataset] accept, with masks, VR, meshes
 and joints consistent with each other, so the whole pipeline runs on them in seconds. Real scenes
-come from [`interact`][handmesh_tutorial.interact]. Used by the tests and benchmarks (docs page
+come from [`interact`][handmesh_tutorial.scenes]. Used by the tests and benchmarks (docs page
 *Reliability*, ``benchmarks/train.py``) and meant for users' own tests; no notebook needs them.
 """
 
@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from ._io import atomic_write_with
-from .dataset import KINDS
+from .data import KINDS
 
 __all__ = ["synthetic_sample", "toy_sample", "mano_format_params", "write_mano_pickle",
            "write_freihand_root"]
@@ -76,8 +76,8 @@ def synthetic_sample(seed: int, kind: str = "hand-hand", image_size: int = 64,
             the size of a MANO hand).
 
     Returns:
-        A sample dict accepted by [`write_sample`][handmesh_tutorial.dataset.write_sample] /
-        ``make_sample`` of [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset].
+        A sample dict accepted by [`write_sample`][handmesh_tutorial.data.write_sample] /
+        ``make_sample`` of [`generate_dataset`][handmesh_tutorial.data.generate_dataset].
     """
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
@@ -163,7 +163,7 @@ def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict
     No OpenGL: the faces of both meshes are sampled at 10 points each, projected and z-buffered
     (shaded by the face normal), over a random colour gradient. Masks, VR, meshes and joints are
     mutually consistent, so it trains, evaluates and stratifies by VR like the real data (just
-    simpler images). Use it with [`generate_dataset`][handmesh_tutorial.dataset.generate_dataset]
+    simpler images). Use it with [`generate_dataset`][handmesh_tutorial.data.generate_dataset]
     for tests and quick demos; the real scenes come from ``interact``.
 
     Args:
@@ -173,7 +173,7 @@ def toy_sample(seed: int, image_size: int = 64, side: str | None = None) -> dict
             is of the opposite side and a little nearer the camera.
 
     Returns:
-        A sample dict for [`write_sample`][handmesh_tutorial.dataset.write_sample].
+        A sample dict for [`write_sample`][handmesh_tutorial.data.write_sample].
     """
     from scipy.spatial.transform import Rotation
 
@@ -255,7 +255,7 @@ def mano_format_params(side: str = "right") -> dict:
     ``shapedirs`` quirk (x column of the wrong sign), so ``load_mano``'s default fix undoes it.
 
     Posed with the same pose, shape, orientation and translation, a
-    [`ManoModel`][handmesh_tutorial.mano.ManoModel] of these arrays loaded with
+    [`ManoModel`][handmesh_tutorial.hand.mano.ManoModel] of these arrays loaded with
     ``fingertips=tuple(HandModel(side).fingertip_vertex_ids)`` gives the vertices ``[:778]`` and
     the joints of [`HandModel`][handmesh_tutorial.hand.HandModel] (float32 round-off). With
     MANO's own fingertip ids (the default ``"smplx"``) the 5 tips are other vertices of this mesh.
@@ -312,8 +312,8 @@ def write_mano_pickle(path: str | os.PathLike, side: str = "right", protocol: in
     The arrays of [`mano_format_params`][handmesh_tutorial.testing.mano_format_params], pickled
     as plain numpy arrays and a scipy sparse ``J_regressor`` (the official files also hold chumpy
     objects; the loader turns both into arrays). Loads with
-    [`load_mano`][handmesh_tutorial.mano.load_mano] and serves as ``handmesh train --template``;
-    name it ``..._RIGHT.pkl`` / ``..._LEFT.pkl`` so that the side can be inferred.
+    [`load_mano`][handmesh_tutorial.hand.mano.load_mano] and serves as ``handmesh train
+    --template``; name it ``..._RIGHT.pkl`` / ``..._LEFT.pkl`` so that the side can be inferred.
 
     Args:
         path: output file, written atomically.
@@ -348,7 +348,7 @@ def write_freihand_root(root: str | os.PathLike, num_samples: int = 3, *, image_
         seed: same seed -> same files.
         hand: a hand model with 778 vertices called like
             [`HandModel`][handmesh_tutorial.hand.HandModel] (e.g. your
-            [`load_mano`][handmesh_tutorial.mano.load_mano] model); default the MANO-format
+            [`load_mano`][handmesh_tutorial.hand.mano.load_mano] model); default the MANO-format
             MakeHuman hand of [`mano_format_params`][handmesh_tutorial.testing.mano_format_params].
 
     Returns:
@@ -361,13 +361,13 @@ def write_freihand_root(root: str | os.PathLike, num_samples: int = 3, *, image_
     from PIL import Image
     from scipy.spatial.transform import Rotation
 
-    from .freihand import NUM_VERTICES, SAMPLE_VERSIONS
+    from .data.freihand import NUM_VERTICES, SAMPLE_VERSIONS
 
     if num_samples < 1:
         raise ValueError(f"num_samples must be >= 1, got {num_samples}")
     if hand is None:
         from .hand import HandModel
-        from .mano import ManoModel
+        from .hand.mano import ManoModel
 
         tips = tuple(int(i) for i in HandModel("right").fingertip_vertex_ids)
         hand = ManoModel(mano_format_params("right"), "right", fingertips=tips)

@@ -1,4 +1,4 @@
-"""Tests of handmesh_tutorial.augment: crops, K, mirroring, augmentation, normalisation."""
+"""Tests of handmesh_tutorial.data.augment: crops, K, mirroring, augmentation, normalisation."""
 
 import functools
 import json
@@ -8,10 +8,10 @@ import pytest
 import torch
 from PIL import Image
 
-from handmesh_tutorial import augment as A
-from handmesh_tutorial.camera import project
-from handmesh_tutorial.dataset import InterSHDataset, generate_dataset
-from handmesh_tutorial.dataset import torch_views as TV
+from handmesh_tutorial.data import InterSHDataset, generate_dataset
+from handmesh_tutorial.data import augment as A
+from handmesh_tutorial.data import torch_views as TV
+from handmesh_tutorial.render.camera import project
 from handmesh_tutorial.testing import toy_sample
 
 torch.set_num_threads(1)
@@ -258,13 +258,13 @@ def test_torch_views_are_reexported_lazily_and_dataset_stays_torch_free():
     import subprocess
     import sys
 
-    from handmesh_tutorial import dataset as D
+    from handmesh_tutorial import data as D
 
     for name in ("HandCropDataset", "InterSHTorchDataset", "FreiHANDTorchDataset", "BadSampleError",
                  "BAD_SAMPLE_ERRORS", "find_bad_items", "without_items", "drop_bad_items"):
         assert getattr(A, name) is getattr(D, name) is getattr(TV, name), name
     with pytest.raises(AttributeError):
         A.NoSuchName  # noqa: B018
-    code = ("import sys, handmesh_tutorial.dataset as D; assert 'torch' not in sys.modules; "
+    code = ("import sys, handmesh_tutorial.data as D; assert 'torch' not in sys.modules; "
             "D.InterSHTorchDataset; assert 'torch' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)

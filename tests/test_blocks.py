@@ -1,4 +1,4 @@
-"""Tests of handmesh_tutorial.blocks: sparse maps, residual spiral block, fusion, transformer."""
+"""Tests of handmesh_tutorial.nn.blocks: sparse maps, residual spiral block, fusion, transformer."""
 
 from types import SimpleNamespace
 
@@ -8,9 +8,9 @@ import scipy.sparse as sp
 import torch
 import trimesh
 
-from handmesh_tutorial import blocks
-from handmesh_tutorial.sampling import mesh_hierarchy
-from handmesh_tutorial.spiral import spiral_indices
+from handmesh_tutorial.nn import blocks
+from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+from handmesh_tutorial.nn.spiral import spiral_indices
 
 torch.set_num_threads(1)
 

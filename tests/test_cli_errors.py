@@ -9,10 +9,11 @@ import tempfile
 import pytest
 import torch
 
-from handmesh_tutorial import _io, cli
+from handmesh_tutorial import _io
 from handmesh_tutorial import train as T
-from handmesh_tutorial.dataset import files as F
-from handmesh_tutorial.dataset import generate_dataset
+from handmesh_tutorial.apps import cli
+from handmesh_tutorial.data import files as F
+from handmesh_tutorial.data import generate_dataset
 from handmesh_tutorial.testing import toy_sample
 
 TRAIN = ["--epochs", "1", "--batch-size", "4", "--image-size", "32", "--channels", "4,4,8,8,8",

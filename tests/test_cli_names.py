@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from handmesh_tutorial import cli
+from handmesh_tutorial.apps import cli
 
 
 def _help(parser, command: str) -> str:

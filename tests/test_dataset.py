@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from handmesh_tutorial import dataset as D
+from handmesh_tutorial import data as D
 from handmesh_tutorial.testing import synthetic_sample
 
 SIZE = 32
@@ -312,7 +312,7 @@ def test_interrupt_during_a_write_leaves_no_partial_sample(tmp_path, monkeypatch
 
 KILL_SCRIPT = textwrap.dedent("""
     import os, sys, time
-    from handmesh_tutorial import dataset as D
+    from handmesh_tutorial import data as D
     from handmesh_tutorial.testing import synthetic_sample
 
     def make(seed):
@@ -470,7 +470,7 @@ def test_workers_give_the_same_bytes(tmp_path, start):
 
 START_METHOD_SCRIPT = textwrap.dedent("""
     import sys, threading
-    from handmesh_tutorial.dataset.workers import _start_method
+    from handmesh_tutorial.data.workers import _start_method
 
     def show(what):
         print(what, _start_method("auto"), _start_method("spawn"))
@@ -770,7 +770,7 @@ def test_sample_rejected_is_a_rejected_candidate(tmp_path):
 
 
 def test_interaction_error_is_a_sample_rejection():
-    from handmesh_tutorial.interact import InteractionError
+    from handmesh_tutorial.scenes import InteractionError
 
     err = InteractionError("hand-chain", 3, "no contact")
     assert isinstance(err, D.SampleRejected) and isinstance(err, RuntimeError)
@@ -791,7 +791,7 @@ def test_a_sample_finished_by_another_writer_is_kept(tmp_path):
 
 ORPHAN_SCRIPT = textwrap.dedent("""
     import sys, time
-    from handmesh_tutorial import dataset as D
+    from handmesh_tutorial import data as D
     from handmesh_tutorial.testing import synthetic_sample
 
     def make(seed):

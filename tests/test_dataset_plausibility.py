@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from handmesh_tutorial import cli
-from handmesh_tutorial import dataset as D
-from handmesh_tutorial.dataset import files as F
+from handmesh_tutorial import data as D
+from handmesh_tutorial.apps import cli
+from handmesh_tutorial.data import files as F
 from handmesh_tutorial.testing import synthetic_sample
 
 SIZE = 32
@@ -89,7 +89,7 @@ def test_absurd_values_are_bad_samples_named_by_verify_and_skip_bad(root, change
     assert [n for n, _ in report.bad] == ["000001"] and report.disagree == []
     assert "000001/annotation.npz" in report.bad[0][1]
     if lean:
-        from handmesh_tutorial.dataset import torch_views as TV
+        from handmesh_tutorial.data import torch_views as TV
 
         ds = TV.InterSHTorchDataset(root, 32, train=False)
         assert [(b["position"], b["sample"]) for b in TV.find_bad_items(ds)] == [(1, "000001")]
@@ -112,7 +112,7 @@ def test_the_writer_refuses_absurd_values_too():
 
 
 def test_skip_bad_names_sample_ids_not_positions_and_a_singular_k_is_a_bad_sample(root):
-    from handmesh_tutorial.dataset import torch_views as TV
+    from handmesh_tutorial.data import torch_views as TV
 
     shutil.rmtree(root / "samples" / "000000")  # positions 0, 1, 2 are samples 1, 2, 3
     png = root / "samples" / "000002" / "image.png"

@@ -1,4 +1,4 @@
-"""Tests of handmesh_tutorial.decoder: single- vs multi-path shapes, depth, gradients,
+"""Tests of handmesh_tutorial.nn.decoder: single- vs multi-path shapes, depth, gradients,
 equivariance and overfitting posed hands."""
 
 from types import SimpleNamespace
@@ -9,10 +9,10 @@ import scipy.sparse as sp
 import torch
 import trimesh
 
-from handmesh_tutorial import decoder as dec
-from handmesh_tutorial.blocks import compose_up
-from handmesh_tutorial.sampling import mesh_hierarchy
-from handmesh_tutorial.spiral import SpiralConv
+from handmesh_tutorial.nn import decoder as dec
+from handmesh_tutorial.nn.blocks import compose_up
+from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+from handmesh_tutorial.nn.spiral import SpiralConv
 
 torch.set_num_threads(1)
 

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import cli, demo
+from handmesh_tutorial.apps import cli, demo
 
 torch.set_num_threads(1)
 
@@ -69,7 +69,7 @@ def test_demo_held_out_scores_recompute_from_predictions(smoke_run):
     out = smoke_run
     ev = json.loads((out / "eval" / "eval.json").read_text())
     pred = np.load(out / "eval" / "predictions.npz")
-    test = hmt.dataset.InterSHDataset(out / "data" / "test")
+    test = hmt.data.InterSHDataset(out / "data" / "test")
     gt_j, gt_v = [], []
     for i in pred["index"]:
         s = test[int(i)]
@@ -93,14 +93,14 @@ def test_rest_hand_baseline_row_equals_an_independent_computation(smoke_run):
     """The report's baseline row: the template's open hand for every test image, scored by
     freihand_scores on the targets as the torch dataset gives them to the network."""
     out = smoke_run
-    from handmesh_tutorial.augment import InterSHTorchDataset
+    from handmesh_tutorial.data.augment import InterSHTorchDataset
 
     ds = InterSHTorchDataset(out / "data" / "test", 64, train=False)
     items = [ds[i] for i in range(len(ds))]
     gv = np.stack([it["vertices"].numpy() for it in items]).astype(float)
     gj = np.stack([it["joints"].numpy() for it in items]).astype(float)
-    tmpl = hmt.model.as_template(None)
-    rest_v = hmt.model.root_centred_template(tmpl)
+    tmpl = hmt.nn.model.as_template(None)
+    rest_v = hmt.nn.model.root_centred_template(tmpl)
     rest_j = tmpl.joint_regressor @ rest_v
     n = len(gv)
     want = hmt.metrics.freihand_scores(
@@ -124,7 +124,7 @@ def test_pretrained_row_is_the_shipped_network_on_the_same_scenes(smoke_run):
     demo's test scenes, at the network's own crop size."""
     out = smoke_run
     info = hmt.pretrained.pretrained_info()
-    want = hmt.train.evaluate(hmt.model.pretrained(), str(out / "data" / "test"),
+    want = hmt.train.evaluate(hmt.pretrained.pretrained(), str(out / "data" / "test"),
                               image_size=info["config"]["image_size"], baseline=False,
                               progress=False)["scores"]
     row = demo.parse_headline((out / "report.md").read_text(), demo.PRETRAINED_ROW)
@@ -135,9 +135,13 @@ def test_pretrained_row_is_the_shipped_network_on_the_same_scenes(smoke_run):
 
 
 def test_demo_without_a_pretrained_file_leaves_its_row_out(tmp_path, monkeypatch):
-    from handmesh_tutorial import pretrained
+    from handmesh_tutorial import _version
 
-    monkeypatch.setattr(pretrained, "_ASSET_DIR", tmp_path / "no_assets")
+    assets = tmp_path / "no_network"  # the shipped encoder only
+    assets.mkdir()
+    (assets / "hand_encoder_pretrained.pt").symlink_to(
+        _version.ASSET_DIR / "hand_encoder_pretrained.pt")
+    monkeypatch.setattr(_version, "ASSET_DIR", assets)
     said = []
     cfg = demo.DemoConfig.from_budget(hmt.budget("smoke"), train_samples=4, test_samples=4,
                                       epochs=1)

@@ -39,16 +39,16 @@ def docstrings(path: Path) -> list[tuple[int, str]]:
 
 
 def test_the_scanner_sees_docstrings():
-    found = docstrings(ROOT / "handmesh_tutorial" / "model.py")
+    found = docstrings(ROOT / "handmesh_tutorial" / "nn" / "model.py")
     assert any("MSMR-Net" in text for _, text in found)
     assert any("smoothing" in text for _, text in found), "attribute docstrings are scanned too"
 
 
 def test_the_pattern_catches_sphinx_roles():
     for text in (":func:`build_model`", ":class:`~handmesh_tutorial.hand.HandModel`",
-                 ":py:meth:`x`", ":mod:`handmesh_tutorial.spiral`", ":data:`VR_BINS`"):
+                 ":py:meth:`x`", ":mod:`handmesh_tutorial.nn.spiral`", ":data:`VR_BINS`"):
         assert SPHINX_ROLE.search(text), text
-    assert not SPHINX_ROLE.search("[`build_model`][handmesh_tutorial.model.build_model]")
+    assert not SPHINX_ROLE.search("[`build_model`][handmesh_tutorial.nn.model.build_model]")
 
 
 @pytest.mark.parametrize("path", MODULES, ids=MODULE_IDS)

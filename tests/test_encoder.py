@@ -1,9 +1,9 @@
-"""Tests of handmesh_tutorial.encoder: ResNet / HRNet shapes, parameter counts, key mapping."""
+"""Tests of handmesh_tutorial.nn.encoder: ResNet / HRNet shapes, parameter counts, key mapping."""
 
 import pytest
 import torch
 
-from handmesh_tutorial import encoder as enc
+from handmesh_tutorial.nn import encoder as enc
 
 torch.set_num_threads(1)
 

@@ -4,10 +4,10 @@ warm-up or throughout, its own learning rate, and its features computed once whe
 import pytest
 import torch
 
-from handmesh_tutorial import augment as A
-from handmesh_tutorial import pose_encoder as PE
 from handmesh_tutorial import train as T
-from handmesh_tutorial.demo.config import RECIPES
+from handmesh_tutorial.apps.demo.config import RECIPES
+from handmesh_tutorial.data import augment as A
+from handmesh_tutorial.nn import pose_encoder as PE
 from handmesh_tutorial.testing import toy_sample
 from handmesh_tutorial.train import features as FT
 

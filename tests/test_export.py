@@ -17,10 +17,10 @@ import trimesh
 from torch import nn
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import blocks
-from handmesh_tutorial import model as M
-from handmesh_tutorial.blocks import SparseVertexMap
-from handmesh_tutorial.sampling import mesh_hierarchy
+from handmesh_tutorial.nn import blocks
+from handmesh_tutorial.nn import model as M
+from handmesh_tutorial.nn.blocks import SparseVertexMap
+from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
 
 torch.set_num_threads(1)
 
@@ -53,7 +53,7 @@ def nets() -> dict:
         net = M.build_model(_TinyEncoder(), decoder, attention, tmpl, channels=(4, 8, 8),
                             latent_channels=8, hierarchy=hier, zero_head=False)
         out[name] = (net.eval(), torch.randn(2, 3, 16, 16))
-    net = hmt.model.pretrained()
+    net = hmt.pretrained.pretrained()
     size = hmt.pretrained.pretrained_info()["config"]["image_size"]
     out["pretrained"] = (net, torch.randn(2, 3, size, size))
     return out

@@ -1,4 +1,4 @@
-"""Tests of handmesh_tutorial.freihand on tiny fixtures in the official FreiHAND layout."""
+"""Tests of handmesh_tutorial.data.freihand on tiny fixtures in the official FreiHAND layout."""
 
 import json
 import zipfile
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from handmesh_tutorial import freihand as fh
 from handmesh_tutorial import metrics
+from handmesh_tutorial.data import freihand as fh
 
 N = 3  # unique samples in the fixture
 
@@ -277,7 +277,7 @@ def _jpeg_declaring(width, height):
                                            (10_000, "could be decompression bomb"),
                                            (5_000, "5000 x 5000 pixels, over 4096 a side")])
 def test_a_jpeg_bomb_is_refused_before_decoding_and_named(root, side, pattern):
-    from handmesh_tutorial.dataset import MAX_IMAGE_SIZE, torch_views
+    from handmesh_tutorial.data import MAX_IMAGE_SIZE, torch_views
 
     assert fh._MAX_IMAGE_SIDE == MAX_IMAGE_SIZE  # one limit for both readers
     path = root / "training" / "rgb" / "00000001.jpg"

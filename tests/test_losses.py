@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import torch
 
-from handmesh_tutorial import keypoints as KP
-from handmesh_tutorial import losses as L
-from handmesh_tutorial.camera import project
-from handmesh_tutorial.encoder import resnet10
 from handmesh_tutorial.metrics import procrustes_align
+from handmesh_tutorial.nn import keypoints as KP
+from handmesh_tutorial.nn import losses as L
+from handmesh_tutorial.nn.encoder import resnet10
+from handmesh_tutorial.render.camera import project
 
 torch.set_num_threads(1)
 

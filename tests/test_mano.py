@@ -1,4 +1,4 @@
-"""Tests for handmesh_tutorial.mano: restricted unpickling and the MANO forward pass.
+"""Tests for handmesh_tutorial.hand.mano: restricted unpickling and the MANO forward pass.
 
 No MANO file is available, so every test writes its own MANO-format fixture: random arrays with
 the real keys and shapes. The LBS reference below is an independent float64 numpy computation.
@@ -17,7 +17,7 @@ import scipy.sparse as sp
 import torch
 from scipy.spatial.transform import Rotation
 
-from handmesh_tutorial import mano as M
+from handmesh_tutorial.hand import mano as M
 from handmesh_tutorial.testing import mano_format_params, write_mano_pickle
 
 torch.set_num_threads(1)

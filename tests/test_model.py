@@ -1,14 +1,15 @@
-"""Tests of handmesh_tutorial.model: MSMRNet assembly, outputs, templates, state-dict round trip."""
+"""Tests of handmesh_tutorial.nn.model: MSMRNet assembly, outputs, templates, state-dict round
+trip."""
 
 import numpy as np
 import pytest
 import torch
 import trimesh
 
-from handmesh_tutorial import model as M
-from handmesh_tutorial.blocks import CoarseMeshTransformer
-from handmesh_tutorial.decoder import MultiPathDecoder, SinglePathDecoder
-from handmesh_tutorial.sampling import mesh_hierarchy
+from handmesh_tutorial.nn import model as M
+from handmesh_tutorial.nn.blocks import CoarseMeshTransformer
+from handmesh_tutorial.nn.decoder import MultiPathDecoder, SinglePathDecoder
+from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
 
 torch.set_num_threads(1)
 
@@ -180,14 +181,14 @@ def test_vertices_from_field_parameterisations(sphere):
 
 def test_output_smoothing_follows_the_length(sphere):
     tmpl, _ = sphere
-    from handmesh_tutorial.surface import mean_edge_length
+    from handmesh_tutorial.nn.smoothing import mean_edge_length
 
     e = mean_edge_length(tmpl.vertices, tmpl.faces)
     assert isinstance(_build(sphere, smoothing_length=0.0).smoothing, torch.nn.Identity)
     net = _build(sphere, smoothing_length=e)  # sigma = e: two steps, applied one by one
     assert len(net.smoothing) == 2
     dense = (net.smoothing[1].to_dense() @ net.smoothing[0].to_dense()).double()
-    from handmesh_tutorial.surface import smoothing_matrix
+    from handmesh_tutorial.nn.smoothing import smoothing_matrix
 
     want = torch.from_numpy(smoothing_matrix(tmpl.faces, 2).toarray())
     torch.testing.assert_close(dense, want, rtol=1e-6, atol=1e-7)
@@ -196,7 +197,7 @@ def test_output_smoothing_follows_the_length(sphere):
 
 
 def _set_sparse_method(net, method):
-    from handmesh_tutorial.blocks import SparseVertexMap
+    from handmesh_tutorial.nn.blocks import SparseVertexMap
     maps = [m for m in net.modules() if isinstance(m, SparseVertexMap) and not m.is_selection]
     for m in maps:
         m.method = method

@@ -4,7 +4,7 @@ import sys
 import pytest
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import cli
+from handmesh_tutorial.apps import cli
 
 
 def test_unknown_attribute_is_an_attribute_error():

@@ -44,16 +44,18 @@ def test_core_components_and_the_pretrained_network_work_without_any_extra():
             sys.modules[name] = None  # as if not installed
         import numpy as np, torch
         import handmesh_tutorial as hmt
-        from handmesh_tutorial import (blocks, collision, decoder, encoder, freihand, hand, lcs,
-                                       mano, metrics, model, spiral, visibility)
-        net = hmt.model.pretrained()
+        from handmesh_tutorial import collision, hand, lcs, metrics, visibility
+        from handmesh_tutorial.data import freihand
+        from handmesh_tutorial.hand import mano
+        from handmesh_tutorial.nn import blocks, decoder, encoder, model, spiral
+        net = hmt.pretrained.pretrained()
         s = hmt.pretrained.pretrained_info()["config"]["image_size"]
         with torch.no_grad():
             out = net(torch.zeros(1, 3, s, s))
         assert out["joints"].shape == (1, 21, 3) and torch.isfinite(out["vertices"]).all()
         hm = hmt.hand.HandModel("right")
-        idx = hmt.spiral.spiral_indices(hm.faces, 9)
-        y = hmt.spiral.SpiralConv(3, 4, idx)(hm().vertices)
+        idx = hmt.nn.spiral.spiral_indices(hm.faces, 9)
+        y = hmt.nn.spiral.SpiralConv(3, 4, idx)(hm().vertices)
         a0, a1 = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]])
         hit = hmt.collision.cylinders_intersect(a0, a1, np.array([0.1]), a0 + [0.15, 0, 0],
                                                 a1 + [0.15, 0, 0], np.array([0.1]))
@@ -82,6 +84,9 @@ def test_a_missing_extra_is_named_in_the_error(monkeypatch):
         monkeypatch.setitem(sys.modules, top, None)
     monkeypatch.setattr(backend, "_PYRENDER", None)
     monkeypatch.setattr(_common, "_NUMBA_STATE", [])
+    # the numba kernels of an earlier test: as if never imported (module and package attribute)
+    monkeypatch.delitem(sys.modules, "handmesh_tutorial.collision._numba", raising=False)
+    monkeypatch.delattr(hmt.collision, "_numba", raising=False)
     with pytest.raises(ImportError, match=r'hmt.viz figures needs matplotlib.*pip install '
                                           r'"handmesh_tutorial\[notebooks\]"'):
         hmt.viz.plot_loss_curves([1.0, 0.5], [{"epoch": 1, "val_loss": 0.4}])

@@ -8,13 +8,13 @@ import pytest
 import torch
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import pose_encoder as PE
-from handmesh_tutorial.camera import project
-from handmesh_tutorial.dataset.torch_views import InterSHTorchDataset
-from handmesh_tutorial.keypoints import KeypointEncoder, normalised_keypoints
+from handmesh_tutorial.apps import pose_pretraining as PP
+from handmesh_tutorial.data import batched_crops as BC
+from handmesh_tutorial.data.torch_views import InterSHTorchDataset
+from handmesh_tutorial.nn import pose_encoder as PE
+from handmesh_tutorial.nn.keypoints import KeypointEncoder, normalised_keypoints
+from handmesh_tutorial.render.camera import project
 from handmesh_tutorial.testing import toy_sample
-from handmesh_tutorial.train import batched_crops as BC
-from handmesh_tutorial.train import pose_pretraining as PP
 
 torch.set_num_threads(1)
 
@@ -135,21 +135,21 @@ def test_load_into_msmr_net_copies_the_encoder_only(tmp_path):
     torch.manual_seed(1)
     src = PE.build_pose_net("resnet10")
     path = PE.export_pose_encoder(src, tmp_path / "e.pt", weights="float32")
-    model = hmt.model.build_model("resnet10", keypoints=True)
+    model = hmt.nn.model.build_model("resnet10", keypoints=True)
     dec_before = {k: v.clone() for k, v in model.decoder.state_dict().items()}
     PE.load_pretrained_encoder(model, path)
     for k, v in src.encoder.state_dict().items():
         assert torch.equal(model.encoder.state_dict()[k], v)
     for k, v in dec_before.items():
         assert torch.equal(model.decoder.state_dict()[k], v)
-    plain = hmt.model.build_model("resnet10")  # the paper's encoder: the ResNet part only
+    plain = hmt.nn.model.build_model("resnet10")  # the paper's encoder: the ResNet part only
     PE.load_pretrained_encoder(plain, path)
     for k, v in src.encoder.backbone.state_dict().items():
         assert torch.equal(plain.encoder.state_dict()[k], v)
     with pytest.raises(ValueError, match="HRNet"):
-        PE.load_pretrained_encoder(hmt.model.build_model("hrnet18"), path)
+        PE.load_pretrained_encoder(hmt.nn.model.build_model("hrnet18"), path)
     with pytest.raises(ValueError, match="shapes differ"):
-        PE.load_pretrained_encoder(hmt.model.build_model("resnet18", keypoints=True), path)
+        PE.load_pretrained_encoder(hmt.nn.model.build_model("resnet18", keypoints=True), path)
 
 
 def test_shipped_encoder_loads_with_provenance_and_disjoint_seeds():

@@ -8,11 +8,13 @@ import pytest
 import torch
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial import augment as A
-from handmesh_tutorial import pretrained as P
+from handmesh_tutorial import _version
+from handmesh_tutorial import pretrained as L
 from handmesh_tutorial import train as T
-from handmesh_tutorial.cli import main as cli_main
-from handmesh_tutorial.dataset import InterSHDataset
+from handmesh_tutorial.apps import pretrain_network as P
+from handmesh_tutorial.apps.cli import main as cli_main
+from handmesh_tutorial.data import InterSHDataset
+from handmesh_tutorial.data import augment as A
 from handmesh_tutorial.testing import toy_sample
 from handmesh_tutorial.train.checkpoints import dequantize_state_dict, quantize_state_dict
 
@@ -92,18 +94,18 @@ def test_export_loads_back_close_to_the_run_and_is_small(run, tmp_path):
 
 def test_pretrained_is_found_by_name_and_missing_says_how_to_make_it(run, tmp_path,
                                                                      monkeypatch, capsys):
-    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
+    monkeypatch.setattr(_version, "ASSET_DIR", tmp_path / "assets")
     with pytest.raises(FileNotFoundError, match="make pretrained"):
-        hmt.model.pretrained()
+        hmt.pretrained.pretrained()
     with pytest.raises(FileNotFoundError, match="make pretrained"):
         T.load_checkpoint("pretrained")
-    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / P.PRETRAINED_FILE,
+    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / L.PRETRAINED_FILE,
                         info={"data": {"train_seed": 9}})
-    net = hmt.model.pretrained()
-    ref = _vertices(T.load_checkpoint(tmp_path / "assets" / P.PRETRAINED_FILE)[0],
+    net = hmt.pretrained.pretrained()
+    ref = _vertices(T.load_checkpoint(tmp_path / "assets" / L.PRETRAINED_FILE)[0],
                     run["dataset"])
     assert np.array_equal(_vertices(net, run["dataset"]), ref)
-    info = P.pretrained_info()
+    info = L.pretrained_info()
     assert info["pretrained"]["data"]["train_seed"] == 9 and info["weights"] == "int8"
     assert info["library_version"] == hmt.__version__  # the version that wrote the file
     assert len(info["history"]) == 2
@@ -123,8 +125,8 @@ def test_init_starts_training_from_given_weights_and_checks_the_architecture(run
     assert all(torch.allclose(got[k], want[k], atol=1e-8) for k in want)
     fresh = trained("random")
     assert not all(torch.allclose(fresh[k], want[k], atol=1e-3) for k in want)
-    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
-    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / P.PRETRAINED_FILE)
+    monkeypatch.setattr(_version, "ASSET_DIR", tmp_path / "assets")
+    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / L.PRETRAINED_FILE)
     named = trained("from_pretrained", init="pretrained")
     assert all(torch.allclose(named[k], want[k], atol=0.01) for k in want)  # int8 steps
     with pytest.raises(ValueError, match="architecture differs"):
@@ -148,8 +150,8 @@ def test_recipe_checks_its_values_and_makes_the_training_config(tmp_path):
 
 
 def test_time_bounded_generation_keeps_whole_shards_in_a_valid_root(tmp_path, monkeypatch):
-    import handmesh_tutorial.demo.run as demo_run
-    from handmesh_tutorial.dataset import generate_dataset
+    import handmesh_tutorial.apps.demo.run as demo_run
+    from handmesh_tutorial.data import generate_dataset
 
     def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
         return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
@@ -177,8 +179,8 @@ def test_a_rerun_keeps_the_shards_of_the_first_and_refuses_other_scenes(tmp_path
     """A time budget decides how many shards a run makes: a rerun with another budget (a run
     resumed on a GPU machine after a failure did this) must train on the first run's shards,
     not generate a different number that cannot merge with them."""
-    import handmesh_tutorial.demo.run as demo_run
-    from handmesh_tutorial.dataset import generate_dataset
+    import handmesh_tutorial.apps.demo.run as demo_run
+    from handmesh_tutorial.data import generate_dataset
 
     made = []
 
@@ -211,15 +213,15 @@ def test_a_rerun_keeps_the_shards_of_the_first_and_refuses_other_scenes(tmp_path
 
 def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     """generate -> train -> export -> install, then a second run that starts from the first."""
-    import handmesh_tutorial.demo.run as demo_run
-    from handmesh_tutorial.dataset import generate_dataset
+    import handmesh_tutorial.apps.demo.run as demo_run
+    from handmesh_tutorial.data import generate_dataset
 
     def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
         return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
                                 "hand-hand", shard=shard, progress=False, durable=False)
 
     monkeypatch.setattr(demo_run, "generate_scenes", toy_scenes)
-    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
+    monkeypatch.setattr(_version, "ASSET_DIR", tmp_path / "assets")
     small = dict(train_scenes=6, val_scenes=3, render_size=64, image_size=32, epochs=2,
                  batch_size=3, workers=1, loader_workers=1, device="cpu", precision="float32")
     calls = []
@@ -230,12 +232,12 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     first = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                install=True, export_every=3600, progress=False, log=None)
     assert calls == [1, 1, 3, 3]  # int8 and float16 after the first and the last epoch only
-    info = P.pretrained_info()
+    info = L.pretrained_info()
     made = info["pretrained"]
     assert made["data"] == {**made["data"], "train_seed": 100, "train_scenes": 6, "val_seed": 101,
                             "val_scenes": 3}
     assert made["epochs_done"] == 3 and len(info["history"]) == 3 and made["seconds"]["train"] > 0
-    assert (tmp_path / "assets" / P.PRETRAINED_FILE).read_bytes() == first["file"].read_bytes()
+    assert (tmp_path / "assets" / L.PRETRAINED_FILE).read_bytes() == first["file"].read_bytes()
     assert first["float16"].stat().st_size > first["file"].stat().st_size
     first["file"].unlink()  # a finished run, resumed: nothing to train, exported again
     again = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**{**small, "epochs": 3}),
@@ -277,9 +279,9 @@ def test_cli_pretrain_help_and_evaluate_by_name(run, tmp_path, monkeypatch, caps
     with pytest.raises(SystemExit):
         cli_main(["pretrain", "--help"])
     assert "--max-train-seconds" in capsys.readouterr().out
-    monkeypatch.setattr(P, "_ASSET_DIR", tmp_path / "assets")
-    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / P.PRETRAINED_FILE)
-    from handmesh_tutorial.dataset import generate_dataset
+    monkeypatch.setattr(_version, "ASSET_DIR", tmp_path / "assets")
+    P.export_pretrained(run["checkpoint"], tmp_path / "assets" / L.PRETRAINED_FILE)
+    from handmesh_tutorial.data import generate_dataset
 
     root = tmp_path / "toy"
     generate_dataset(root, lambda s: toy_sample(s, image_size=64), 4, 2, "hand-hand",
@@ -289,21 +291,21 @@ def test_cli_pretrain_help_and_evaluate_by_name(run, tmp_path, monkeypatch, caps
     assert code == 0 and "PA-MPJPE" in capsys.readouterr().out
 
 
-shipped = pytest.mark.skipif(not (P._ASSET_DIR / P.PRETRAINED_FILE).is_file(),
+shipped = pytest.mark.skipif(not (_version.ASSET_DIR / L.PRETRAINED_FILE).is_file(),
                              reason="no pretrained file in this checkout")
 
 
 @shipped
 def test_the_shipped_file_fits_the_template_and_records_how_it_was_made():
-    path = P.pretrained_path()
+    path = L.pretrained_path()
     assert path.stat().st_size <= 10_000_000
-    info = P.pretrained_info()
+    info = L.pretrained_info()
     made = info["pretrained"]
     assert info["weights"] == "int8"
     assert made["data"]["train_scenes"] >= 1000 and made["data"]["train_seed"] not in range(11)
     assert made["hardware"] and made["seconds"]["train"] > 0 and made["commit"]
     # a new hand template invalidates the weights: loading checks the template's hash
-    net = hmt.model.pretrained()
+    net = hmt.pretrained.pretrained()
     size = info["config"]["image_size"]
     out = net(torch.zeros(1, 3, size, size))
     assert out["vertices"].shape[1] == len(hmt.train.resolve_template(None).vertices)

@@ -231,7 +231,7 @@ def test_crop_camera_frames_points():
 
 def test_project_is_the_checked_camera_projection():
     """``render.project`` is ``camera.project`` (same numbers) plus the renderer's checks."""
-    from handmesh_tutorial import camera
+    from handmesh_tutorial.render import camera
 
     assert R.project is camera.project_checked
     assert R.intrinsics is camera.intrinsics and R.crop_camera is camera.crop_camera
@@ -439,7 +439,7 @@ def test_the_same_scene_renders_to_the_same_bytes_every_time():
     # pyrender keeps its mesh and light nodes in sets (object-id order): a pixel where a hand's
     # wrist rim meets its forearm (same depth) and the order in which lights are summed changed
     # from one render to the next (1 pixel in about 1 image in 200). These four scenes showed it.
-    from handmesh_tutorial import interact
+    from handmesh_tutorial import scenes as interact
 
     scenes = [(2225977598304645, "hand-hand"), (5283688704410008, "hand-object"),
               (850257826479516, "hand-hand"), (5452981206712262, "hand-hand")]

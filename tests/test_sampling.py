@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial.sampling import (
+from handmesh_tutorial.nn.hierarchy import (
     barycentric_upsampling,
     decimate,
     default_cache_dir,
@@ -322,7 +322,7 @@ def test_unwritable_cache_falls_back_to_memory_with_a_warning(tmp_path, monkeypa
         monkeypatch.delenv("HANDMESH_CACHE")
         monkeypatch.setenv("HOME", str(bad))
         with pytest.warns(UserWarning, match="cannot write"):
-            net = hmt.model.pretrained()
+            net = hmt.pretrained.pretrained()
         assert net.template.shape[0] == hmt.hand.HandModel("right").num_vertices
     finally:
         if how == "read_only_folder":

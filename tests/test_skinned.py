@@ -1,17 +1,17 @@
-"""Tests of handmesh_tutorial.skinned and build_model(output="skinned")."""
+"""Tests of handmesh_tutorial.nn.skinned and build_model(output="skinned")."""
 
 from types import SimpleNamespace
 
+import fit_probe as fit
 import numpy as np
 import pytest
 import torch
 from test_fit import make_small_hand
 
-from handmesh_tutorial import fit
 from handmesh_tutorial.hand import HandModel, axis_angle_to_matrix, random_pose, random_shape
-from handmesh_tutorial.model import build_model, root_centred_template
-from handmesh_tutorial.rotation import matrix_to_rotation_6d
-from handmesh_tutorial.skinned import SkinnedOutput, skinning_of
+from handmesh_tutorial.nn.model import build_model, root_centred_template
+from handmesh_tutorial.nn.rotation import matrix_to_rotation_6d
+from handmesh_tutorial.nn.skinned import SkinnedOutput, skinning_of
 
 torch.set_num_threads(1)
 

@@ -11,7 +11,7 @@ import torch
 import trimesh
 from scipy.sparse.csgraph import shortest_path
 
-from handmesh_tutorial.spiral import (
+from handmesh_tutorial.nn.spiral import (
     SpiralConv,
     rotational_neighbours,
     spiral_indices,

@@ -1,4 +1,5 @@
-"""Tests of handmesh_tutorial.surface: roughness and flipped faces against a naive per-edge loop,
+"""Tests of handmesh_tutorial.metrics.surface: roughness and flipped faces against a naive per-edge
+loop,
 and their invariances."""
 
 import numpy as np
@@ -7,7 +8,8 @@ import torch
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from handmesh_tutorial import surface
+from handmesh_tutorial.metrics import surface
+from handmesh_tutorial.nn import smoothing
 
 
 def _naive_roughness(pred, gt, faces):
@@ -147,7 +149,7 @@ def test_mirrored_copy(meshes):
 
 def test_smoothing_matrix_and_steps(meshes):
     v, f = meshes["sphere"]
-    s1 = surface.smoothing_matrix(f, 1)
+    s1 = smoothing.smoothing_matrix(f, 1)
     # one step: half the value stays, half is the mean of the 1-ring (loop over vertices)
     dense = s1.toarray()
     for i in range(len(v)):
@@ -156,18 +158,18 @@ def test_smoothing_matrix_and_steps(meshes):
         want[i] = 0.5
         want[list(ring)] += 0.5 / len(ring)
         np.testing.assert_allclose(dense[i], want)
-    s3 = surface.smoothing_matrix(f, 3)
+    s3 = smoothing.smoothing_matrix(f, 3)
     np.testing.assert_allclose(s3.toarray(), np.linalg.matrix_power(dense, 3), atol=1e-12)
     np.testing.assert_allclose(np.asarray(s3.sum(1)).ravel(), 1.0)
-    assert (surface.smoothing_matrix(f, 0) != surface.smoothing_matrix(f, 0).T).nnz == 0
-    np.testing.assert_array_equal(surface.smoothing_matrix(f, 0).toarray(), np.eye(len(v)))
+    assert (smoothing.smoothing_matrix(f, 0) != smoothing.smoothing_matrix(f, 0).T).nnz == 0
+    np.testing.assert_array_equal(smoothing.smoothing_matrix(f, 0).toarray(), np.eye(len(v)))
     # an isolated vertex keeps its value
-    iso = surface.smoothing_matrix(f, 2, num_vertices=len(v) + 1).toarray()
+    iso = smoothing.smoothing_matrix(f, 2, num_vertices=len(v) + 1).toarray()
     assert iso[-1, -1] == 1.0 and iso[-1].sum() == 1.0
-    e = surface.mean_edge_length(v, f)
-    assert surface.smoothing_steps(v, f, 0.0) == 0
-    assert surface.smoothing_steps(v, f, e) == 2
-    assert surface.smoothing_steps(v, f, 2 * e) == 8
-    assert surface.smoothing_steps(2 * v, f, 2 * e) == 2  # a length, not a step count
+    e = smoothing.mean_edge_length(v, f)
+    assert smoothing.smoothing_steps(v, f, 0.0) == 0
+    assert smoothing.smoothing_steps(v, f, e) == 2
+    assert smoothing.smoothing_steps(v, f, 2 * e) == 8
+    assert smoothing.smoothing_steps(2 * v, f, 2 * e) == 2  # a length, not a step count
     with pytest.raises(ValueError, match="steps"):
-        surface.smoothing_matrix(f, -1)
+        smoothing.smoothing_matrix(f, -1)

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 import torch
 
-from handmesh_tutorial import augment as A
 from handmesh_tutorial import train as T
+from handmesh_tutorial.apps.cli import main as cli_main
 from handmesh_tutorial.budget import budget
-from handmesh_tutorial.cli import main as cli_main
-from handmesh_tutorial.dataset import InterSHDataset, generate_dataset
+from handmesh_tutorial.data import InterSHDataset, generate_dataset
+from handmesh_tutorial.data import augment as A
 from handmesh_tutorial.testing import (
     synthetic_sample,
     toy_sample,
@@ -379,7 +379,7 @@ def test_freihand_end_to_end_from_a_mano_pickle(tmp_path, capsys, mano_freihand)
 def test_mano_pickle_is_a_template(tmp_path, mano_freihand):
     """A user's MANO_RIGHT.pkl is a template wherever a .npz is: read through the restricted
     MANO loader, the flat rest hand with MANO's 21-keypoint regressor; a left file is refused."""
-    from handmesh_tutorial.mano import UnsafePickleError, load_mano
+    from handmesh_tutorial.hand.mano import UnsafePickleError, load_mano
 
     pkl = mano_freihand[0]
     t = T.resolve_template(pkl)
@@ -644,7 +644,7 @@ class _Payload:
 
 
 def test_cli_errors_are_one_line_with_an_exit_code(toy_root, tmp_path, capsys):
-    from handmesh_tutorial.cli import EXIT_CODES
+    from handmesh_tutorial.apps.cli import EXIT_CODES
 
     crafted = tmp_path / "crafted.pt"
     torch.save({"format": T.CHECKPOINT_FORMAT, "model": _Payload()}, crafted)

@@ -25,14 +25,14 @@ def scenes_grid() -> np.ndarray:
     """(3*SIZE, PER_ROW*SIZE, 3) uint8: the grid of the docs page."""
     rows = []
     with hmt.render.Renderer(SIZE) as renderer:
-        for row, kind in enumerate(hmt.interact.KINDS):
+        for row, kind in enumerate(hmt.scenes.KINDS):
             images, i = [], 0
             while len(images) < PER_ROW:
-                seed = hmt.dataset.sample_seed(11 + row, i)
+                seed = hmt.data.sample_seed(11 + row, i)
                 i += 1
                 try:
-                    sample = hmt.interact.make_sample(seed, kind, SIZE, renderer=renderer)
-                except hmt.interact.InteractionError:
+                    sample = hmt.scenes.make_sample(seed, kind, SIZE, renderer=renderer)
+                except hmt.scenes.InteractionError:
                     continue          # the generator rejects some seeds; take the next one
                 images.append(sample["image"])
             rows.append(np.concatenate(images, axis=1))

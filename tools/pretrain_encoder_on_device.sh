@@ -27,14 +27,14 @@ copy() {
 copier=$!
 set +e -o pipefail
 # shellcheck disable=SC2086  # the argument strings are meant to split
-python3 -m handmesh_tutorial.cli pretrain-encoder --out /tmp/peA --no-progress $COMMON $1 2>&1 \
+python3 -m handmesh_tutorial.apps.cli pretrain-encoder --out /tmp/peA --no-progress $COMMON $1 2>&1 \
   | tee "$OUT/logA.txt"
 rc=$?
 if [ -n "$2" ]; then
   mkdir -p /tmp/peB
   for f in data crops_train.pt crops_val.pt; do ln -sfn "/tmp/peA/$f" "/tmp/peB/$f"; done
   # shellcheck disable=SC2086
-  python3 -m handmesh_tutorial.cli pretrain-encoder --out /tmp/peB --no-progress $COMMON $2 \
+  python3 -m handmesh_tutorial.apps.cli pretrain-encoder --out /tmp/peB --no-progress $COMMON $2 \
     2>&1 | tee "$OUT/logB.txt"
   rc=$((rc + $?))
 fi

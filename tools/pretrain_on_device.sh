@@ -42,7 +42,7 @@ files="/tmp/pt/msmr_net_pretrained.pt /tmp/pt/msmr_net_float16.pt /tmp/pt/train/
  done; done) >/dev/null 2>&1 &
 copier=$!
 set +e -o pipefail
-python3 -m handmesh_tutorial.cli pretrain --out /tmp/pt --no-progress "$@" 2>&1 | tee "$OUT/log.txt"
+python3 -m handmesh_tutorial.apps.cli pretrain --out /tmp/pt --no-progress "$@" 2>&1 | tee "$OUT/log.txt"
 rc=$?
 kill $copier 2>/dev/null
 for f in $files; do if [ -f "$f" ]; then cp "$f" "$OUT/"; fi; done

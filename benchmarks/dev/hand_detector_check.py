@@ -14,7 +14,7 @@ the project's.
 Two halves, so the two environments never mix:
 
 ``generate`` (project venv; ``handmesh_tutorial`` + pyrender, ``PYOPENGL_PLATFORM=egl``) renders
-fresh scenes with :func:`handmesh_tutorial.interact.make_sample` and writes one ``NNNNN.npz``
+fresh scenes with :func:`handmesh_tutorial.scenes.make_sample` and writes one ``NNNNN.npz``
 (+ ``NNNNN.png``) per scene: ``image`` (S,S,3) uint8, ``joints`` (21,3) target hand, camera frame,
 metres, FreiHAND order; ``other_joints`` (21,3) of the other hand (hand-hand) or NaN; ``K``;
 ``vr`` (target); ``side``, ``other_side``, ``kind``, ``seed``, ``tone`` (the target's skin tone,
@@ -115,8 +115,8 @@ def generate(out: Path, num: int, seed: int, kinds: list[str], image_size: int,
     from PIL import Image
 
     import handmesh_tutorial
-    from handmesh_tutorial import interact
-    from handmesh_tutorial.dataset import SampleRejected, sample_seed
+    from handmesh_tutorial import scenes as interact
+    from handmesh_tutorial.data import SampleRejected, sample_seed
     from handmesh_tutorial.visibility import VR_BINS as PROJECT_BINS
 
     torch.set_num_threads(1)

@@ -39,7 +39,7 @@ import torch
 
 import handmesh_tutorial as hmt
 from handmesh_tutorial._io import atomic_savez
-from handmesh_tutorial.dataset.torch_views import InterSHTorchDataset
+from handmesh_tutorial.data.torch_views import InterSHTorchDataset
 from handmesh_tutorial.metrics import point_errors, procrustes_align
 
 
@@ -121,8 +121,8 @@ def main(argv=None) -> None:
     gt, val_gt = te["joints"], tr["joints"][n_fit:]
     print(f"training scenes {n_fit}, validation {args.val}, test {len(gt)}")
     print("explained variance of the first 1..5 components:", np.round(explained[:5], 3))
-    template = hmt.model.as_template()
-    rest_j = np.asarray(template.joint_regressor) @ hmt.model.root_centred_template(template)
+    template = hmt.nn.model.as_template()
+    rest_j = np.asarray(template.joint_regressor) @ hmt.nn.model.root_centred_template(template)
     for name, joints in (("validation", val_gt), ("test", gt)):
         print(f"{name}: rest hand {pa_mpjpe_mm(np.broadcast_to(rest_j, joints.shape), joints):.2f}"
               f" mm, mean hand (k=0) {pa_mpjpe_mm(np.broadcast_to(ref, joints.shape), joints):.2f}"
@@ -148,7 +148,7 @@ def main(argv=None) -> None:
     y_train = torch.from_numpy(targets.astype(np.float32))
     basis = torch.from_numpy((vt[:k] * sd[:, None]).astype(np.float32))  # coefficient -> m
     mean = torch.from_numpy(mu.astype(np.float32))
-    enc = hmt.encoder.build_encoder(args.encoder)
+    enc = hmt.nn.encoder.build_encoder(args.encoder)
     net = torch.nn.Sequential(enc, torch.nn.Linear(enc.out_features, k))
     opt = torch.optim.Adam(net.parameters(), 1e-3)
 

@@ -1,7 +1,8 @@
 """One lever of the CPU training recipe, measured: train, then score beside both constant hands.
 
-Trains MSMR-Net with the demo's CPU recipe (``hmt.demo.RECIPES["cpu"]``) plus the overrides given
-on the command line on one INTER-SH training root, then scores the best checkpoint on a held-out
+Trains MSMR-Net with the demo's CPU recipe (``hmt.apps.demo.RECIPES["cpu"]``) plus the overrides
+given on the command line on one INTER-SH training root, then scores the best checkpoint on a
+held-out
 root with ``hmt.train.evaluate`` beside the rest hand and the mean training hand, and measures the
 2D keypoint head's error in the crop (pixels, and as a fraction of the crop side so that crop sizes
 compare). Writes ``OUT/levers.json`` and prints one line.
@@ -27,7 +28,7 @@ import numpy as np
 import torch
 
 import handmesh_tutorial as hmt
-from handmesh_tutorial.keypoints import KeypointEncoder, normalised_keypoints
+from handmesh_tutorial.nn.keypoints import KeypointEncoder, normalised_keypoints
 
 
 def keypoint_errors(model, dataset, batch_size: int = 32) -> np.ndarray:
@@ -58,7 +59,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--epochs", type=int, default=8)
     parser.add_argument("--batch-size", type=int, default=16)
     parser.add_argument("--encoder", default="resnet10")
-    parser.add_argument("--recipe", default="cpu", choices=sorted(hmt.demo.RECIPES))
+    parser.add_argument("--recipe", default="cpu", choices=sorted(hmt.apps.demo.RECIPES))
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=JSON",
                         help="TrainConfig override, e.g. normal_weight=0.2 or "
                              'model_kwargs={"keypoints":true}')
@@ -67,7 +68,7 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
 
     overrides = {k: json.loads(v) for k, v in (s.split("=", 1) for s in args.set)}
-    recipe = {**hmt.demo.RECIPES[args.recipe]}
+    recipe = {**hmt.apps.demo.RECIPES[args.recipe]}
     if "model_kwargs" in overrides:
         recipe["model_kwargs"] = {**recipe.get("model_kwargs", {}), **overrides.pop("model_kwargs")}
     recipe.update(overrides)
@@ -84,7 +85,7 @@ def main(argv=None) -> dict:
 
     train_set, _ = hmt.train.make_datasets(cfg)
     mean = hmt.train.mean_hand(train_set)
-    test_set = hmt.augment.InterSHTorchDataset(hmt.dataset.InterSHDataset(args.test),
+    test_set = hmt.data.augment.InterSHTorchDataset(hmt.data.InterSHDataset(args.test),
                                                image_size=args.image_size, train=False,
                                                augment=False, box_scale=cfg.box_scale)
     model, _ = hmt.train.load_checkpoint(result.best_checkpoint)

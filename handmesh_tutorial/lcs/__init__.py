@@ -24,7 +24,7 @@ decomposition becomes ambiguous, so flexion ranges beyond 90° (PIP 110°) round
 expressed in rest-pose axes. A rotation about the rest LCS axes is therefore
 ``R_k = F_k R(a) F_k^T``, and its axis-angle is simply ``F_k @ rotvec(R(a))``; that is what
 [`Articulation.to_pose`][handmesh_tutorial.lcs.articulation.Articulation.to_pose] returns, ready for
-``HandModel(pose=...)`` (and for [`ManoModel`][handmesh_tutorial.mano.model.ManoModel]).
+``HandModel(pose=...)`` (and for [`ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel]).
 
 **Which vertex (hand).** [`hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs] picks ``v_i`` with a
 deterministic rule on the rest mesh: (1) a target direction ``d_i`` = the palmar normal of the hand

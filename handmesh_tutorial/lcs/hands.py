@@ -2,8 +2,8 @@
 
 [`hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs] applies the paper's rule to a
 [`HandModel`][handmesh_tutorial.hand.model.HandModel] or
-[`ManoModel`][handmesh_tutorial.mano.model.ManoModel] (the flexion vertex of each joint is picked
-deterministically on the rest mesh, see [`handmesh_tutorial.lcs`][handmesh_tutorial.lcs]);
+[`ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel] (the flexion vertex of each joint is
+picked deterministically on the rest mesh, see [`handmesh_tutorial.lcs`][handmesh_tutorial.lcs]);
 [`random_pose`][handmesh_tutorial.lcs.hands.random_pose] draws (n,15,3) axis-angle poses whose LCS
 angles lie inside the limits.
 
@@ -92,7 +92,7 @@ def hand_lcs(model, limits="anatomical", *, thumb_flexion_angle: float = 45.0,
     """The LCS of the 15 articulated joints of a hand model, in MANO joint order 1..15.
 
     Works for [`HandModel`][handmesh_tutorial.hand.model.HandModel] and
-    [`ManoModel`][handmesh_tutorial.mano.model.ManoModel]
+    [`ManoModel`][handmesh_tutorial.hand.mano.model.ManoModel]
     (anything with ``side``, ``template_vertices``, ``skinning_weights``, ``parents`` and a
     zero-pose call returning ``joints`` (FreiHAND order) and ``joints_mano``).
 

@@ -31,6 +31,8 @@ notebook 09, "Evaluation"):
   `PAPER_THRESHOLDS`.
 * `fscore`: `f_score`, `nearest_distances`, `FSCORE_THRESHOLDS`.
 * `scores`: `per_sample_scores`, `freihand_scores`, `scores_from_errors`, `ROOT_INDEX`.
+* `surface` (imported on first use): `roughness_deg`, `flipped_face_fraction`, the signed
+  dihedral angles behind them.
 * `tables`: `scores_by_vr_bin`, `scores_by_group`, `comparison_table`, `format_table`,
   `VR_BIN_LABELS`, `SURFACE_KEYS`; the VR bins (`VR_BINS`, `vr_bin_index`) are re-exported from
   [`visibility`][handmesh_tutorial.visibility].
@@ -75,3 +77,12 @@ __all__ = [
     "scores_from_errors",
     "vr_bin_index",
 ]
+
+
+def __getattr__(name: str):
+    # surface quality (roughness, flipped faces) is a submodule: ``hmt.metrics.surface``
+    if name == "surface":
+        import importlib
+
+        return importlib.import_module(f"{__name__}.surface")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -66,7 +66,7 @@ def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,
 
 SURFACE_KEYS = ("roughness_deg", "flipped")
 """Per-sample surface scores that group rows average when ``per_sample`` holds them
-([`handmesh_tutorial.surface.roughness_deg`][handmesh_tutorial.surface.roughness_deg],
+([`handmesh_tutorial.metrics.surface.roughness_deg`][handmesh_tutorial.metrics.surface.roughness_deg],
 ``flipped_face_fraction``).
 """
 

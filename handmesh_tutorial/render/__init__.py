@@ -21,15 +21,12 @@ Submodules (each name below is also importable from ``handmesh_tutorial.render``
 * `backgrounds`: procedural (`random_background`) and photograph (`photo_background`,
   `BACKGROUND_PHOTOS`) backgrounds, the generator's mix (`scene_background`).
 * the camera (`intrinsics`, `crop_camera`, `framing`, `project`) lives in
-  [`handmesh_tutorial.camera`][handmesh_tutorial.camera] and is re-exported here; ``project`` is
-  `camera.project_checked` (one camera, (N, 3) points, ``Z > 0`` checked).
+  [`handmesh_tutorial.render.camera`][handmesh_tutorial.render.camera] and is re-exported here;
+  ``project`` is `camera.project_checked` (one camera, (N, 3) points, ``Z > 0`` checked).
 """
 
 from __future__ import annotations
 
-from ..camera import check_intrinsics as _check_K  # noqa: F401 - used by benchmarks/render.py
-from ..camera import crop_camera, framing, intrinsics
-from ..camera import project_checked as project
 from .backend import ensure_egl, gl_opened, import_pyrender, patch_pyrender_numpy2
 from .backgrounds import (
     BACKGROUND_PHOTOS,
@@ -41,6 +38,9 @@ from .backgrounds import (
     scene_background,
     skimage_data_dir,
 )
+from .camera import check_intrinsics as _check_K  # noqa: F401 - used by benchmarks/render.py
+from .camera import crop_camera, framing, intrinsics
+from .camera import project_checked as project
 from .color import color_temperature, srgb_to_linear
 from .lights import Light, default_lights, random_lights, scene_lights
 

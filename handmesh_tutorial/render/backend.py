@@ -89,7 +89,7 @@ def gl_opened() -> bool:
     A forked child inherits a copy of the graphics driver's state without the driver's threads
     (Mesa's llvmpipe rasterises in its own threads); creating a context there can hang. Worker
     pools therefore fork only from a process where this is ``False``
-    ([`generate_dataset`][handmesh_tutorial.dataset.generate_dataset], ``mp_context="auto"``).
+    ([`generate_dataset`][handmesh_tutorial.data.generate_dataset], ``mp_context="auto"``).
     Importing pyrender (`import_pyrender`) opens no context.
     """
     return _GL_OPENED

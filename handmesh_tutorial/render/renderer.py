@@ -1,8 +1,9 @@
 """The offscreen renderer: scene image, label mask, depth and each body alone, with pyrender.
 
 Everything public here is in the **OpenCV camera frame** (x right, y down, z forward, metres) with
-a pinhole intrinsic matrix ``K`` (see [`handmesh_tutorial.camera`][handmesh_tutorial.camera]).
-OpenGL's frame (y up, z backward, pixel centres at half-integers) appears only inside this module:
+a pinhole intrinsic matrix ``K`` (see
+[`handmesh_tutorial.render.camera`][handmesh_tutorial.render.camera]). OpenGL's frame (y up, z
+backward, pixel centres at half-integers) appears only inside this module:
 the scene's world frame *is* the OpenCV camera frame, and the pyrender camera node gets the pose
 `CV_TO_GL` = ``diag(1, -1, -1, 1)`` plus a half-pixel shift of the principal point.
 
@@ -26,9 +27,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..camera import check_intrinsics
 from . import backend as _backend
 from .backend import _keep_egl_display, import_pyrender
+from .camera import check_intrinsics
 from .color import srgb_to_linear
 from .lights import Light, default_lights
 

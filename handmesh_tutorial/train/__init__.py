@@ -30,7 +30,7 @@ Every public name below is importable from ``handmesh_tutorial.train`` itself; t
 
 from __future__ import annotations
 
-from ..losses import vertex_loss
+from ..nn.losses import vertex_loss
 from .baselines import (
     MEAN_HAND,
     REST_HAND,

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from .. import metrics as M
-from ..model import root_centred_template
+from ..nn.model import root_centred_template
 from .templates import resolve_template
 
 __all__ = ["constant_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND",
@@ -30,7 +30,7 @@ def constant_hand_predictions(template_vertices, joint_regressor, num: int):
 
     Args:
         template_vertices: ``(V, 3)`` the constant hand in the network frame (the rest hand,
-            [`root_centred_template`][handmesh_tutorial.model.root_centred_template], or
+            [`root_centred_template`][handmesh_tutorial.nn.model.root_centred_template], or
             [`mean_hand`][handmesh_tutorial.train.baselines.mean_hand]), metres; numpy or torch.
         joint_regressor: ``(21, V)`` regressor the network uses for its joints.
         num: number of predictions.
@@ -61,7 +61,7 @@ def mean_hand(dataset, template=None, iterations: int = 5) -> np.ndarray:
     pose, not to read each hand's pose from its image.
 
     Args:
-        dataset: a [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] (e.g.
+        dataset: a [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset] (e.g.
             the training split of [`make_datasets`][handmesh_tutorial.train.data.make_datasets]; its
             ``target_shape``, without images) or any dataset of items with ``vertices``.
         template: the network's template (default: the library's hand).
@@ -101,7 +101,7 @@ def constant_hand_scores(dataset, vertices=None, template=None) -> dict:
     """FreiHAND-style scores of one constant mesh predicted for every item (no network).
 
     Args:
-        dataset: a [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] (or a
+        dataset: a [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset] (or a
             ``Subset``
             of one); only its ``vertices`` and ``joints`` are read.
         vertices: ``(V, 3)`` the constant mesh in the network frame, e.g.

@@ -27,7 +27,8 @@ from torch import nn
 from .._io import atomic_write_bytes as _atomic_write_bytes
 from .._io import leftover_temporaries
 from .._untrusted import load_torch_file
-from .._version import __version__
+from .._version import PRETRAINED_FILE, __version__, shipped_file
+from ..nn.quantize import dequantize_state_dict, quantize_state_dict
 from ._distributed import _resolve_device
 from .config import TrainConfig
 from .templates import build_model_from_config, resolve_template, template_hash
@@ -124,79 +125,13 @@ def save_checkpoint(path: str | os.PathLike, *, model: nn.Module, config: TrainC
     return path
 
 
-def quantize_state_dict(state: Mapping[str, torch.Tensor], names: Sequence[str]
-                        ) -> tuple[dict, dict]:
-    """Store weights small: symmetric int8 per output channel, float16 for the other parameters.
-
-    Each tensor named in ``names`` with two or more dimensions (convolution kernels, linear and
-    spiral weights) becomes int8 ``round(w / s)`` with one float32 scale ``s = max|w| / 127`` per
-    output channel (row 0 of the tensor); the other floating tensors in ``names`` (biases,
-    normalisation weights) become float16. Tensors not in ``names`` (buffers: the template,
-    regressors, running statistics, index tables) stay exact. About a quarter of the float32
-    size.
-
-    Args:
-        state: a ``state_dict``.
-        names: the parameter names (``dict(model.named_parameters())``).
-
-    Returns:
-        ``(stored, scales)``: the dict to save and ``{name: (C,) float32 scale}`` of the int8
-        entries.
-        [`dequantize_state_dict`][handmesh_tutorial.train.checkpoints.dequantize_state_dict]
-        inverts it to within half a step (``s / 2``) per weight.
-    """
-    names = set(names)
-    stored, scales = {}, {}
-    for k, v in state.items():
-        v = v.detach().cpu()
-        if k in names and v.is_floating_point() and v.ndim >= 2:
-            flat = v.float().reshape(v.shape[0], -1)
-            s = flat.abs().amax(dim=1).clamp_min(1e-12) / 127.0
-            stored[k] = torch.round(flat / s[:, None]).clamp(-127, 127).to(torch.int8) \
-                .reshape(v.shape)
-            scales[k] = s
-        elif k in names and v.is_floating_point():
-            stored[k] = v.to(torch.float16)
-        else:
-            stored[k] = v
-    return stored, scales
-
-
-def dequantize_state_dict(stored: Mapping[str, torch.Tensor],
-                          scales: Mapping[str, torch.Tensor]) -> dict:
-    """Float32 weights of a
-    [`quantize_state_dict`][handmesh_tutorial.train.checkpoints.quantize_state_dict] result.
-
-    Raises:
-        ValueError: a scale without its int8 tensor, or of the wrong length.
-    """
-    out = {}
-    for k, v in stored.items():
-        if k in scales:
-            s = scales[k]
-            if v.dtype != torch.int8 or s.shape != (v.shape[0],):
-                raise ValueError(f"quantized entry {k!r}: {v.dtype} {tuple(v.shape)} with "
-                                 f"scales {tuple(s.shape)}")
-            out[k] = (v.float().reshape(v.shape[0], -1) * s.float()[:, None]).reshape(v.shape)
-        elif v.dtype == torch.float16:
-            out[k] = v.float()
-        else:
-            out[k] = v
-    extra = sorted(set(scales) - set(stored))
-    if extra:
-        raise ValueError(f"scales for entries that are not stored: {extra}")
-    return out
-
-
 # what every checkpoint holds (save_checkpoint; a weights-only one has optimizer None)
 _REQUIRED_KEYS = ("model", "config", "template_hash", "epoch", "step", "history", "best")
 
 
 def _read_checkpoint(path: str | os.PathLike, map_location="cpu") -> dict:
     if str(path) == "pretrained":
-        from ..pretrained import pretrained_path
-
-        path = pretrained_path()
+        path = shipped_file(PRETRAINED_FILE, "make pretrained")
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")

@@ -64,7 +64,7 @@ class TrainConfig:
         attention: transformer on the coarse mesh.
         channels: decoder channels per level, finest first (``None``: model defaults).
         latent_channels: channels per coarse-mesh token.
-        model_kwargs: further [`build_model`][handmesh_tutorial.model.build_model] arguments
+        model_kwargs: further [`build_model`][handmesh_tutorial.nn.model.build_model] arguments
             (``spiral_length``, ``num_blocks``, ``num_heads``, ...).
         template: ``None`` = the open right hand; else a ``.npz`` path written by
             [`save_template`][handmesh_tutorial.train.templates.save_template] (``vertices``,
@@ -88,7 +88,7 @@ class TrainConfig:
         edge_weight: weight of the edge-length loss; 0 = off.
         normal_weight: weight of the normal loss; 0 = off. (The four terms:
             [`training_loss`][handmesh_tutorial.train.loop.training_loss],
-            [`handmesh_tutorial.losses`][handmesh_tutorial.losses].)
+            [`handmesh_tutorial.nn.losses`][handmesh_tutorial.nn.losses].)
         skip_bad: before training, load every training and validation item once and leave out
             those that cannot be read (listed in ``TrainResult.skipped`` and ``skipped.json``);
             ``False``: the first bad sample stops the run with its file named. May change on
@@ -103,7 +103,7 @@ class TrainConfig:
             resumed run continues from its own checkpoint (``init`` must stay the run's).
         init_encoder: start only the encoder from pretrained weights: ``"pretrained"`` (the
             shipped hand encoder,
-            [`pretrained_encoder`][handmesh_tutorial.pose_encoder.pretrained_encoder]) or the
+            [`pretrained_encoder`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder]) or the
             path of a pose-encoder file; the rest of the network starts from random weights (the
             paper's protocol). Needs a ``resnet10`` encoder (with ``model_kwargs={"keypoints":
             True}`` it gets the keypoint head too, else the ResNet only); not with ``init``.

@@ -2,7 +2,7 @@
 
 Determinism: the sample order of epoch ``e`` is ``numpy.random.default_rng([seed, e]).permutation``;
 the validation split is drawn from its own seeded stream; augmentation draws come from
-``(seed, epoch, index)`` (see [`handmesh_tutorial.augment`][handmesh_tutorial.augment]).
+``(seed, epoch, index)`` (see [`handmesh_tutorial.data.augment`][handmesh_tutorial.data.augment]).
 
 Taught in notebook 08 ("Training").
 """
@@ -11,16 +11,17 @@ from __future__ import annotations
 
 import hashlib
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from ..dataset import InterSHDataset, read_meta
-from ..dataset import torch_views as TV
-from ..dataset.reader import _present
-from ..dataset.schema import SAMPLES_DIR
-from ..freihand import FreiHAND
+from ..data import InterSHDataset, read_meta
+from ..data import torch_views as TV
+from ..data.freihand import FreiHAND
+from ..data.reader import _present
+from ..data.schema import SAMPLES_DIR
 from .config import TrainConfig
 
 __all__ = ["EpochBatchSampler", "make_datasets"]
@@ -101,8 +102,8 @@ def make_datasets(config: TrainConfig):
 
     Returns:
         ``(train_dataset, val_dataset or None)``:
-        [`InterSHTorchDataset`][handmesh_tutorial.dataset.torch_views.InterSHTorchDataset] or
-        [`FreiHANDTorchDataset`][handmesh_tutorial.dataset.torch_views.FreiHANDTorchDataset];
+        [`InterSHTorchDataset`][handmesh_tutorial.data.torch_views.InterSHTorchDataset] or
+        [`FreiHANDTorchDataset`][handmesh_tutorial.data.torch_views.FreiHANDTorchDataset];
         validation without
         augmentation.
 
@@ -192,3 +193,21 @@ def _fingerprint_changes(saved: dict, now: dict) -> list[str]:
             names = sorted(k for k in set(fa) | set(fb) if fa.get(k) != fb.get(k))
             out.append(f"{role} annotation files differ (names or sizes): {names}")
     return out
+
+
+def _checked_fingerprint(config, dataset, ck: dict | None, last) -> dict | None:
+    """The data's fingerprint (``None`` for a dataset object); on resume (``ck`` the checkpoint
+    read from ``last``), data that changed since the run started is refused: the data itself is
+    compared, not only its path, so a folder replaced by another set is caught."""
+    fingerprint = _data_fingerprint(config) if dataset is None else None
+    if ck is not None and fingerprint is not None:
+        if "data_fingerprint" not in ck:
+            warnings.warn(f"{last} predates data fingerprints: cannot check that {config.data} "
+                          "holds the data this run started with", stacklevel=4)
+        elif ck["data_fingerprint"] is not None and \
+                (diff := _fingerprint_changes(ck["data_fingerprint"], fingerprint)):
+            raise ValueError(
+                f"{last}: the data changed since this run started ({'; '.join(diff)}): "
+                "resuming would mix two data sets in one run. Restore the run's data, or "
+                "start a new run in another out_dir")
+    return fingerprint

@@ -18,18 +18,18 @@ import numpy as np
 import torch
 from torch import nn
 
-from .. import augment as A
 from .. import metrics as M
 from .. import viz
 from .._io import atomic_savez, check_writable, write_json
 from .._optional import require
 from .._progress import progress_bar
 from ..budget import check_image_size
-from ..dataset import KINDS, InterSHDataset
-from ..dataset import torch_views as TV
-from ..freihand import NUM_VERTICES, FreiHAND, write_predictions
-from ..losses import vertex_loss
-from ..surface import flipped_face_fraction, roughness_deg
+from ..data import KINDS, InterSHDataset
+from ..data import augment as A
+from ..data import torch_views as TV
+from ..data.freihand import NUM_VERTICES, FreiHAND, write_predictions
+from ..metrics.surface import flipped_face_fraction, roughness_deg
+from ..nn.losses import vertex_loss
 from ._distributed import _resolve_device
 from .baselines import MEAN_HAND, REST_HAND, _rest_template, constant_hand_predictions
 from .checkpoints import load_checkpoint
@@ -44,7 +44,7 @@ def predict(model: nn.Module, images, batch_size: int = 32,
     """Run the network on crops, in eval mode, without gradients.
 
     Args:
-        model: an [`MSMRNet`][handmesh_tutorial.model.MSMRNet].
+        model: an [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet].
         images: ``(B, 3, S, S)`` normalised float tensor (as the datasets return), or uint8
             ``(B, S, S, 3)`` / ``(S, S, 3)`` RGB crops (normalised here).
         batch_size: images per forward pass.
@@ -53,7 +53,7 @@ def predict(model: nn.Module, images, batch_size: int = 32,
     Returns:
         dict with ``vertices`` ``(B, V, 3)`` and ``joints`` ``(B, 21, 3)`` CPU float32 tensors:
         right-hand, root-relative network frame (see
-        [`to_camera`][handmesh_tutorial.augment.to_camera] to go back to the camera).
+        [`to_camera`][handmesh_tutorial.data.augment.to_camera] to go back to the camera).
 
     Shapes:
         ``images (B, 3, S, S)`` float or ``(B, S, S, 3)`` / ``(S, S, 3)`` uint8 -> ``vertices
@@ -112,7 +112,7 @@ def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
 
     Args:
         model: the network.
-        dataset: a [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]
+        dataset: a [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset]
             (``train=False``).
         batch_size: evaluation batch size.
         device: default: the model's device.
@@ -133,7 +133,7 @@ def validate(model: nn.Module, dataset, batch_size: int = 16, device=None,
 def _item_kinds(dataset, index: np.ndarray) -> list | None:
     """Scene kind of each evaluated item (INTER-SH readers only), else ``None``.
 
-    Only an [`InterSHDataset`][handmesh_tutorial.dataset.InterSHDataset] source has scene kinds;
+    Only an [`InterSHDataset`][handmesh_tutorial.data.InterSHDataset] source has scene kinds;
     other readers with an ``annotation`` method (FreiHAND's takes a file key, not an index) and
     in-memory sample lists give ``None``.
     """
@@ -202,7 +202,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         checkpoint_or_model: a checkpoint path, or a network (then give ``image_size``).
         data: INTER-SH root (``kind="intersh"``) or FreiHAND root (``kind="freihand"``, split
             ``split``).
-        dataset: a ready [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset]
+        dataset: a ready [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset]
             instead of
             ``data``.
         kind: ``"intersh"`` or ``"freihand"`` (default: the checkpoint's ``dataset``, else
@@ -215,7 +215,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             ``vr.png`` (the figures need matplotlib, the ``notebooks`` extra: without it a
             warning says so and the other files are written), and on FreiHAND data
             ``pred.json`` (the official submission format,
-            [`write_predictions`][handmesh_tutorial.freihand.write_predictions]: camera frame,
+            [`write_predictions`][handmesh_tutorial.data.freihand.write_predictions]: camera frame,
             the evaluated items in order) when the network predicts MANO's 778 vertices; else
             ``notes`` says why it was not written.
         camera_frame: predictions un-mirrored and moved back to the source camera frame
@@ -240,9 +240,10 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     Returns:
         dict with ``scores`` ([`freihand_scores`][handmesh_tutorial.metrics.freihand_scores]: mm,
         AUC, F-scores, plus the surface scores ``roughness_deg`` and ``flipped`` when the network
-        has ``faces``: [`roughness_deg`][handmesh_tutorial.surface.roughness_deg], the mean
-        [`flipped_face_fraction`][handmesh_tutorial.surface.flipped_face_fraction]), ``per_sample``
-        (``index``, ``vr``, ``mirrored``, ``kind`` (INTER-SH) and per-sample ``mpjpe``, ``mpvpe``,
+        has ``faces``: [`roughness_deg`][handmesh_tutorial.metrics.surface.roughness_deg], the mean
+        [`flipped_face_fraction`][handmesh_tutorial.metrics.surface.flipped_face_fraction]),
+        ``per_sample`` (``index``, ``vr``, ``mirrored``, ``kind`` (INTER-SH) and per-sample
+        ``mpjpe``, ``mpvpe``,
         ``pa_mpjpe``, ``pa_mpvpe`` in mm, ``f_at_5mm``, ``f_at_15mm``, ``roughness_deg``,
         ``flipped``; (N,) arrays), ``errors``
         ([`per_sample_scores`][handmesh_tutorial.metrics.per_sample_scores], metres), ``vr_table``

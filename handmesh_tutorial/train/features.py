@@ -45,9 +45,9 @@ def encoder_digest(encoder: nn.Module) -> str:
 
 
 def is_deterministic(dataset) -> bool:
-    """Whether a [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] gives
+    """Whether a [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset] gives
     the same crop for an index in every epoch (no augmentation)."""
-    from ..augment import AugmentConfig
+    from ..data.augment import AugmentConfig
 
     aug = getattr(dataset, "augment", None)
     return isinstance(aug, AugmentConfig) and (not getattr(dataset, "train", True)
@@ -65,8 +65,8 @@ class EncodedDataset(torch.utils.data.Dataset):
     """A crop dataset whose images are replaced by a frozen encoder's outputs.
 
     Items are the wrapped dataset's without ``image``, plus ``features`` ``(D,)`` and, for a
-    [`KeypointEncoder`][handmesh_tutorial.keypoints.KeypointEncoder], ``uv`` ``(J, 2)``;
-    [`MSMRNet.decode`][handmesh_tutorial.model.MSMRNet.decode] takes ``features`` where the model
+    [`KeypointEncoder`][handmesh_tutorial.nn.keypoints.KeypointEncoder], ``uv`` ``(J, 2)``;
+    [`MSMRNet.decode`][handmesh_tutorial.nn.model.MSMRNet.decode] takes ``features`` where the model
     would take ``image``.
 
     Args:
@@ -145,7 +145,7 @@ def model_outputs(model: nn.Module, batch: Mapping, device: torch.device,
     """The network's output for a batch of crops, or of stored encoder features.
 
     Args:
-        model: an [`MSMRNet`][handmesh_tutorial.model.MSMRNet] (or DDP around one, for images).
+        model: an [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet] (or DDP around one, for images).
         batch: items with ``image`` ``(B, 3, S, S)``, or with ``features`` ``(B, D)`` (and
             ``uv``) of an [`EncodedDataset`][handmesh_tutorial.train.features.EncodedDataset].
         device: where to compute.

@@ -1,26 +1,23 @@
 """The training loop: objective, steps, exact resume, DDP
 ([`train`][handmesh_tutorial.train.loop.train]).
 
-Paper, Sec. "Training": the loss is the L1 distance between predicted and ground-truth mesh
-vertices, the vertices translated so that the middle MCP joint (keypoint 9) is at the origin (the
-recipe's other numbers are the defaults of
-[`TrainConfig`][handmesh_tutorial.train.config.TrainConfig]). Our loss is the mean absolute error
-over vertices *and* coordinates, i.e. the paper's per-vertex L1 norm divided by 3 (a constant
-factor that Adam ignores); [`training_loss`][handmesh_tutorial.train.loop.training_loss] adds the
-optional terms.
+Paper, Sec. "Training": the L1 distance between predicted and true vertices, centred on the
+middle MCP joint (keypoint 9); the recipe's numbers are the defaults of
+[`TrainConfig`][handmesh_tutorial.train.config.TrainConfig]. Our loss is the mean absolute error
+over vertices and coordinates (the paper's per-vertex L1 / 3, a factor Adam ignores);
+[`training_loss`][handmesh_tutorial.train.loop.training_loss] adds the optional terms.
 
 What the loop guarantees:
 
 * **Determinism.** Model initialisation uses ``torch.manual_seed(seed)``; the sample order of epoch
   ``e`` is ``numpy.random.default_rng([seed, e]).permutation``; augmentation draws come from
-  ``(seed, epoch, index)`` (see [`handmesh_tutorial.augment`][handmesh_tutorial.augment]). No global
-  RNG is touched by the data pipeline.
+  ``(seed, epoch, index)`` (see [`handmesh_tutorial.data.augment`][handmesh_tutorial.data.augment]).
+  No global RNG is touched by the data pipeline.
 * **Exact resume.** ``checkpoint_last.pt`` (written atomically after every
   ``checkpoint_every`` epochs) holds the model, optimiser, scheduler, epoch, step, the torch /
   numpy / python RNG states, the history and the config; ``train(cfg, resume=True)`` continues
-  from it and ends with the same weights as an uninterrupted run (same threads, CPU).
-  Everything is stored as tensors, lists and numbers: ``torch.load(..., weights_only=True)``
-  reads it.
+  from it and ends with the same weights as an uninterrupted run (same threads, CPU); it refuses
+  other settings or other data (a fingerprint of ``meta.json`` and the sample ids).
 * **Batches and DDP.** ``batch_size`` is the *global* batch. Launched with ``torchrun`` (env
   vars ``WORLD_SIZE``, ``RANK``, ``LOCAL_RANK``, ``MASTER_ADDR``, ``MASTER_PORT``), every
   global batch is cut into ``world_size * micro_batches`` equal consecutive chunks; rank ``r``
@@ -54,9 +51,9 @@ from torch import nn
 
 from .._io import single_writer, write_json
 from .._progress import progress_bar
-from ..dataset import torch_views as TV
-from ..keypoints import keypoint_loss, normalised_keypoints
-from ..losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
+from ..data import torch_views as TV
+from ..nn.keypoints import keypoint_loss, normalised_keypoints
+from ..nn.losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
 from ._distributed import (
     _barrier,
     _broadcast_row,
@@ -74,7 +71,7 @@ from .checkpoints import (
     save_checkpoint,
 )
 from .config import RESUMABLE_KEYS, TrainConfig, changed_settings
-from .data import EpochBatchSampler, _data_fingerprint, _fingerprint_changes, make_datasets
+from .data import EpochBatchSampler, _checked_fingerprint, make_datasets
 from .evaluation import validate
 from .features import EncodedDataset, is_deterministic, model_outputs
 from .templates import build_model_from_config, resolve_template, template_hash
@@ -138,7 +135,7 @@ def training_loss(out: dict, batch: Mapping, config: TrainConfig,
             encoder).
         batch: the items (``vertices``, ``joints``, ``root``, ``K``), on ``out``'s device.
         config: weights ``keypoint_weight``, ``aligned_weight``, ``edge_weight``, ``normal_weight``
-            (0 = term off; see [`handmesh_tutorial.losses`][handmesh_tutorial.losses]) and
+            (0 = term off; see [`handmesh_tutorial.nn.losses`][handmesh_tutorial.nn.losses]) and
             ``image_size``.
         faces: ``(F, 3)`` int64 faces (needed by the edge and normal terms).
 
@@ -226,7 +223,7 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
             (they are replaced). Without ``resume`` or ``overwrite`` such a folder is refused,
             so a forgotten ``--resume`` never destroys a run.
         dataset: a training dataset to use instead of ``config.data`` (items as
-            [`HandCropDataset`][handmesh_tutorial.dataset.torch_views.HandCropDataset] returns;
+            [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset] returns;
             ``set_epoch`` is
             called when it exists).
         val_dataset: a validation dataset (with ``dataset``), or ``None``.
@@ -300,18 +297,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
                 f"{last}: cannot resume with other settings (checkpoint, now): {changed}. "
                 f"Resume with the run's settings (only {', '.join(RESUMABLE_KEYS)} may "
                 "change), or start a new run in another out_dir")
-    # the data itself, not only its path: a folder replaced by another set is refused
-    fingerprint = _data_fingerprint(config) if dataset is None else None
-    if ck is not None and fingerprint is not None:
-        if "data_fingerprint" not in ck:
-            warnings.warn(f"{last} predates data fingerprints: cannot check that {config.data} "
-                          "holds the data this run started with", stacklevel=3)
-        elif ck["data_fingerprint"] is not None and \
-                (diff := _fingerprint_changes(ck["data_fingerprint"], fingerprint)):
-            raise ValueError(
-                f"{last}: the data changed since this run started ({'; '.join(diff)}): "
-                "resuming would mix two data sets in one run. Restore the run's data, or "
-                "start a new run in another out_dir")
+    fingerprint = _checked_fingerprint(config, dataset, ck, last)
 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it
@@ -320,7 +306,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
     if ck is None and config.init is not None:
         _load_init(net, config, t_id)
     if ck is None and config.init_encoder is not None:
-        from ..pose_encoder import load_pretrained_encoder
+        from ..nn.pose_encoder import load_pretrained_encoder
 
         load_pretrained_encoder(net, config.init_encoder)
     net = net.to(device)

@@ -3,7 +3,7 @@
 A run's template is the library's open right hand unless ``TrainConfig.template`` names a ``.npz``
 written by [`save_template`][handmesh_tutorial.train.templates.save_template] or a user's MANO
 pickle (``MANO_RIGHT.pkl``, read by the restricted loader of
-[`handmesh_tutorial.mano`][handmesh_tutorial.mano]); checkpoints store only its
+[`handmesh_tutorial.hand.mano`][handmesh_tutorial.hand.mano]); checkpoints store only its
 [`template_hash`][handmesh_tutorial.train.templates.template_hash]. Vertices in metres, (V, 3);
 faces (F, 3); joint regressor (21, V).
 
@@ -22,7 +22,7 @@ from torch import nn
 
 from .._io import atomic_savez
 from .._untrusted import open_npz
-from ..model import as_template, build_model
+from ..nn.model import as_template, build_model
 from .config import TrainConfig
 
 __all__ = ["resolve_template", "save_template", "template_hash", "build_model_from_config"]
@@ -36,12 +36,12 @@ def resolve_template(spec=None):
             ``joint_regressor`` (see
             [`save_template`][handmesh_tutorial.train.templates.save_template]); a path to a
             right-hand MANO pickle (``.pkl``: the flat rest hand of
-            [`load_mano`][handmesh_tutorial.mano.load_mano], its 21-keypoint regressor with
+            [`load_mano`][handmesh_tutorial.hand.mano.load_mano], its 21-keypoint regressor with
             MANO's fingertip vertices in the ``"smplx"`` convention); or anything
-            [`as_template`][handmesh_tutorial.model.as_template] accepts.
+            [`as_template`][handmesh_tutorial.nn.model.as_template] accepts.
 
     Returns:
-        A [`MeshTemplate`][handmesh_tutorial.model.MeshTemplate].
+        A [`MeshTemplate`][handmesh_tutorial.nn.model.MeshTemplate].
 
     Raises:
         FileNotFoundError: the file does not exist.
@@ -70,7 +70,7 @@ def resolve_template(spec=None):
 
 def _mano_template(path: Path):
     """A right-hand MANO model from a pickle, refused by name when it is a left hand."""
-    from ..mano import load_mano
+    from ..hand.mano import load_mano
 
     if "left" in path.name.lower():  # load_mano's rule for the side
         raise ValueError(f"{path}: a left-hand MANO file cannot be the template: the network "
@@ -116,7 +116,7 @@ def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
         template: overrides ``config.template`` (a template object or path).
 
     Returns:
-        An [`MSMRNet`][handmesh_tutorial.model.MSMRNet] on the CPU.
+        An [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet] on the CPU.
     """
     tmpl = resolve_template(config.template if template is None else template)
     return build_model(encoder=config.encoder, decoder=config.decoder,

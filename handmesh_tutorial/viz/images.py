@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from .._optional import require
-from ..camera import project
+from ..render.camera import project
 from ._common import _to_numpy
 
 __all__ = ["plot_mesh_on_image", "plot_overlays"]

@@ -1,0 +1,150 @@
+"""The module paths of 0.1 (before the data-flow tree of 0.2), kept importable for one version.
+
+``import handmesh_tutorial.spiral``, ``hmt.dataset.InterSHDataset`` or
+``from handmesh_tutorial.interact import build_scene`` keep working: an old path is a stand-in
+module that hands out the names of its new home, with a ``FutureWarning`` naming that home. The
+stand-ins go in 0.3 (``CHANGELOG.md``). New code uses the new paths (docs page "The pipeline").
+
+This table is the one place that names modules of the apps layer from inside the library (as
+strings, imported only when an old name is used).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.abc
+import importlib.util
+import sys
+import types
+import warnings
+
+__all__ = ["MOVED", "MOVED_NAMES", "install", "moved_attribute"]
+
+_P = "handmesh_tutorial."
+
+MOVED: dict[str, tuple[str, ...]] = {
+    # old module path -> its new home(s), first match wins for a name
+    "augment": ("data.augment",),
+    "blocks": ("nn.blocks",),
+    "camera": ("render.camera",),
+    "cli": ("apps.cli",),
+    "dataset": ("data",),
+    "decoder": ("nn.decoder",),
+    "demo": ("apps.demo",),
+    "encoder": ("nn.encoder",),
+    "freihand": ("data.freihand",),
+    "interact": ("scenes",),
+    "keypoints": ("nn.keypoints",),
+    "losses": ("nn.losses",),
+    "mano": ("hand.mano",),
+    "model": ("nn.model",),
+    "pose_encoder": ("nn.pose_encoder",),
+    "pretraining_data": ("apps.pretraining_data",),
+    "rotation": ("nn.rotation",),
+    "sampling": ("nn.hierarchy",),
+    "skinned": ("nn.skinned",),
+    "spiral": ("nn.spiral",),
+    "surface": ("metrics.surface", "nn.smoothing"),
+    "train.batched_crops": ("data.batched_crops",),
+    "train.pose_pretraining": ("apps.pose_pretraining",),
+}
+"""Old module (without the ``handmesh_tutorial.`` prefix) -> new module(s). A submodule of a moved
+package moves with it (``dataset.files`` -> ``data.files``)."""
+
+MOVED_NAMES: dict[str, dict[str, str]] = {
+    # names that left a module which still exists: module -> {name: new module}
+    "model": {"pretrained": "pretrained"},
+    "pretrained": {name: "apps.pretrain_network" for name in (
+        "PretrainedRecipe", "build_pretrained", "export_pretrained", "generate_training_scenes",
+        "generate_train_val")},
+}
+"""Names that moved out of a module: old module -> {name: its new module}."""
+
+
+def _targets(old: str) -> tuple[str, ...] | None:
+    """New modules of an old module path (full names), or None when it did not move."""
+    rel = old[len(_P):] if old.startswith(_P) else None
+    if rel is None:
+        return None
+    best = max((k for k in MOVED if rel == k or rel.startswith(k + ".")), key=len, default=None)
+    if best is None:
+        return None
+    rest = rel[len(best):]
+    return tuple(_P + t + rest for t in MOVED[best])
+
+
+def moved_attribute(module: str, name: str):
+    """``name`` of an old module from its new home (`MOVED_NAMES`), with a ``FutureWarning``.
+
+    Raises:
+        AttributeError: ``name`` did not move out of ``module``.
+    """
+    new = MOVED_NAMES.get(module[len(_P):] if module.startswith(_P) else module, {}).get(name)
+    if new is None:
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    warnings.warn(f"{module}.{name} is now {_P}{new}.{name}; the old name goes in 0.3",
+                  FutureWarning, stacklevel=3)
+    return getattr(importlib.import_module(_P + new), name)
+
+
+class _Moved(types.ModuleType):
+    """Stand-in for an old module path: attributes come from the new module(s)."""
+
+    def __init__(self, name: str, targets: tuple[str, ...]):
+        super().__init__(name, f"moved to {', '.join(targets)}")
+        self.__dict__["_targets"] = targets
+
+    def _modules(self):
+        return [importlib.import_module(t) for t in self.__dict__["_targets"]]
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        for mod in self._modules():
+            if hasattr(mod, name):
+                return getattr(mod, name)
+        if _targets(f"{self.__name__}.{name}"):  # an old submodule: its stand-in
+            return importlib.import_module(f"{self.__name__}.{name}")
+        extra = MOVED_NAMES.get(self.__name__[len(_P):], {})
+        if name in extra:
+            return getattr(importlib.import_module(_P + extra[name]), name)
+        raise AttributeError(f"module {self.__name__!r} (now {self.__dict__['_targets']}) has "
+                             f"no attribute {name!r}")
+
+    def __dir__(self):
+        return sorted({n for m in self._modules() for n in dir(m)})
+
+    @property
+    def __all__(self):  # noqa: D401 - the new modules' public names
+        return [n for m in self._modules() for n in getattr(m, "__all__", ())]
+
+
+class _Finder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Finds the old module paths (before the package's own finder) and makes their stand-ins."""
+
+    def find_spec(self, fullname, path=None, target=None):
+        targets = _targets(fullname)
+        if targets is None:
+            return None
+        is_pkg = any(importlib.util.find_spec(t) is not None
+                     and importlib.util.find_spec(t).submodule_search_locations is not None
+                     for t in targets[:1])
+        return importlib.util.spec_from_loader(fullname, self, is_package=is_pkg)
+
+    def create_module(self, spec):
+        targets = _targets(spec.name)
+        warnings.warn(f"{spec.name} is now {' and '.join(targets)}; the old path goes in 0.3",
+                      FutureWarning, stacklevel=2)
+        return _Moved(spec.name, targets)
+
+    def exec_module(self, module):
+        pass
+
+
+_FINDER = _Finder()
+
+
+def install() -> None:
+    """Put the finder of the old paths first on ``sys.meta_path`` (idempotent)."""
+    if _FINDER not in sys.meta_path:
+        sys.meta_path.insert(0, _FINDER)

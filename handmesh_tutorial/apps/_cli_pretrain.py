@@ -1,0 +1,123 @@
+"""The ``handmesh pretrain`` and ``handmesh pretrain-encoder`` commands (docs pages "The
+pretrained model" and "Why the paper starts from pretrained weights"): the makers of the two
+shipped weight files, kept apart from the everyday commands of ``handmesh_tutorial.apps.cli``."""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["add_pretrain_commands"]
+
+
+def _cmd_pretrain(args: argparse.Namespace) -> int:
+    from .pretrain_network import PretrainedRecipe, build_pretrained
+
+    fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "image_size", "encoder",
+              "recipe", "epochs", "batch_size", "lr", "workers", "loader_workers", "seed",
+              "device", "precision", "init")
+    recipe = PretrainedRecipe(**{k: getattr(args, k) for k in fields
+                                 if getattr(args, k) is not None})
+    res = build_pretrained(args.out, recipe, max_generate_seconds=args.max_generate_seconds,
+                           max_train_seconds=args.max_train_seconds, install=args.install,
+                           progress=not args.no_progress)
+    info = res["info"]
+    print(f"handmesh pretrain: {info['data']['train_scenes']} training scenes, "
+          f"{info['epochs_done']} of {info.get('epochs_planned', recipe.epochs)} epochs on "
+          f"{info['hardware']}, "
+          f"{info['seconds']['generate']:.0f} s generating, {info['seconds']['train']:.0f} s "
+          f"training -> {res['file']}")
+    return 0
+
+
+def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
+    from .pose_pretraining import PosePretrainConfig, build_pretrained_encoder
+
+    fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "backbone", "batch_size",
+              "lr", "max_steps", "seed", "device", "workers")
+    kw = {k: getattr(args, k) for k in fields if getattr(args, k) is not None}
+    if args.image_sizes:
+        kw["image_sizes"] = tuple(int(s) for s in args.image_sizes.split(","))
+    if args.init is not None:
+        kw["init"] = None if args.init == "none" else args.init
+    res = build_pretrained_encoder(args.out, PosePretrainConfig(**kw),
+                                   max_generate_seconds=args.max_generate_seconds,
+                                   max_train_seconds=args.max_train_seconds,
+                                   install=args.install, progress=not args.no_progress)
+    last = res["history"][-1]
+    print(f"handmesh pretrain-encoder: {res['info']['data']['train_scenes']} training scenes, "
+          f"{last['step']} steps on {res['info']['hardware']}; val PA-MPJPE "
+          f"{last['64']['pa_mpjpe']:.2f} mm at 64 px (mean training hand "
+          f"{last['mean training hand']['pa_mpjpe']:.2f}) -> {res['file']}")
+    return 0
+
+
+def add_pretrain_commands(sub) -> None:
+    """Add ``pretrain`` and ``pretrain-encoder`` to the ``handmesh`` sub-parsers."""
+    pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
+                         "(a GPU when there is one), export a small int8 file (resumable)")
+    pre.add_argument("--out", default="runs/pretrained",
+                     help="output folder (default: runs/pretrained)")
+    pre.add_argument("--install", action="store_true",
+                     help="copy the result into the package, where hmt.pretrained.pretrained() and "
+                     "--checkpoint pretrained find it")
+    pre.add_argument("--train-scenes", type=int, help="training scenes (default: 20000)")
+    pre.add_argument("--val-scenes", type=int, help="validation scenes (default: 300)")
+    pre.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 100; "
+                     "validation: the next)")
+    pre.add_argument("--render-size", type=int, help="scene image side (default: 224)")
+    pre.add_argument("--image-size", type=int, help="network crop side (default: 128)")
+    pre.add_argument("--encoder", help="image encoder (default: resnet10)")
+    pre.add_argument("--recipe", choices=("cpu", "paper"), help="loss recipe (default: cpu)")
+    pre.add_argument("--epochs", type=int, help="training epochs (default: 16)")
+    pre.add_argument("--batch-size", type=int, help="batch size (default: 128)")
+    pre.add_argument("--lr", type=float, help="Adam learning rate (default: 1e-3)")
+    pre.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")
+    pre.add_argument("--loader-workers", type=int,
+                     help="data-loader processes (default: one per CPU, less one)")
+    pre.add_argument("--seed", type=int, help="initialisation / order / augmentation seed")
+    pre.add_argument("--device", help="auto | cpu | cuda (default: auto)")
+    pre.add_argument("--precision", choices=("float32", "bfloat16"),
+                     help="autocast precision (default: bfloat16)")
+    pre.add_argument("--init", help="start from these weights: 'pretrained' (the shipped network; "
+                     "use new --data-seed values so each run adds scenes) or a checkpoint")
+    pre.add_argument("--max-generate-seconds", type=float, default=None,
+                     help="stop generating training scenes when the next shard would end past "
+                     "this budget")
+    pre.add_argument("--max-train-seconds", type=float, default=None,
+                     help="fit training to this budget: the first epoch is timed, then the "
+                     "epochs that fit are planned (learning-rate schedule included)")
+    pre.add_argument("--no-progress", action="store_true", help="no progress bars")
+    pre.set_defaults(func=_cmd_pretrain)
+
+    pe = sub.add_parser("pretrain-encoder", help="make the pretrained hand image encoder: generate "
+                        "scenes, train on 2D keypoints and 3D joints (no mesh decoder), export a "
+                        "small int8 file (resumable)")
+    pe.add_argument("--out", default="runs/pretrained_encoder",
+                    help="output folder (default: runs/pretrained_encoder)")
+    pe.add_argument("--install", action="store_true",
+                    help="copy the result into the package, where "
+                    "hmt.nn.pose_encoder.pretrained_encoder() finds it")
+    pe.add_argument("--train-scenes", type=int, help="training scenes (default: 40000)")
+    pe.add_argument("--val-scenes", type=int, help="validation scenes (default: 400)")
+    pe.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 900; "
+                    "validation: the next)")
+    pe.add_argument("--render-size", type=int, help="scene image side (default: 224)")
+    pe.add_argument("--image-sizes", help="crop sides trained on, comma-separated (default: "
+                    "64,96,128)")
+    pe.add_argument("--backbone", help="ResNet (default: resnet10)")
+    pe.add_argument("--batch-size", type=int, help="batch size (default: 256)")
+    pe.add_argument("--lr", type=float, help="AdamW peak learning rate (default: 2e-3)")
+    pe.add_argument("--max-steps", type=int, help="the most training steps (default: 60000)")
+    pe.add_argument("--init", help="start from: none (random weights, the default), network (the "
+                    "encoder of the shipped MSMR-Net) or a pose-encoder file")
+    pe.add_argument("--seed", type=int, help="initialisation / order / augmentation seed")
+    pe.add_argument("--device", help="auto | cpu | cuda (default: auto)")
+    pe.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")
+    pe.add_argument("--max-generate-seconds", type=float, default=None,
+                    help="stop generating training scenes when the next shard would end past "
+                    "this budget")
+    pe.add_argument("--max-train-seconds", type=float, default=None,
+                    help="training budget: the first steps are timed and the steps that fit are "
+                    "planned (learning-rate schedule included)")
+    pe.add_argument("--no-progress", action="store_true", help="no progress bars")
+    pe.set_defaults(func=_cmd_pretrain_encoder)

@@ -1,0 +1,154 @@
+"""The demo's sizes and choices: [`DemoConfig`][handmesh_tutorial.apps.demo.config.DemoConfig] (per
+run-size tier), the training recipes, and the training config of the demo and of notebooks 08-10
+([`train_config`][handmesh_tutorial.apps.demo.config.train_config]).
+
+Why these values: the docstring of [`handmesh_tutorial.apps.demo`][handmesh_tutorial.apps.demo] and
+the docs page "Why the paper starts from pretrained weights". Taught in notebook 00 ("Quickstart")
+and
+notebook 08 ("Training").
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+from ...budget import budget as _budget
+
+__all__ = ["DemoConfig", "train_config", "RECIPES"]
+
+RECIPES = {
+    "paper": {},
+    "cpu": {"model_kwargs": {"keypoints": True, "global_rotation": True, "output": "skinned"},
+            "keypoint_weight": 0.5, "aligned_weight": 1.0},
+}
+"""Training recipes ([`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] fields on top of
+[`train_config`][handmesh_tutorial.apps.demo.config.train_config]): the paper's (one L1 vertex loss,
+an encoder that ends in global average pooling) and the CPU recipe, which adds a 2D keypoint head
+whose
+features are pooled at the joints
+([`handmesh_tutorial.nn.keypoints`][handmesh_tutorial.nn.keypoints]), a global-rotation head
+([`handmesh_tutorial.nn.rotation`][handmesh_tutorial.nn.rotation]), the skinned
+decoder output ([`handmesh_tutorial.nn.skinned`][handmesh_tutorial.nn.skinned]: every prediction is
+a skinned hand surface) and the keypoint and aligned-joint losses
+([`handmesh_tutorial.nn.losses`][handmesh_tutorial.nn.losses]). Why: docs page "Training from
+scratch on a CPU".
+"""
+
+
+@dataclass
+class DemoConfig:
+    """Sizes and choices of one demo run (see the module docstring for why these values).
+
+    Attributes:
+        train_samples: training scenes generated (all kinds together).
+        test_samples: held-out test scenes (always VR-balanced).
+        render_size: side of the rendered scene images, pixels.
+        image_size: side of the network's input crop, pixels.
+        epochs: training epochs.
+        batch_size: training batch size.
+        lr: Adam learning rate.
+        encoder: image encoder name.
+        decoder: ``"multi"`` or ``"single"``.
+        attention: coarse-mesh transformer on.
+        augment: random crop / scale / rotation / colour jitter of training crops.
+        recipe: ``"cpu"`` (default; [`RECIPES`][handmesh_tutorial.apps.demo.config.RECIPES]: 2D
+            keypoint head with pose pooling, a global-rotation head, the skinned decoder output,
+            keypoint and aligned-joint losses beside the paper's L1) or ``"paper"`` (L1 vertex loss
+            only, global-pooling encoder).
+        balance_train: VR-balance the training scenes too (about 5x slower to generate).
+        init_encoder: where the encoder starts: ``"pretrained"`` (the shipped hand encoder,
+            [`pretrained_encoder`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder]; the
+            paper's protocol with our stand-in for ImageNet weights), a pose-encoder file, or
+            ``None`` (random weights). The rest of the network always starts from random weights.
+        freeze_encoder: epochs at the start with the encoder's weights and statistics fixed.
+        encoder_lr_scale: the encoder's learning rate as a share of ``lr`` after that.
+        threads: torch threads.
+        workers: data-generation processes.
+        overlays: held-out samples drawn in ``overlays.png``.
+        budget: name of the tier the sizes came from.
+    """
+
+    train_samples: int = 3000
+    test_samples: int = 100
+    render_size: int = 128
+    image_size: int = 128
+    epochs: int = 10
+    batch_size: int = 16
+    lr: float = 1e-3
+    encoder: str = "resnet10"
+    decoder: str = "multi"
+    attention: bool = True
+    augment: bool = False
+    recipe: str = "cpu"
+    balance_train: bool = False
+    init_encoder: str | None = "pretrained"
+    freeze_encoder: int = 10
+    encoder_lr_scale: float = 0.1
+    threads: int = 2
+    workers: int = 2
+    overlays: int = 8
+    budget: str = "default"
+
+    @classmethod
+    def from_budget(cls, budget=None, **overrides) -> DemoConfig:
+        """The demo's sizes for a run-size tier.
+
+        Args:
+            budget: a [`Budget`][handmesh_tutorial.budget.Budget] (default ``hmt.budget()``).
+            **overrides: any field.
+
+        Returns:
+            The config.
+        """
+        if budget is None:
+            budget = _budget()
+        full = budget.name == "full"  # the paper's scale: its data size, epochs, augmentation
+        sized = dict(train_samples=budget.samples if full else max(8, 5 * budget.samples),
+                     test_samples=max(4, budget.eval_samples // 2),
+                     render_size=budget.image_size,
+                     image_size=budget.image_size,
+                     epochs=budget.epochs if full else max(1, budget.epochs // 2),
+                     batch_size=max(2, budget.batch_size), augment=full,
+                     threads=budget.threads, workers=min(2, budget.threads),
+                     overlays=8 if budget.name != "smoke" else 4, budget=budget.name)
+        sized.update(overrides)
+        return cls(**sized)
+
+
+def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.PathLike,
+                 seed: int = 0, progress: bool = True, **overrides):
+    """The demo's [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] (notebooks 08-10 train
+    with it).
+
+    10% of ``data`` is held out for per-epoch validation; the learning rate is halved once, after
+    three quarters of the epochs; crops are cached in memory; CPU; the loss terms and keypoint head
+    of ``config.recipe`` ([`RECIPES`][handmesh_tutorial.apps.demo.config.RECIPES]).
+
+    Args:
+        config: the demo's sizes and choices.
+        data: INTER-SH training root.
+        out_dir: the run's folder.
+        seed: initialisation, data order, split and augmentation seed.
+        progress: tqdm bars.
+        **overrides: any [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] field (e.g.
+            ``decoder``, ``attention`` for the ablation).
+
+    Returns:
+        The config.
+    """
+    from ...train import TrainConfig  # lazy: torch
+
+    if config.recipe not in RECIPES:
+        raise ValueError(f"recipe must be one of {sorted(RECIPES)}, got {config.recipe!r}")
+    kw = dict(data=str(data), out_dir=str(out_dir), val_fraction=0.1,
+              image_size=config.image_size, epochs=config.epochs, batch_size=config.batch_size,
+              lr=config.lr, lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
+              encoder=config.encoder, decoder=config.decoder, attention=config.attention,
+              seed=seed, device="cpu", threads=config.threads, cache_data=True,
+              progress=progress, init_encoder=config.init_encoder,
+              freeze_encoder=config.freeze_encoder if config.init_encoder else 0,
+              encoder_lr_scale=config.encoder_lr_scale if config.init_encoder else 1.0,
+              **RECIPES[config.recipe])
+    kw.update(overrides)
+    return TrainConfig(**kw)
