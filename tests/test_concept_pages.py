@@ -55,11 +55,13 @@ def test_long_pages_open_with_a_short_summary(page):
     if len(text.split()) <= LONG_PAGE_WORDS:
         return
     lines = summary_lines(text)
-    assert lines, f"{page.name}: over {LONG_PAGE_WORDS} words; open it with a '**What to know**' list"
+    assert lines, (
+        f"{page.name}: over {LONG_PAGE_WORDS} words; open it with a '**What to know**' list")
     assert len(lines) <= MAX_SUMMARY_LINES, (
         f"{page.name}: the summary has {len(lines)} lines, at most {MAX_SUMMARY_LINES}")
     links = sum("](" in ln for ln in lines)
-    assert links >= 3, f"{page.name}: the summary links {links} sections; link where each fact is shown"
+    assert links >= 3, (
+        f"{page.name}: the summary links {links} sections; link where each fact is shown")
 
 
 @pytest.mark.parametrize("page", PAGES, ids=PAGE_IDS)
