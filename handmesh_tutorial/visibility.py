@@ -74,8 +74,8 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
         stray: share of the alone mask's pixel count that may lie outside it and still pass
             as rasteriser jitter (counted as hidden, ``on_outside`` not applied). 0 (default):
             none, right for Mesa, which rasterises a body identically in both passes; NVIDIA's
-            EGL flips some edge pixels between them (29 of a hand's seen on an H200; the
-            generator allows 3 %).
+            EGL flips some edge pixels between them (docs page "Rendering", "The passes and the
+            label mask"), and the generator allows 3 %.
 
     Returns:
         VR in ``[0, 1]`` (a Python float).
