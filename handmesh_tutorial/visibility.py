@@ -84,6 +84,16 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
         ValueError: a mask is not 2-D, the shapes differ, ``scene_mask`` is not an integer label
             mask, the alone mask of ``label`` is empty (VR undefined), or visible pixels lie
             outside the alone mask with ``on_outside="raise"``.
+
+    Examples:
+        >>> import numpy as np
+        >>> from handmesh_tutorial.visibility import visibility_ratio
+        >>> alone = np.zeros((4, 6), bool)
+        >>> alone[:, :4] = True  # body 1 rendered alone covers 4 columns
+        >>> scene = np.zeros((4, 6), int)
+        >>> scene[:, :3], scene[:, 3:] = 1, 2  # in the scene, body 2 hides its 4th column
+        >>> visibility_ratio(scene, alone, 1)
+        0.75
     """
     if on_outside not in _ON_OUTSIDE:
         raise ValueError(f"on_outside must be one of {_ON_OUTSIDE}, got {on_outside!r}")
