@@ -184,12 +184,13 @@ class BalancedVRSampler:
         per_bin: quota of each bin (``> 0``).
         bins: VR bins (default `VR_BINS`).
 
-    Example:
-        ```python
-        s = BalancedVRSampler(per_bin=1)
-        [s.offer(v) for v in (0.99, 0.97, 0.3, 0.5, 0.7, 0.85)]
-        # [True, False, False, True, True, True]; now s.full is True
-        ```
+    Examples:
+        >>> from handmesh_tutorial.visibility import BalancedVRSampler
+        >>> s = BalancedVRSampler(per_bin=1)
+        >>> [s.offer(v) for v in (0.99, 0.97, 0.3, 0.5, 0.7, 0.85)]  # 0.3 is in no bin
+        [True, False, False, True, True, True]
+        >>> s.full
+        True
     """
 
     def __init__(self, per_bin: int, bins: tuple[tuple[float, float], ...] = VR_BINS):
