@@ -74,8 +74,8 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
         stray: share of the alone mask's pixel count that may lie outside it and still pass
             as rasteriser jitter (counted as hidden, ``on_outside`` not applied). 0 (default):
             none, right for Mesa, which rasterises a body identically in both passes; NVIDIA's
-            EGL flips some edge pixels between them (29 of a hand's seen on an H200; the
-            generator allows 3 %).
+            EGL flips some edge pixels between them (docs page "Rendering", "The passes and the
+            label mask"), and the generator allows 3 %.
 
     Returns:
         VR in ``[0, 1]`` (a Python float).
@@ -84,6 +84,16 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
         ValueError: a mask is not 2-D, the shapes differ, ``scene_mask`` is not an integer label
             mask, the alone mask of ``label`` is empty (VR undefined), or visible pixels lie
             outside the alone mask with ``on_outside="raise"``.
+
+    Examples:
+        >>> import numpy as np
+        >>> from handmesh_tutorial.visibility import visibility_ratio
+        >>> alone = np.zeros((4, 6), bool)
+        >>> alone[:, :4] = True  # body 1 rendered alone covers 4 columns
+        >>> scene = np.zeros((4, 6), int)
+        >>> scene[:, :3], scene[:, 3:] = 1, 2  # in the scene, body 2 hides its 4th column
+        >>> visibility_ratio(scene, alone, 1)
+        0.75
     """
     if on_outside not in _ON_OUTSIDE:
         raise ValueError(f"on_outside must be one of {_ON_OUTSIDE}, got {on_outside!r}")
@@ -174,12 +184,13 @@ class BalancedVRSampler:
         per_bin: quota of each bin (``> 0``).
         bins: VR bins (default `VR_BINS`).
 
-    Example:
-        ```python
-        s = BalancedVRSampler(per_bin=1)
-        [s.offer(v) for v in (0.99, 0.97, 0.3, 0.5, 0.7, 0.85)]
-        # [True, False, False, True, True, True]; now s.full is True
-        ```
+    Examples:
+        >>> from handmesh_tutorial.visibility import BalancedVRSampler
+        >>> s = BalancedVRSampler(per_bin=1)
+        >>> [s.offer(v) for v in (0.99, 0.97, 0.3, 0.5, 0.7, 0.85)]  # 0.3 is in no bin
+        [True, False, False, True, True, True]
+        >>> s.full
+        True
     """
 
     def __init__(self, per_bin: int, bins: tuple[tuple[float, float], ...] = VR_BINS):

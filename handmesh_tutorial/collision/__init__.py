@@ -55,11 +55,10 @@ BACKEND: str = "auto"
 """Which implementation the exact tests use: ``"auto"`` (the default: the compiled kernels of
 ``handmesh_tutorial.collision._numba`` when numba imports, else numpy), ``"numba"`` (those kernels,
 an error without numba) or ``"numpy"`` (the vectorised reference). Both give the same answers
-(tested pair by pair); the kernels are 10x faster on 1 M pairs and 20-50x on hand-vs-hand queries
-(docs page "Performance"). The first call in a process loads them (about 0.5 s; the very first
-after installation compiles them, a few seconds). Set it on this package
-(``hmt.collision.BACKEND = "numpy"``); every query reads it at call time. Every public test also
-takes ``backend=``."""
+(tested pair by pair); the kernels are faster, and their first call in a process loads (once
+after installation: compiles) them; speeds and costs: docs page "Performance". Set it on this
+package (``hmt.collision.BACKEND = "numpy"``); every query reads it at call time. Every public test
+also takes ``backend=``."""
 
 __all__ = [
     "ATOL",

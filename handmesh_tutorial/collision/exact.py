@@ -352,10 +352,13 @@ def cylinders_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL,
     Shapes:
         ``a0, a1, b0, b1 (..., 3)``, ``ra, rb (...)`` (broadcast) -> ``(...)`` bool.
 
-    Example:
+    Examples:
+        >>> from handmesh_tutorial.collision import cylinders_intersect
         >>> a0, a1, b0, b1 = [0, 0, 0], [0, 0, 0.04], [0.019, 0, 0.02], [0.019, 0.04, 0.02]
-        >>> cylinders_intersect(a0, a1, 0.01, b0, b1, 0.01)
+        >>> cylinders_intersect(a0, a1, 0.01, b0, b1, 0.01)  # two 1-cm radii, axes 1.9 cm apart
         array(True)
+        >>> cylinders_intersect([a0, a0], [a1, a1], 0.01, [b0, b0], [b1, b1], [0.01, 0.008])
+        array([ True, False])
     """
     a0, a1, ra, b0, b1, rb, shape = _prepare(a0, a1, ra, b0, b1, rb, atol)
     nb = _kernels(backend)
@@ -394,6 +397,15 @@ def capsules_intersect(a0, a1, ra, b0, b1, rb, *, atol: float = ATOL) -> np.ndar
 
     Shapes:
         ``a0, a1, b0, b1 (..., 3)``, ``ra, rb (...)`` (broadcast) -> ``(...)`` bool.
+
+    Examples:
+        >>> from handmesh_tutorial.collision import capsules_intersect, cylinders_intersect
+        >>> a0, a1 = [0, 0, 0], [0, 0, 0.04]  # 4 cm long, radius 1 cm
+        >>> b0, b1 = [0.015, 0, 0.048], [0.015, 0, 0.088]  # past a's end cap, 1.5 cm aside
+        >>> capsules_intersect(a0, a1, 0.01, b0, b1, 0.01)  # the round caps meet...
+        array(True)
+        >>> cylinders_intersect(a0, a1, 0.01, b0, b1, 0.01)  # ...the flat-capped solids do not
+        array(False)
     """
     a0, a1, ra, b0, b1, rb, shape = _prepare(a0, a1, ra, b0, b1, rb, atol)
     a0, a1, b0, b1 = _rows(a0), _rows(a1), _rows(b0), _rows(b1)

@@ -122,7 +122,7 @@ def bodies_collide(A: Cylinders, B: Cylinders, *, atol: float = ATOL,
 SELF_CONTACT_COMPRESSION: float = 0.3
 """Fraction of each radius
 [`self_collisions`][handmesh_tutorial.collision.queries.self_collisions] lets soft tissue compress
-(measured on the MakeHuman hand: 0.3 keeps a plain fist, a pinch and a flat hand free of
+(why 0.3: on the MakeHuman hand it keeps a plain fist, a pinch and a flat hand free of
 self-collisions while a finger crossed through its neighbour still collides).
 """
 

@@ -433,9 +433,8 @@ def read_target(directory: str | os.PathLike) -> tuple:
     """Read only what a training crop of the target hand needs (a lean
     [`read_sample`][handmesh_tutorial.data.files.read_sample]).
 
-    Skips the masks and the other bodies' arrays, which training never reads: a data loader's
-    item (read and 128-px augmented crop of a 224-px scene) takes 4.3 ms instead of 6.1
-    (``benchmarks/data.py``).
+    Skips the masks and the other bodies' arrays, which training never reads, so a data
+    loader's item costs less (docs page "Performance", ``benchmarks/data.py``).
 
     Returns:
         ``(image, K, vertices, joints, side, vr)``: ``(H, W, 3)`` uint8, ``(3, 3)`` float64

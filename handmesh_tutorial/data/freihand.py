@@ -157,7 +157,7 @@ class FreiHAND:
         versions: sample versions to index (training only; default all four, in file order
             ``gs, hom, sample, auto``). The evaluation split has only ``gs``.
 
-    Example:
+    Examples:
         >>> ds = FreiHAND("~/FreiHAND_pub_v2", "training")  # doctest: +SKIP
         >>> s = ds[0]; s["image"].shape, s["joints"].shape  # doctest: +SKIP
         ((224, 224, 3), (21, 3))

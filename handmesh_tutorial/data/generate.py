@@ -180,7 +180,8 @@ def generate_dataset(
             when it is safe (this process has opened no OpenGL context, not imported torch and
             runs no other threads: ``handmesh generate``, the demo) and spawns otherwise (a
             Jupyter kernel, a process that rendered or trained before); ``"spawn"`` is always
-            safe with OpenGL and torch, but each worker imports everything again (about 2 s).
+            safe with OpenGL and torch, but each worker imports everything again (seconds;
+            docs page "Performance").
             The bytes written are the same either way. A ``make_sample`` defined in a notebook
             needs ``"fork"``.
 

@@ -88,10 +88,10 @@ def _start_method(requested: str) -> str:
     """The multiprocessing start method of the worker pool for ``mp_context=requested``.
 
     ``"auto"`` forks where forking is safe and otherwise spawns. A spawned worker starts a fresh
-    interpreter and imports everything again (torch, the library, pyrender: about 2 s on a
-    2-core laptop, in every worker of every run), and at the end runs the interpreter's full
-    teardown (about 0.4 s with torch loaded); a forked worker inherits the parent's imports and
-    leaves with ``os._exit``. Forking is safe here when
+    interpreter and imports everything again (torch, the library, pyrender: seconds, in every
+    worker of every run), and at the end runs the interpreter's full teardown; a forked worker
+    inherits the parent's imports and leaves with ``os._exit`` (costs: docs page "Performance",
+    "Worker start-up"). Forking is safe here when
 
     * the platform is Linux (macOS system frameworks and Windows do not support it);
     * this process has opened no OpenGL context

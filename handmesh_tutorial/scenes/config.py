@@ -90,8 +90,8 @@ class InteractionConfig:
             [`THUMB_ZERO_ELEVATION_DEG`][handmesh_tutorial.lcs.hands.THUMB_ZERO_ELEVATION_DEG]:
             the joint limits and the pose prior count from a thumb near the palm plane, as
             anatomical ranges do); ``None`` counts from the MakeHuman template's rest thumb,
-            35° out of the palm (the generator before this option: every thumb about 30° further
-            across the palm). See [`lcs.hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs].
+            35° out of the palm, which turns every thumb about 30° further across the palm. See
+            [`lcs.hand_lcs`][handmesh_tutorial.lcs.hands.hand_lcs].
     """
 
     limits: str = "anatomical"

@@ -122,9 +122,8 @@ class _MeshSDF:
     point. For the others, each point takes its ``k`` nearest face centroids in one vectorised
     k-d tree query; that set is complete when the ``k``-th centroid is farther than ``r`` plus the
     largest small-face radius, and only the few points where it is not fall back to a radius
-    query. (One radius query with ``r`` plus the *largest* radius of all faces, 31 mm for the
-    hand's cap, returned hundreds of faces per point as Python lists: 68 ms for a hand's 779
-    vertices against the other hand, against 12 ms now.)
+    query. Why the split: one radius query with ``r`` plus the *largest* face radius (the wrist
+    cap's) returns hundreds of faces per point (costs: docs page "Performance", "Generator").
     """
 
     big_face = 0.012

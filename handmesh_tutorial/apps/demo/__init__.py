@@ -33,12 +33,13 @@ Evaluation and report are cheap and always redone.
 **Sizes** come from the run-size tier
 ([`handmesh_tutorial.budget.budget`][handmesh_tutorial.budget.budget]) through
 [`DemoConfig.from_budget`][handmesh_tutorial.apps.demo.config.DemoConfig.from_budget]; the demo's
-own choices, made so that the ``default`` tier finishes in about twelve minutes on a 2-core CPU:
+own choices, made so that the ``default`` tier finishes in minutes on a 2-core CPU (wall times:
+docs page "Performance"):
 
-* training scenes = 5 x ``budget.samples`` (``default``: 3,000; about 7 scenes/s with two
-  workers at 128 px on a 2-core CPU) and VR-balanced test scenes = 1/2 of
-  ``budget.eval_samples`` (``default``: 100; balancing rejects candidates, about 5 renders per
-  kept scene). Training needs *many different* scenes far more than it needs balanced ones;
+* training scenes = 5 x ``budget.samples`` (``default``: 3,000) and VR-balanced test scenes =
+  1/2 of ``budget.eval_samples`` (``default``: 100; balancing rejects candidates, docs page
+  "INTER-SH on disk", "VR-balanced sets"). Training needs *many different* scenes far more than
+  it needs balanced ones;
 * network crop = ``budget.image_size`` (``default``: 128 px, cut around the target hand, which
   spans 45-75 % of the rendered image), batch ``budget.batch_size`` (``default``: 16),
   ``budget.epochs / 2`` epochs (``default``: 10, about 1,700 steps), learning rate ``1e-3``,

@@ -56,7 +56,8 @@ class DemoConfig:
             keypoint head with pose pooling, a global-rotation head, the skinned decoder output,
             keypoint and aligned-joint losses beside the paper's L1) or ``"paper"`` (L1 vertex loss
             only, global-pooling encoder).
-        balance_train: VR-balance the training scenes too (about 5x slower to generate).
+        balance_train: VR-balance the training scenes too (several times slower to generate:
+            docs page "INTER-SH on disk", "VR-balanced sets").
         init_encoder: where the encoder starts: ``"pretrained"`` (the shipped hand encoder,
             [`pretrained_encoder`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder]; the
             paper's protocol with our stand-in for ImageNet weights), a pose-encoder file, or

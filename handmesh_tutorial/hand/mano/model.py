@@ -404,7 +404,7 @@ def load_mano(path: str | Path, side: str | None = None, *, use_pca: bool = Fals
         UnsafePickleError: the file contains a class or function outside the whitelist.
         ValueError: side cannot be inferred, a key is missing or has the wrong shape.
 
-    Example:
+    Examples:
         >>> mano = load_mano("models/MANO_RIGHT.pkl")            # doctest: +SKIP
         >>> out = mano(pose=torch.zeros(1, 15, 3))               # doctest: +SKIP
         >>> out.vertices.shape, out.joints.shape                 # doctest: +SKIP

@@ -201,6 +201,20 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
     Shapes:
         ``vertices (V, 3)``, ``faces (F, 3)`` -> per level ``vertices (V_l, 3)``,
         ``faces (F_l, 3)``.
+
+    Examples:
+        >>> import numpy as np, trimesh
+        >>> from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+        >>> sphere = trimesh.creation.icosphere(subdivisions=1)  # 42 vertices
+        >>> h = mesh_hierarchy(sphere.vertices, sphere.faces, (2, 2), use_cache=False)
+        >>> [len(v) for v in h.vertices]
+        [42, 21, 11]
+        >>> h.down[0].shape, h.up[0].shape  # D: (V_1, V_0), U: (V_0, V_1)
+        ((21, 42), (42, 21))
+        >>> bool(np.array_equal(h.down[0] @ h.vertices[0], h.vertices[1]))  # a vertex subset
+        True
+        >>> bool(np.allclose(h.up[0].sum(axis=1), 1.0))  # barycentric rows
+        True
     """
     v, f = _check_mesh(vertices, faces)
     factors = tuple(float(x) for x in factors)
