@@ -4,6 +4,8 @@
 ``from handmesh_tutorial.interact import build_scene`` keep working: an old path is a stand-in
 module that hands out the names of its new home, with a ``FutureWarning`` naming that home. The
 stand-ins go in 0.3 (``CHANGELOG.md``). New code uses the new paths (docs page "The pipeline").
+The same holds for a public name of 0.1 that is plumbing and private since 0.2 (`RENAMED`,
+``hmt.data.TMP_PREFIX`` -> ``hmt.data.schema._TMP_PREFIX``), through its module's ``__getattr__``.
 
 This table is the one place that names modules of the apps layer from inside the library (as
 strings, imported only when an old name is used).
@@ -112,6 +114,9 @@ def moved_attribute(module: str, name: str):
     return getattr(importlib.import_module(_P + new), name)
 
 
+_MISSING = object()
+
+
 class _Moved(types.ModuleType):
     """Stand-in for an old module path: attributes come from the new module(s)."""
 
@@ -126,8 +131,9 @@ class _Moved(types.ModuleType):
         if name.startswith("__"):
             raise AttributeError(name)
         for mod in self._modules():
-            if hasattr(mod, name):
-                return getattr(mod, name)
+            value = getattr(mod, name, _MISSING)  # once: a renamed name warns on each access
+            if value is not _MISSING:
+                return value
         if _targets(f"{self.__name__}.{name}"):  # an old submodule: its stand-in
             return importlib.import_module(f"{self.__name__}.{name}")
         extra = MOVED_NAMES.get(self.__name__[len(_P):], {})

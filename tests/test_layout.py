@@ -86,6 +86,8 @@ def test_the_surface_count_names_a_re_exported_name_once():
 
 
 def test_plumbing_made_private_keeps_its_old_name_for_one_version():
+    import warnings
+
     from handmesh_tutorial import _aliases
 
     assert {"TMP_PREFIX", "LOCK_FILE", "patch_pyrender_numpy2"} <= {
@@ -100,6 +102,13 @@ def test_plumbing_made_private_keeps_its_old_name_for_one_version():
             assert value is getattr(importlib.import_module(f"handmesh_tutorial.{home}"), private)
     with pytest.raises(AttributeError, match="no attribute 'NO_SUCH_NAME'"):
         hmt.data.NO_SUCH_NAME  # noqa: B018
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        old = importlib.import_module("handmesh_tutorial.dataset")  # 0.1's path of data
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        assert old.LOCK_FILE == hmt.data.schema._LOCK_FILE
+    assert [str(w.message).split(" is ")[0] for w in seen] == ["handmesh_tutorial.data.LOCK_FILE"]
 
 
 @pytest.mark.parametrize("module", PUBLIC_MODULES)
