@@ -19,7 +19,7 @@ _SUBMODULES = (
     "train", "metrics", "viz", "pretrained", "inference", "budget", "testing", "apps",
 )
 
-__all__ = ["Budget", "budget", "__version__", *_SUBMODULES]
+__all__ = ["Budget", "budget", "__version__", *(m for m in _SUBMODULES if m != "budget")]
 
 _aliases.install()  # the module paths of 0.1 (``hmt.spiral``, ``hmt.dataset``...) until 0.3
 

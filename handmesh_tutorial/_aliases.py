@@ -4,6 +4,8 @@
 ``from handmesh_tutorial.interact import build_scene`` keep working: an old path is a stand-in
 module that hands out the names of its new home, with a ``FutureWarning`` naming that home. The
 stand-ins go in 0.3 (``CHANGELOG.md``). New code uses the new paths (docs page "The pipeline").
+The same holds for a public name of 0.1 that is plumbing and private since 0.2 (`RENAMED`,
+``hmt.data.TMP_PREFIX`` -> ``hmt.data.schema._TMP_PREFIX``), through its module's ``__getattr__``.
 
 This table is the one place that names modules of the apps layer from inside the library (as
 strings, imported only when an old name is used).
@@ -18,7 +20,7 @@ import sys
 import types
 import warnings
 
-__all__ = ["MOVED", "MOVED_NAMES", "install", "moved_attribute"]
+__all__ = ["MOVED", "MOVED_NAMES", "RENAMED", "install", "moved_attribute"]
 
 _P = "handmesh_tutorial."
 
@@ -60,6 +62,23 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
 }
 """Names that moved out of a module: old module -> {name: its new module}."""
 
+_TMP, _LOCK = "data.schema._TMP_PREFIX", "data.schema._LOCK_FILE"
+_EGL, _NP2 = "render.backend._ensure_egl", "render.backend._patch_pyrender_numpy2"
+_SKIMAGE = "render.backgrounds._skimage_data_dir"
+_STALE = "train.checkpoints._remove_stale_temp_files"
+RENAMED: dict[str, dict[str, str]] = {
+    # public names of 0.1 that are plumbing, private since 0.2: module -> {old name: new home}
+    "data": {"TMP_PREFIX": _TMP, "LOCK_FILE": _LOCK},
+    "data.schema": {"TMP_PREFIX": _TMP, "LOCK_FILE": _LOCK},
+    "render": {"ensure_egl": _EGL, "patch_pyrender_numpy2": _NP2, "skimage_data_dir": _SKIMAGE},
+    "render.backend": {"ensure_egl": _EGL, "patch_pyrender_numpy2": _NP2},
+    "render.backgrounds": {"skimage_data_dir": _SKIMAGE},
+    "train": {"remove_stale_temp_files": _STALE},
+    "train.checkpoints": {"remove_stale_temp_files": _STALE},
+}
+"""Names made private (``_``-prefixed): module -> {old name: ``module._new_name``}. The old name
+keeps working until 0.3 through the module's ``__getattr__`` (`moved_attribute`)."""
+
 
 def _targets(old: str) -> tuple[str, ...] | None:
     """New modules of an old module path (full names), or None when it did not move."""
@@ -74,17 +93,28 @@ def _targets(old: str) -> tuple[str, ...] | None:
 
 
 def moved_attribute(module: str, name: str):
-    """``name`` of an old module from its new home (`MOVED_NAMES`), with a ``FutureWarning``.
+    """``name`` of a module from its new home (`MOVED_NAMES`, `RENAMED`), with a ``FutureWarning``.
 
     Raises:
-        AttributeError: ``name`` did not move out of ``module``.
+        AttributeError: ``name`` did not move out of ``module`` and was not renamed.
     """
-    new = MOVED_NAMES.get(module[len(_P):] if module.startswith(_P) else module, {}).get(name)
+    rel = module[len(_P):] if module.startswith(_P) else module
+    private = RENAMED.get(rel, {}).get(name)
+    if private is not None:
+        home, new_name = private.rsplit(".", 1)
+        warnings.warn(f"{_P}{rel}.{name} is private since 0.2 ({_P}{private}: plumbing, not "
+                      "part of the public surface); the old name goes in 0.3",
+                      FutureWarning, stacklevel=3)
+        return getattr(importlib.import_module(_P + home), new_name)
+    new = MOVED_NAMES.get(rel, {}).get(name)
     if new is None:
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
     warnings.warn(f"{module}.{name} is now {_P}{new}.{name}; the old name goes in 0.3",
                   FutureWarning, stacklevel=3)
     return getattr(importlib.import_module(_P + new), name)
+
+
+_MISSING = object()
 
 
 class _Moved(types.ModuleType):
@@ -101,8 +131,9 @@ class _Moved(types.ModuleType):
         if name.startswith("__"):
             raise AttributeError(name)
         for mod in self._modules():
-            if hasattr(mod, name):
-                return getattr(mod, name)
+            value = getattr(mod, name, _MISSING)  # once: a renamed name warns on each access
+            if value is not _MISSING:
+                return value
         if _targets(f"{self.__name__}.{name}"):  # an old submodule: its stand-in
             return importlib.import_module(f"{self.__name__}.{name}")
         extra = MOVED_NAMES.get(self.__name__[len(_P):], {})

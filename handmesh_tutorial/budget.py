@@ -18,8 +18,7 @@ from __future__ import annotations
 import os
 from dataclasses import asdict, dataclass
 
-__all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE",
-           "check_image_size"]
+__all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE"]
 
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")

@@ -41,8 +41,8 @@ from .data.augment import (
 from .metrics import ROOT_INDEX
 from .render.camera import check_intrinsics
 
-__all__ = ["HandCrop", "HandPrediction", "check_image", "crop_hand", "root_from_keypoints",
-           "predict_hands", "predict_hand"]
+__all__ = ["HandCrop", "HandPrediction", "crop_hand", "root_from_keypoints", "predict_hands",
+           "predict_hand"]
 
 _SIDES = ("left", "right")
 

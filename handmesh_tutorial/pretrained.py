@@ -18,15 +18,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._version import PRETRAINED_FILE, shipped_file, shipped_version
-from .nn.pose_encoder import (
+from .nn.pose_encoder import (  # noqa: F401 - ENCODER_FILE: not public, importable as in 0.1
     ENCODER_FILE,
     pretrained_encoder,
     pretrained_encoder_info,
     pretrained_encoder_path,
 )
 
-__all__ = ["PRETRAINED_FILE", "ENCODER_FILE", "pretrained", "pretrained_path", "pretrained_info",
-           "pretrained_encoder", "pretrained_encoder_info", "pretrained_encoder_path"]
+__all__ = ["pretrained", "pretrained_path", "pretrained_info", "pretrained_encoder",
+           "pretrained_encoder_info", "pretrained_encoder_path"]
 
 
 def pretrained_path() -> Path:

@@ -41,7 +41,7 @@ def tree(root) -> dict:
     """sha256 of every file under root (relative path -> digest), the writer lock excluded."""
     root = Path(root)
     return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*")) if p.is_file() and p.name != D.LOCK_FILE}
+            for p in sorted(root.rglob("*")) if p.is_file() and p.name != D.schema._LOCK_FILE}
 
 
 def sample_dirs(root) -> list[str]:
@@ -411,7 +411,7 @@ def test_stale_temporaries_are_removed_but_not_a_users_files(tmp_path):
 def test_a_second_writer_is_refused(tmp_path):
     fcntl = pytest.importorskip("fcntl")
     (tmp_path / "r").mkdir()
-    with open(tmp_path / "r" / D.LOCK_FILE, "a+b") as fh:
+    with open(tmp_path / "r" / D.schema._LOCK_FILE, "a+b") as fh:
         fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
         with pytest.raises(RuntimeError, match="being written by another process"):
             gen(tmp_path / "r")

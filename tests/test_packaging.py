@@ -93,7 +93,7 @@ def test_a_missing_extra_is_named_in_the_error(monkeypatch):
     with pytest.raises(ImportError, match=r'PyOpenGL.*"handmesh_tutorial\[scenes\]"'):
         backend.import_pyrender()
     with pytest.raises(ImportError, match=r'scikit-image.*"handmesh_tutorial\[scenes\]"'):
-        backgrounds.skimage_data_dir()
+        backgrounds._skimage_data_dir()
     a = np.zeros((1, 3))
     with pytest.raises(ImportError, match=r'numba.*"handmesh_tutorial\[scenes\]"'):
         hmt.collision.cylinders_intersect(a, a + 1, [0.1], a, a + 1, [0.1], backend="numba")

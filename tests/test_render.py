@@ -100,10 +100,10 @@ def test_numpy2_fix_formerly_broken_paths(renderer):
 def test_patch_is_local_and_idempotent():
     fake = types.ModuleType("fake_pyrender_mesh")
     fake.np = np
-    applied = R.patch_pyrender_numpy2(fake)
+    applied = R.backend._patch_pyrender_numpy2(fake)
     assert applied == (not hasattr(np, "infty"))
     assert fake.np.infty == np.inf and fake.np.array is np.array
-    assert R.patch_pyrender_numpy2(fake) is False
+    assert R.backend._patch_pyrender_numpy2(fake) is False
 
 
 # ---------------------------------------------------------------- label masks and depth
@@ -329,7 +329,7 @@ def test_scene_lights_vary_colour_and_direction():
 def test_background_photos_are_bundled_in_the_wheel_and_free():
     """Only photographs the installed scikit-image ships (no pooch download), CC0 or public
     domain, each with its credit."""
-    folder = R.skimage_data_dir()
+    folder = R.backgrounds._skimage_data_dir()
     assert {ph.name for ph in R.BACKGROUND_PHOTOS} == {"coffee", "chelsea", "rocket", "brick",
                                                        "grass", "gravel"}
     for ph in R.BACKGROUND_PHOTOS:

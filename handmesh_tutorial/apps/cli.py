@@ -32,7 +32,7 @@ from pathlib import Path
 from ..budget import budget
 from ._cli_pretrain import add_pretrain_commands
 
-__all__ = ["EXIT_CODES", "build_parser", "main", "error_kind", "error_message"]
+__all__ = ["EXIT_CODES", "build_parser", "main"]
 
 EXIT_CODES = {"ok": 0, "unexpected": 1, "usage": 2, "bad-input": 3, "not-found": 4,
               "exists": 5, "environment": 6, "interrupted": 130}

@@ -29,14 +29,14 @@ re-exported here, so ``hmt.collision.cylinders_intersect`` and
 from __future__ import annotations
 
 from .cylinders import Cylinders, box_cylinders, ring_cylinders
-from .distance import (
+from .distance import (  # noqa: F401 - cylinder_support: not public, importable as in 0.1
     cylinder_support,
     point_cylinder_distance,
     project_to_cylinder,
     sphere_cylinder_intersect,
 )
 from .exact import ATOL, capsules_intersect, cylinders_intersect, segment_segment_distance
-from .hand_proxies import (
+from .hand_proxies import (  # noqa: F401 - fit_cylinders, hand_segments: not public
     HAND_CYLINDER_NAMES,
     coverage,
     fit_cylinders,
@@ -71,12 +71,9 @@ __all__ = [
     "capsules_intersect",
     "colliding_pairs",
     "coverage",
-    "cylinder_support",
     "cylinders_intersect",
     "distance_bounds",
-    "fit_cylinders",
     "hand_cylinders",
-    "hand_segments",
     "point_cylinder_distance",
     "project_to_cylinder",
     "ring_cylinders",

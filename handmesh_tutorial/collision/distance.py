@@ -14,10 +14,7 @@ import numpy as np
 from ._common import _check_points, _check_radius
 from .exact import ATOL
 
-__all__ = [
-    "point_cylinder_distance", "project_to_cylinder", "cylinder_support",
-    "sphere_cylinder_intersect",
-]
+__all__ = ["point_cylinder_distance", "project_to_cylinder", "sphere_cylinder_intersect"]
 
 
 def point_cylinder_distance(points, p0, p1, radius) -> np.ndarray:

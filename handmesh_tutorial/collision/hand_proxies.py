@@ -14,7 +14,7 @@ from ._common import _check_points
 from .cylinders import Cylinders
 from .distance import point_cylinder_distance
 
-__all__ = ["fit_cylinders", "HAND_CYLINDER_NAMES", "hand_segments", "hand_cylinders", "coverage"]
+__all__ = ["HAND_CYLINDER_NAMES", "hand_cylinders", "coverage"]
 
 
 def _pts(x, name):

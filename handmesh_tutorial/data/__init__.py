@@ -46,11 +46,10 @@ from __future__ import annotations
 import importlib
 
 from ..visibility import VR_BINS
-from .candidates import PROBE_MIN_HITS, SampleRejected
+from .candidates import SampleRejected
 from .files import (
     _write_folder,  # noqa: F401 - benchmarks/generate.py times it
     encode_sample,
-    npz_bytes,
     read_annotation,
     read_sample,
     write_sample,
@@ -60,32 +59,25 @@ from .reader import InterSHDataset, VerifyReport, read_meta, verify_dataset
 from .root import merge_shards
 from .schema import (
     FOCAL_RANGE,
-    FORMAT_NAME,
     FORMAT_VERSION,
     KINDS,
-    LOCK_FILE,
     MAX_DISTANCE_M,
     MAX_IMAGE_SIZE,
     MAX_LABEL,
     MAX_SAMPLES,
     META_FILE,
     MIN_DEPTH_M,
-    MIN_INDEX_WIDTH,
     PRINCIPAL_POINT_MARGIN,
-    READABLE_FORMAT_VERSIONS,
     SAMPLES_DIR,
-    TMP_PREFIX,
 )
-from .seeds import index_width, probe_seed, sample_seed, shard_range, vr_bins, vr_histogram
+from .seeds import sample_seed, vr_bins, vr_histogram
 
 __all__ = [
-    "FORMAT_NAME", "FORMAT_VERSION", "READABLE_FORMAT_VERSIONS", "KINDS", "META_FILE",
-    "SAMPLES_DIR", "TMP_PREFIX", "LOCK_FILE", "MIN_INDEX_WIDTH", "MAX_SAMPLES", "MAX_LABEL",
+    "FORMAT_VERSION", "KINDS", "META_FILE", "SAMPLES_DIR", "MAX_SAMPLES", "MAX_LABEL",
     "MAX_IMAGE_SIZE", "MAX_DISTANCE_M", "MIN_DEPTH_M", "FOCAL_RANGE", "PRINCIPAL_POINT_MARGIN",
-    "PROBE_MIN_HITS", "SampleRejected", "sample_seed", "probe_seed", "shard_range", "index_width",
-    "vr_bins", "vr_histogram", "npz_bytes", "encode_sample", "write_sample", "read_annotation",
-    "read_sample", "read_meta", "InterSHDataset", "VerifyReport", "verify_dataset",
-    "GenerationSummary", "generate_dataset", "merge_shards", "VR_BINS",
+    "SampleRejected", "sample_seed", "vr_bins", "vr_histogram", "encode_sample", "write_sample",
+    "read_annotation", "read_sample", "read_meta", "InterSHDataset", "VerifyReport",
+    "verify_dataset", "GenerationSummary", "generate_dataset", "merge_shards", "VR_BINS",
 ]
 
 _TORCH_VIEWS = ("HandCropDataset", "InterSHTorchDataset", "FreiHANDTorchDataset",
@@ -93,8 +85,20 @@ _TORCH_VIEWS = ("HandCropDataset", "InterSHTorchDataset", "FreiHANDTorchDataset"
                 "drop_bad_items")
 """Names of ``torch_views``, loaded (with torch) on first access."""
 
+_PLUMBING = {
+    "FORMAT_NAME": "schema", "READABLE_FORMAT_VERSIONS": "schema", "MIN_INDEX_WIDTH": "schema",
+    "PROBE_MIN_HITS": "candidates", "probe_seed": "seeds", "shard_range": "seeds",
+    "index_width": "seeds", "npz_bytes": "files",
+}
+"""Names of 0.1's ``hmt.data`` that are plumbing (not in ``__all__``): they keep working from
+here, without a warning, as they do from their submodules."""
+
 
 def __getattr__(name: str):
     if name in _TORCH_VIEWS:
         return getattr(importlib.import_module(f"{__name__}.torch_views"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    if name in _PLUMBING:  # not public, still importable from here
+        return getattr(importlib.import_module(f"{__name__}.{_PLUMBING[name]}"), name)
+    from .._aliases import moved_attribute  # 0.1's public names of plumbing, until 0.3
+
+    return moved_attribute(__name__, name)

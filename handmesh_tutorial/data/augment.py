@@ -58,8 +58,8 @@ _TORCH_VIEWS = ("HandCropDataset", "InterSHTorchDataset", "FreiHANDTorchDataset"
 
 __all__ = [
     "IMAGE_MEAN", "IMAGE_STD", "AugmentConfig", "normalize_image", "denormalize_image",
-    "flip_intrinsics", "rotation_z", "crop_transform", "warp_image", "color_jitter",
-    "mirror_matrix", "unmirror", "to_camera", *_TORCH_VIEWS,
+    "flip_intrinsics", "crop_transform", "warp_image", "color_jitter", "unmirror", "to_camera",
+    *_TORCH_VIEWS,
 ]
 
 IMAGE_MEAN = 0.5

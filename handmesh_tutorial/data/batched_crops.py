@@ -23,7 +23,7 @@ import torch.nn.functional as F  # noqa: N812 - the usual torch alias
 
 from .._progress import progress_bar
 
-__all__ = ["CACHE_SIZE", "CACHE_BOX", "BOX_SCALE", "crop_cache", "augment_crops"]
+__all__ = ["BOX_SCALE", "crop_cache", "augment_crops"]
 
 CACHE_SIZE = 192
 """Side of the cached crops, pixels (a 128-px training crop then samples them about 1:1)."""

@@ -19,7 +19,7 @@ from .files import _encode, _write_folder
 from .schema import _canonical
 from .seeds import _SEED_RULE, probe_seed, sample_seed
 
-__all__ = ["PROBE_MIN_HITS", "SampleRejected"]
+__all__ = ["SampleRejected"]
 
 PROBE_MIN_HITS = 2
 """A bin is filled by VR balancing when at least this many probe candidates hit it: one lucky

@@ -31,15 +31,15 @@ from .schema import (
     MAX_IMAGE_SIZE,
     META_FILE,
     READABLE_FORMAT_VERSIONS,
-    TMP_PREFIX,
+    _TMP_PREFIX,
     _canonical,
     _check_camera,
     _check_points,
     _label,
 )
 
-__all__ = ["npz_bytes", "encode_sample", "write_sample", "read_annotation", "read_sample",
-           "read_target", "ANNOTATION_MAX_BYTES"]
+__all__ = ["encode_sample", "write_sample", "read_annotation", "read_sample", "read_target",
+           "ANNOTATION_MAX_BYTES"]
 
 ANNOTATION_MAX_BYTES = 64 * 2**20
 """Most bytes the arrays of one sample's ``annotation.npz`` may declare (a hand-chain scene holds
@@ -159,7 +159,7 @@ def _write_file(path: Path, data: bytes, durable: bool) -> None:
 def _temporary(path: Path) -> Path:
     """Where a writer puts ``path`` before renaming it: ``.tmp-<name>-<pid>-<8 hex>`` beside it
     (the form `_is_own_temporary` recognises)."""
-    return path.with_name(f"{TMP_PREFIX}{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    return path.with_name(f"{_TMP_PREFIX}{path.name}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
 
 
 def _write_atomic(path: Path, data: bytes, durable: bool = True) -> None:
@@ -475,7 +475,7 @@ def read_target(directory: str | os.PathLike) -> tuple:
             side, float(ann["vr"][t]))
 
 
-_TMP_NAME = re.compile(rf"^{re.escape(TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
+_TMP_NAME = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
 """Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``."""
 _SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+|alone_rgb_\d+)\.png$"
                           r"|^annotation\.(npz|json)$")

@@ -17,7 +17,7 @@ from typing import Any
 from .._io import fsync_dir, single_writer
 from .files import _is_own_temporary, _temporary, _write_atomic
 from .reader import _planned, _present, read_meta
-from .schema import LOCK_FILE, META_FILE, SAMPLES_DIR, TMP_PREFIX
+from .schema import _LOCK_FILE, _TMP_PREFIX, META_FILE, SAMPLES_DIR
 
 __all__ = ["merge_shards"]
 
@@ -57,7 +57,7 @@ def _diff_message(path: Path, old: dict, new: dict, keys: Sequence[str]) -> str:
 
 def _lock(root: Path):
     """One writer per root (an flock the OS drops if the process dies, even on SIGKILL)."""
-    return single_writer(root / LOCK_FILE, str(root))
+    return single_writer(root / _LOCK_FILE, str(root))
 
 
 def _clean_stale(folder: Path) -> int:
@@ -68,7 +68,7 @@ def _clean_stale(folder: Path) -> int:
     n = 0
     if folder.is_dir():
         for p in folder.iterdir():
-            if p.name.startswith(TMP_PREFIX) and _is_own_temporary(p):
+            if p.name.startswith(_TMP_PREFIX) and _is_own_temporary(p):
                 shutil.rmtree(p) if p.is_dir() else p.unlink()
                 n += 1
     return n

@@ -21,8 +21,7 @@ from .._io import json_safe
 from ..budget import MAX_IMAGE_SIZE as _MAX_IMAGE_SIZE
 
 __all__ = [
-    "FORMAT_NAME", "FORMAT_VERSION", "READABLE_FORMAT_VERSIONS", "KINDS", "META_FILE",
-    "SAMPLES_DIR", "TMP_PREFIX", "LOCK_FILE", "MIN_INDEX_WIDTH", "MAX_SAMPLES", "MAX_LABEL",
+    "FORMAT_VERSION", "KINDS", "META_FILE", "SAMPLES_DIR", "MAX_SAMPLES", "MAX_LABEL",
     "MAX_IMAGE_SIZE", "MAX_DISTANCE_M", "MIN_DEPTH_M", "FOCAL_RANGE", "PRINCIPAL_POINT_MARGIN",
 ]
 
@@ -41,8 +40,8 @@ KINDS: tuple[str, ...] = ("hand-hand", "hand-object", "hand-chain")
 [`make_sample`][handmesh_tutorial.scenes.make_sample] draws one per sample)."""
 META_FILE = "meta.json"
 SAMPLES_DIR = "samples"
-TMP_PREFIX = ".tmp-"
-LOCK_FILE = ".generate.lock"
+_TMP_PREFIX = ".tmp-"
+_LOCK_FILE = ".generate.lock"
 MIN_INDEX_WIDTH = 6
 MAX_SAMPLES = 100_000_000
 """Largest ``num_samples`` a ``meta.json`` may declare (the paper's set is 40,000; a corrupt
@@ -260,3 +259,8 @@ def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
             raise _fail(loc(key), f"extra array of dtype {s[key].dtype} cannot be stored")
     return s
 
+
+def __getattr__(name: str):  # 0.1's public names of plumbing (``TMP_PREFIX``...), until 0.3
+    from .._aliases import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -15,7 +15,7 @@ import numpy as np
 from ..visibility import VR_BINS, vr_bin
 from .schema import MIN_INDEX_WIDTH
 
-__all__ = ["sample_seed", "probe_seed", "shard_range", "index_width", "vr_bins", "vr_histogram"]
+__all__ = ["sample_seed", "vr_bins", "vr_histogram"]
 
 _SEED_RULE = ("numpy.random.SeedSequence(entropy=seed, spawn_key=(index, attempt))"
               ".generate_state(1, uint64)[0] >> 11")

@@ -67,7 +67,7 @@ from .joints import (
     MANO_TO_FREIHAND,
     MIRROR_AXIS,
 )
-from .mesh import (
+from .mesh import (  # noqa: F401 - joint_regressor_from_mesh, wrist_seam_normals: not public
     forearm_colors,
     forearm_mesh,
     joint_regressor_from_mesh,
@@ -92,9 +92,7 @@ __all__ = [
     "MANO_JOINT_NAMES", "MANO_PARENTS", "FREIHAND_JOINT_NAMES", "FREIHAND_PARENTS",
     "MANO_TO_FREIHAND", "FINGERTIP_NAMES", "FINGER_NAMES", "MIRROR_AXIS", "SHAPE_PARAM_NAMES",
     "SHAPE_SAMPLE_RANGES", "SKIN_TONES", "ASSET_PATH", "random_shape", "forearm_mesh",
-    "forearm_colors", "wrist_seam_normals",
-    "HandTemplate", "HandOutput", "HandModel",
-    "joint_regressor_from_mesh", "save_template", "load_template",
+    "forearm_colors", "HandTemplate", "HandOutput", "HandModel", "save_template", "load_template",
     "axis_angle_to_matrix", "lbs", "mirror_points", "mirror_axis_angle",
     "self_intersections", "mesh_checks", "flexion_axes", "example_pose", "random_pose",
 ]

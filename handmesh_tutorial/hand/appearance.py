@@ -20,8 +20,7 @@ import numpy as np
 
 from ._common import _adjacency
 
-__all__ = ["SKIN_TONES", "skin_tone", "knuckle_weights", "labelled_skin_colors",
-           "plain_skin_colors"]
+__all__ = ["SKIN_TONES", "skin_tone"]
 
 SKIN_TONES: tuple[tuple[float, float, float], ...] = (
     (0.96, 0.80, 0.69),

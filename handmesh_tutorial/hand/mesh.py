@@ -21,8 +21,7 @@ import numpy as np
 from ._common import _unit
 from .joints import MANO_PARENTS, MANO_TO_FREIHAND
 
-__all__ = ["joint_regressor_from_mesh", "self_intersections", "mesh_checks", "forearm_mesh",
-           "wrist_seam_normals", "forearm_colors"]
+__all__ = ["self_intersections", "mesh_checks", "forearm_mesh", "forearm_colors"]
 
 
 def joint_regressor_from_mesh(vertices: np.ndarray, weights: np.ndarray, joints: np.ndarray,

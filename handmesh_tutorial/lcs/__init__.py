@@ -90,8 +90,8 @@ from .angles import (
     within_limits,
 )
 from .articulation import Articulation
-from .frames import local_frames, select_flexion_vertices
-from .hands import (
+from .frames import local_frames, select_flexion_vertices  # noqa: F401 - the latter not public
+from .hands import (  # noqa: F401 - palm_normal: not public, importable as in 0.1
     THUMB_ZERO_ELEVATION_DEG,
     hand_lcs,
     palm_normal,
@@ -99,7 +99,7 @@ from .hands import (
     thumb_elevation,
     thumb_zero_rotation,
 )
-from .limits import (
+from .limits import (  # noqa: F401 - HAND_JOINT_KINDS: not public, importable as in 0.1
     ANATOMICAL_LIMITS_DEG,
     DIP_FOLLOWS_PIP,
     DIP_PIP_RATIO,
@@ -114,7 +114,6 @@ __all__ = [
     "DIP_FOLLOWS_PIP",
     "DIP_PIP_RATIO",
     "FINGER_JOINTS",
-    "HAND_JOINT_KINDS",
     "PAPER_LIMIT_DEG",
     "THUMB_JOINTS",
     "THUMB_ZERO_ELEVATION_DEG",
@@ -127,11 +126,9 @@ __all__ = [
     "local_frames",
     "mirror_angles",
     "natural_hand_angles",
-    "palm_normal",
     "pose_to_lcs_angles",
     "random_pose",
     "rotation_from_lcs_angles",
-    "select_flexion_vertices",
     "thumb_elevation",
     "thumb_zero_rotation",
     "within_limits",

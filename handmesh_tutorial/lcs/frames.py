@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["local_frames", "select_flexion_vertices"]
+__all__ = ["local_frames"]
 
 
 def _unit(v: np.ndarray, what: str) -> np.ndarray:

@@ -20,8 +20,8 @@ from .frames import local_frames, select_flexion_vertices
 from .limits import HAND_JOINT_KINDS, _resolve_limits
 from .synergy import THUMB_JOINTS
 
-__all__ = ["THUMB_ZERO_ELEVATION_DEG", "palm_normal", "thumb_elevation", "thumb_zero_rotation",
-           "hand_lcs", "random_pose"]
+__all__ = ["THUMB_ZERO_ELEVATION_DEG", "thumb_elevation", "thumb_zero_rotation", "hand_lcs",
+           "random_pose"]
 
 
 def _np(x) -> np.ndarray:

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "PAPER_LIMIT_DEG", "ANATOMICAL_LIMITS_DEG", "DIP_PIP_RATIO", "DIP_FOLLOWS_PIP",
-    "HAND_JOINT_KINDS", "hand_joint_limits",
+    "hand_joint_limits",
 ]
 
 PAPER_LIMIT_DEG = 60.0

@@ -44,8 +44,13 @@ from ..visibility import VR_BINS, vr_bin_index
 from .fscore import FSCORE_THRESHOLDS, f_score, nearest_distances
 from .pck import FREIHAND_THRESHOLDS, PAPER_THRESHOLDS, auc, pck_curve, point_errors
 from .procrustes import procrustes_align
-from .scores import ROOT_INDEX, freihand_scores, per_sample_scores, scores_from_errors
-from .tables import (
+from .scores import (  # noqa: F401 - scores_from_errors: not public, importable as in 0.1
+    ROOT_INDEX,
+    freihand_scores,
+    per_sample_scores,
+    scores_from_errors,
+)
+from .tables import (  # noqa: F401 - SURFACE_KEYS: not public, importable as in 0.1
     SURFACE_KEYS,
     VR_BIN_LABELS,
     comparison_table,
@@ -59,7 +64,6 @@ __all__ = [
     "FSCORE_THRESHOLDS",
     "PAPER_THRESHOLDS",
     "ROOT_INDEX",
-    "SURFACE_KEYS",
     "VR_BINS",
     "VR_BIN_LABELS",
     "auc",
@@ -74,7 +78,6 @@ __all__ = [
     "procrustes_align",
     "scores_by_group",
     "scores_by_vr_bin",
-    "scores_from_errors",
     "vr_bin_index",
 ]
 

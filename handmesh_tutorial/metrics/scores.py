@@ -14,7 +14,7 @@ from .fscore import FSCORE_THRESHOLDS, f_score
 from .pck import FREIHAND_THRESHOLDS, PAPER_THRESHOLDS, _pck_sorted, auc, point_errors
 from .procrustes import procrustes_align
 
-__all__ = ["ROOT_INDEX", "freihand_scores", "per_sample_scores", "scores_from_errors"]
+__all__ = ["ROOT_INDEX", "freihand_scores", "per_sample_scores"]
 
 
 ROOT_INDEX = 9

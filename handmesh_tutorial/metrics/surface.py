@@ -30,8 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["interior_edges", "face_normals", "dihedral_angles", "roughness_deg",
-           "flipped_face_fraction"]
+__all__ = ["face_normals", "dihedral_angles", "roughness_deg", "flipped_face_fraction"]
 
 
 def _as_batch(x, name: str) -> np.ndarray:

@@ -16,7 +16,6 @@ from ..visibility import VR_BINS, vr_bin_index
 from .pck import PAPER_THRESHOLDS, auc, pck_curve
 
 __all__ = [
-    "SURFACE_KEYS",
     "VR_BIN_LABELS",
     "comparison_table",
     "format_table",

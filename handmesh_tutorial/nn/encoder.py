@@ -34,8 +34,7 @@ from torch import nn
 
 __all__ = [
     "BasicBlock", "Bottleneck", "ResNet", "resnet10", "resnet18", "resnet34", "resnet50", "HRNet",
-    "HRNET_W18_SMALL_V2", "HRNET_W18", "hrnet_w18_small", "build_encoder", "ENCODERS",
-    "load_torchvision_state_dict",
+    "hrnet_w18_small", "build_encoder", "ENCODERS", "load_torchvision_state_dict",
 ]
 
 

@@ -43,7 +43,7 @@ from .quantize import dequantize_state_dict, quantize_state_dict
 
 __all__ = ["PoseNet", "pose_loss", "build_pose_net", "pretrained_encoder",
            "pretrained_encoder_info", "pretrained_encoder_path", "load_pretrained_encoder",
-           "export_pose_encoder", "read_pose_encoder", "ENCODER_FILE", "FORMAT"]
+           "export_pose_encoder", "read_pose_encoder"]
 
 ENCODER_FILE = "hand_encoder_pretrained.pt"
 """Name of the shipped file in ``handmesh_tutorial/assets/``."""

@@ -36,7 +36,7 @@ from __future__ import annotations
 from .body import Body
 from .chain import CHAIN_SIZE_RANGES, Chain, make_chain
 from .colors import random_colors
-from .fit import distance_to_cylinders, primitive_fit
+from .fit import distance_to_cylinders, primitive_fit  # noqa: F401 - the former not public
 from .static import OBJECT_KINDS, SIZE_RANGES, make_object
 
 __all__ = [
@@ -46,7 +46,6 @@ __all__ = [
     "Body",
     "Chain",
     "make_chain",
-    "distance_to_cylinders",
     "make_object",
     "primitive_fit",
     "random_colors",

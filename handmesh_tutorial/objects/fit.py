@@ -15,7 +15,7 @@ from .._optional import require
 from ..collision import Cylinders, point_cylinder_distance
 from .body import Body
 
-__all__ = ["distance_to_cylinders", "primitive_fit"]
+__all__ = ["primitive_fit"]
 
 
 def distance_to_cylinders(points: Any, cylinders: Cylinders) -> np.ndarray:

@@ -14,8 +14,8 @@ the visibility ratio"); the conventions are on the docs page ``docs/concepts/ren
 Submodules (each name below is also importable from ``handmesh_tutorial.render``):
 
 * `renderer`: the offscreen `Renderer`, `RenderMesh`, `RenderResult`, `CV_TO_GL`.
-* `backend`: pyrender's import (`import_pyrender`), EGL when headless (`ensure_egl`), the NumPy 2
-  fix (`patch_pyrender_numpy2`), whether this process has opened an OpenGL context (`gl_opened`).
+* `backend`: whether this process has opened an OpenGL context (`gl_opened`); and, private,
+  pyrender's one import (EGL when headless, the NumPy 2 fix: docs page "Rendering and cameras").
 * `lights`: `Light`, `default_lights`, `random_lights`, and the generator's `scene_lights`.
 * `color`: `srgb_to_linear` and black-body light colours (`color_temperature`).
 * `backgrounds`: procedural (`random_background`) and photograph (`photo_background`,
@@ -27,7 +27,7 @@ Submodules (each name below is also importable from ``handmesh_tutorial.render``
 
 from __future__ import annotations
 
-from .backend import ensure_egl, gl_opened, import_pyrender, patch_pyrender_numpy2
+from .backend import gl_opened, import_pyrender  # noqa: F401 - import_pyrender: not public
 from .backgrounds import (
     BACKGROUND_PHOTOS,
     PHOTO_PROB,
@@ -36,7 +36,6 @@ from .backgrounds import (
     photo_pixels,
     random_background,
     scene_background,
-    skimage_data_dir,
 )
 from .camera import check_intrinsics as _check_K  # noqa: F401 - used by benchmarks/render.py
 from .camera import crop_camera, framing, intrinsics
@@ -68,12 +67,9 @@ __all__ = [
     "color_temperature",
     "crop_camera",
     "default_lights",
-    "ensure_egl",
     "framing",
     "gl_opened",
-    "import_pyrender",
     "intrinsics",
-    "patch_pyrender_numpy2",
     "photo_background",
     "photo_pixels",
     "project",
@@ -81,6 +77,11 @@ __all__ = [
     "random_lights",
     "scene_background",
     "scene_lights",
-    "skimage_data_dir",
     "srgb_to_linear",
 ]
+
+
+def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.3
+    from .._aliases import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -1,8 +1,8 @@
 """pyrender's setup: EGL (headless OpenGL), the NumPy 2 fix, one import, one shared EGL display.
 
 pyrender is imported lazily, only here, through `import_pyrender`, which first selects the EGL
-platform when no display exists (`ensure_egl`) and applies the NumPy 2 fix
-`patch_pyrender_numpy2` (see ``docs/concepts/rendering.md``). `_keep_egl_display` lets one
+platform when no display exists (`_ensure_egl`) and applies the NumPy 2 fix
+`_patch_pyrender_numpy2` (see ``docs/concepts/rendering.md``). `_keep_egl_display` lets one
 [`Renderer`][handmesh_tutorial.render.renderer.Renderer] close without breaking the others of the
 process, which share one EGL display.
 
@@ -19,10 +19,10 @@ import numpy as np
 
 from .._optional import require
 
-__all__ = ["ensure_egl", "gl_opened", "import_pyrender", "patch_pyrender_numpy2"]
+__all__ = ["gl_opened"]
 
 
-def ensure_egl() -> str | None:
+def _ensure_egl() -> str | None:
     """Select EGL (headless OpenGL) for PyOpenGL when there is no display.
 
     Sets ``PYOPENGL_PLATFORM=egl`` with ``os.environ.setdefault`` when ``DISPLAY`` and
@@ -50,7 +50,7 @@ class _NumpyWithInfty(types.ModuleType):
         return getattr(np, name)
 
 
-def patch_pyrender_numpy2(mesh_module: types.ModuleType) -> bool:
+def _patch_pyrender_numpy2(mesh_module: types.ModuleType) -> bool:
     """Make pyrender 0.1.45's ``Mesh.bounds`` work under NumPy 2, without touching NumPy.
 
     ``pyrender/mesh.py`` computes ``Mesh.bounds`` starting from ``np.infty``, an alias NumPy 2
@@ -96,7 +96,7 @@ def gl_opened() -> bool:
 
 
 def import_pyrender() -> types.ModuleType:
-    """Import pyrender once: EGL when headless (`ensure_egl`), then the NumPy 2 fix.
+    """Import pyrender once: EGL when headless (`_ensure_egl`), then the NumPy 2 fix.
 
     This is the only place in the library that imports pyrender.
 
@@ -105,12 +105,12 @@ def import_pyrender() -> types.ModuleType:
     """
     global _PYRENDER
     if _PYRENDER is None:
-        ensure_egl()
+        _ensure_egl()
         require("OpenGL", "rendering (pyrender)")
         pyrender = require("pyrender", "rendering")
         require("pyrender.mesh", "rendering")
 
-        patch_pyrender_numpy2(pyrender.mesh)
+        _patch_pyrender_numpy2(pyrender.mesh)
         _PYRENDER = pyrender
     return _PYRENDER
 
@@ -134,3 +134,8 @@ def _keep_egl_display(platform: Any) -> None:
 
     platform.delete_context = delete_context
 
+
+def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.3
+    from .._aliases import moved_attribute
+
+    return moved_attribute(__name__, name)

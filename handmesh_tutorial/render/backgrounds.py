@@ -31,7 +31,6 @@ __all__ = [
     "photo_pixels",
     "random_background",
     "scene_background",
-    "skimage_data_dir",
 ]
 
 
@@ -172,7 +171,7 @@ def _photo(name: str) -> BackgroundPhoto:
                      f"{[ph.name for ph in BACKGROUND_PHOTOS]}")
 
 
-def skimage_data_dir() -> Path:
+def _skimage_data_dir() -> Path:
     """The ``data`` folder of the installed scikit-image (found without importing it).
 
     Raises:
@@ -204,7 +203,7 @@ def photo_pixels(name: str) -> np.ndarray:
     from PIL import Image
 
     ph = _photo(name)
-    path = skimage_data_dir() / ph.file
+    path = _skimage_data_dir() / ph.file
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing: the installed scikit-image does not bundle "
                                 f"{ph.file} (scikit-image 0.26's wheel does)")
@@ -325,3 +324,8 @@ def scene_background(rng: np.random.Generator | int | None, H: int, W: int | Non
     img = grey + rng.uniform(0.3, 0.8) * (img - grey)
     return np.clip(img + 0.5, 0, 255).astype(np.uint8)
 
+
+def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.3
+    from .._aliases import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -30,7 +30,9 @@ Every public name below is importable from ``handmesh_tutorial.train`` itself; t
 
 from __future__ import annotations
 
-from ..nn.losses import vertex_loss
+# EpochBatchSampler, template_hash, vertex_loss (nn.losses), existing_run, changed_settings,
+# CHECKPOINT_FORMAT, RUN_CHECKPOINTS: not public, importable from here as in 0.1
+from ..nn.losses import vertex_loss  # noqa: F401
 from .baselines import (
     MEAN_HAND,
     REST_HAND,
@@ -38,26 +40,34 @@ from .baselines import (
     constant_hand_scores,
     mean_hand,
 )
-from .checkpoints import (
+from .checkpoints import (  # noqa: F401
     CHECKPOINT_FORMAT,
     METRIC_COLUMNS,
     RUN_CHECKPOINTS,
     existing_run,
     load_checkpoint,
-    remove_stale_temp_files,
     save_checkpoint,
 )
-from .config import RESUMABLE_KEYS, TrainConfig, changed_settings
-from .data import EpochBatchSampler, make_datasets
+from .config import RESUMABLE_KEYS, TrainConfig, changed_settings  # noqa: F401
+from .data import EpochBatchSampler, make_datasets  # noqa: F401
 from .evaluation import evaluate, predict, validate
 from .loop import TrainResult, train, training_loss
-from .templates import build_model_from_config, resolve_template, save_template, template_hash
+from .templates import (  # noqa: F401
+    build_model_from_config,
+    resolve_template,
+    save_template,
+    template_hash,
+)
 
 __all__ = [
-    "TrainConfig", "TrainResult", "EpochBatchSampler", "train", "evaluate", "validate", "predict",
-    "load_checkpoint", "save_checkpoint", "build_model_from_config", "make_datasets",
-    "resolve_template", "save_template", "template_hash", "vertex_loss", "training_loss",
-    "constant_hand_predictions", "constant_hand_scores", "mean_hand", "REST_HAND", "MEAN_HAND",
-    "existing_run", "remove_stale_temp_files", "changed_settings",
-    "CHECKPOINT_FORMAT", "METRIC_COLUMNS", "RUN_CHECKPOINTS", "RESUMABLE_KEYS",
+    "TrainConfig", "TrainResult", "train", "evaluate", "validate", "predict", "load_checkpoint",
+    "save_checkpoint", "build_model_from_config", "make_datasets", "resolve_template",
+    "save_template", "training_loss", "constant_hand_predictions", "constant_hand_scores",
+    "mean_hand", "REST_HAND", "MEAN_HAND", "METRIC_COLUMNS", "RESUMABLE_KEYS",
 ]
+
+
+def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.3
+    from .._aliases import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -28,14 +28,12 @@ from .._io import atomic_write_bytes as _atomic_write_bytes
 from .._io import leftover_temporaries
 from .._untrusted import load_torch_file
 from .._version import PRETRAINED_FILE, __version__, shipped_file
-from ..nn.quantize import dequantize_state_dict, quantize_state_dict
+from ..nn.quantize import dequantize_state_dict, quantize_state_dict  # noqa: F401 - as in 0.1
 from ._distributed import _resolve_device
 from .config import TrainConfig
 from .templates import build_model_from_config, resolve_template, template_hash
 
-__all__ = ["save_checkpoint", "load_checkpoint", "existing_run", "remove_stale_temp_files",
-           "CHECKPOINT_FORMAT", "METRIC_COLUMNS", "RUN_CHECKPOINTS", "quantize_state_dict",
-           "dequantize_state_dict"]
+__all__ = ["save_checkpoint", "load_checkpoint", "METRIC_COLUMNS"]
 
 CHECKPOINT_FORMAT = "handmesh_tutorial.checkpoint/1"
 """``format`` entry of every checkpoint written by
@@ -213,7 +211,7 @@ def existing_run(out_dir) -> list[str]:
     return [n for n in RUN_CHECKPOINTS if (out / n).exists()]
 
 
-def remove_stale_temp_files(out_dir) -> list[Path]:
+def _remove_stale_temp_files(out_dir) -> list[Path]:
     """Delete the half-written temp files a killed run left in ``out_dir``.
 
     Only names that this module's atomic writes make (``.<file>.<random>.tmp`` for its own
@@ -250,3 +248,9 @@ def _write_logs(out: Path, history: list[dict], step_losses: list[float], durabl
     _write_csv(out / "metrics.csv", history, METRIC_COLUMNS, durable)
     _write_csv(out / "steps.csv", [{"step": i + 1, "loss": x} for i, x in enumerate(step_losses)],
                ("step", "loss"), durable)
+
+
+def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.3
+    from .._aliases import moved_attribute
+
+    return moved_attribute(__name__, name)

@@ -24,7 +24,7 @@ from ..data.reader import _present
 from ..data.schema import SAMPLES_DIR
 from .config import TrainConfig
 
-__all__ = ["EpochBatchSampler", "make_datasets"]
+__all__ = ["make_datasets"]
 
 
 class EpochBatchSampler(torch.utils.data.Sampler):

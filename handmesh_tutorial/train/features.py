@@ -21,8 +21,7 @@ from torch import nn
 
 from .._progress import progress_bar
 
-__all__ = ["EncodedDataset", "is_deterministic", "encoder_digest", "clear_feature_cache",
-           "model_outputs"]
+__all__ = ["EncodedDataset", "clear_feature_cache"]
 
 _MEMO: OrderedDict = OrderedDict()  # (encoder digest, crops) -> {source, items by raw index}
 _MEMO_SIZE = 4

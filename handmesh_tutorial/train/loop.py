@@ -64,10 +64,10 @@ from ._distributed import (
 from .checkpoints import (
     METRIC_COLUMNS,
     _read_checkpoint,
+    _remove_stale_temp_files,
     _set_rng_state,
     _write_logs,
     existing_run,
-    remove_stale_temp_files,
     save_checkpoint,
 )
 from .config import RESUMABLE_KEYS, TrainConfig, changed_settings
@@ -277,7 +277,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
             "--overwrite) or choose another out_dir")
     if is_main:
         out.mkdir(parents=True, exist_ok=True)
-        remove_stale_temp_files(out)
+        _remove_stale_temp_files(out)
     tmpl = resolve_template(config.template if template is None else template)
     t_id = template_hash(tmpl)
 

@@ -25,7 +25,7 @@ from .._untrusted import open_npz
 from ..nn.model import as_template, build_model
 from .config import TrainConfig
 
-__all__ = ["resolve_template", "save_template", "template_hash", "build_model_from_config"]
+__all__ = ["resolve_template", "save_template", "build_model_from_config"]
 
 
 def resolve_template(spec=None):

@@ -42,18 +42,21 @@ re-exported here, so ``hmt.nn.hierarchy.mesh_hierarchy`` and
 
 from __future__ import annotations
 
-from .hierarchy import ALGORITHM_VERSION, MeshHierarchy, default_cache_dir, mesh_hierarchy
-from .matrices import barycentric_upsampling, selection_matrix, to_torch_sparse
+# ALGORITHM_VERSION, default_cache_dir, to_torch_sparse: not public, importable as in 0.1
+from .hierarchy import (  # noqa: F401
+    ALGORITHM_VERSION,
+    MeshHierarchy,
+    default_cache_dir,
+    mesh_hierarchy,
+)
+from .matrices import barycentric_upsampling, selection_matrix, to_torch_sparse  # noqa: F401
 from .qslim import decimate, vertex_quadrics
 
 __all__ = [
-    "ALGORITHM_VERSION",
     "MeshHierarchy",
     "barycentric_upsampling",
     "decimate",
-    "default_cache_dir",
     "mesh_hierarchy",
     "selection_matrix",
-    "to_torch_sparse",
     "vertex_quadrics",
 ]

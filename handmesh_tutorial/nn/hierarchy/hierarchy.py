@@ -25,7 +25,7 @@ from ._common import _check_mesh
 from .matrices import barycentric_upsampling, selection_matrix
 from .qslim import decimate
 
-__all__ = ["ALGORITHM_VERSION", "MeshHierarchy", "default_cache_dir", "mesh_hierarchy"]
+__all__ = ["MeshHierarchy", "mesh_hierarchy"]
 
 ALGORITHM_VERSION = "2"
 """Bumped whenever the decimation or the matrices change, so stale cache files are not reused."""

@@ -13,7 +13,7 @@ import trimesh
 
 from ._common import _check_mesh
 
-__all__ = ["selection_matrix", "barycentric_upsampling", "to_torch_sparse"]
+__all__ = ["selection_matrix", "barycentric_upsampling"]
 
 
 def selection_matrix(kept, num_fine: int) -> sp.csr_matrix:
