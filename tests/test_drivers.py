@@ -148,3 +148,77 @@ def test_parts_and_a_time_budget_are_checked_before_anything_is_written(tmp_path
         with pytest.raises(ValueError, match=match):
             generate_dataset(tmp_path / "r", toy_sample, 4, 0, "hand-hand", progress=False, **kw)
     assert not (tmp_path / "r").exists() and not (tmp_path / ".r-shards").exists()
+
+
+def test_every_preset_is_a_valid_config_of_known_fields_and_copies_its_values():
+    from handmesh_tutorial.train import TrainConfig
+    from handmesh_tutorial.train.config import PRESETS
+
+    assert set(PRESETS) == {"paper", "cpu", "demo", "pretraining"}
+    assert TrainConfig.preset("paper").to_dict() == TrainConfig().to_dict()  # the paper: defaults
+    fields = set(TrainConfig().to_dict())
+    for name, values in PRESETS.items():
+        assert set(values) <= fields, name
+        cfg = TrainConfig.preset(name, data="d", epochs=3)
+        assert cfg.data == "d" and cfg.epochs == 3
+        assert {k: getattr(cfg, k) for k in values if k != "epochs"} == \
+            {k: v for k, v in values.items() if k != "epochs"}
+    cfg = TrainConfig.preset("cpu")
+    cfg.model_kwargs["keypoints"] = False  # a config's dicts are its own
+    assert PRESETS["cpu"]["model_kwargs"]["keypoints"] is True
+    assert PRESETS["demo"]["model_kwargs"]["keypoints"] is True
+    with pytest.raises(ValueError, match=r"unknown TrainConfig preset 'gpu'; the presets are "
+                                         r"\['cpu', 'demo', 'paper', 'pretraining'\]"):
+        TrainConfig.preset("gpu")
+    with pytest.raises(ValueError, match=r"unknown TrainConfig fields \['epoch'\] given to "
+                                         r"preset 'demo'"):
+        TrainConfig.preset("demo", epoch=3)
+
+
+def test_the_table_of_the_presets_says_what_each_sets():
+    """The docstring table of `TrainConfig.preset` (rendered on the API page) is the presets."""
+    import ast
+
+    from handmesh_tutorial.train import TrainConfig
+    from handmesh_tutorial.train.config import PRESETS
+
+    rows = [ln.strip().strip("|").split("|") for ln in TrainConfig.preset.__doc__.splitlines()
+            if ln.strip().startswith("| `")]
+    names = ["paper", "cpu", "demo", "pretraining"]
+    heads = PRESETS["cpu"]["model_kwargs"]
+    table = {}
+    for field, *cells in rows:
+        field = field.strip().strip("`")
+        table[field] = [heads if c.strip() == "cpu_heads" else ast.literal_eval(c.strip())
+                        for c in cells]
+    assert set(table) == {k for v in PRESETS.values() for k in v}  # every field a preset sets
+    for k, name in enumerate(names):
+        cfg = TrainConfig.preset(name)
+        assert {f: getattr(cfg, f) for f in table} == {f: v[k] for f, v in table.items()}, name
+
+
+def test_the_demo_and_the_pretraining_recipe_default_to_their_presets():
+    """DemoConfig and PretrainedRecipe keep their own defaults (read before the scene generator
+    forks, without torch); these must be the presets' numbers."""
+    from handmesh_tutorial.train import TrainConfig
+
+    for cfg in (demo.DemoConfig(), demo.DemoConfig.from_budget(hmt.budget("default"))):
+        got = demo.train_config(cfg, "d", "o")
+        assert got.to_dict() == TrainConfig.preset("demo", data="d", out_dir="o").to_dict()
+    got = P.PretrainedRecipe(loader_workers=3).train_config("tr", "va", "o")
+    want = TrainConfig.preset("pretraining", data="tr", val_data="va", out_dir="o", num_workers=3)
+    assert got.to_dict() == want.to_dict()
+
+
+def test_the_recipe_names_are_checked_without_importing_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys; from handmesh_tutorial.apps.pretrain_network import PretrainedRecipe; "
+            "from handmesh_tutorial.apps.demo.config import DemoConfig, RECIPES; "
+            "PretrainedRecipe(recipe='paper'); DemoConfig.from_budget(recipe='paper'); "
+            "assert 'paper' in RECIPES and 'gpu' not in RECIPES and len(RECIPES) == 2; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'torch')[:3])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    assert out.stdout.strip() == "[]"
