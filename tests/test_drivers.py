@@ -113,13 +113,13 @@ def test_one_driver_writes_the_demos_scenes_byte_for_byte_and_resumes_its_roots(
     from handmesh_tutorial.scenes import generate_interactions
 
     old = tmp_path / "old"
-    _before_demo_scenes(old, 3, 5, render_size=32, workers=1, progress=False)
+    _before_demo_scenes(old, 2, 5, render_size=32, workers=1, progress=False)
     before = _hashes(old)
     # the driver in two shards within an unbounded time budget, merged into one root
     new = tmp_path / "new"
-    s = generate_interactions(new, "mixed", 3, 5, image_size=32, progress=False,
+    s = generate_interactions(new, "mixed", 2, 5, image_size=32, progress=False,
                               max_seconds=math.inf, parts=2)
-    assert s.written == 3 and s.shards == 2 and s.indices == [[0, 3]]
+    assert s.written == 2 and s.shards == 2 and s.indices == [[0, 2]]
     got = _hashes(new)
     samples = {k: v for k, v in before.items() if k.startswith("samples/")}
     assert {k: v for k, v in got.items() if k.startswith("samples/")} == samples
@@ -129,10 +129,10 @@ def test_one_driver_writes_the_demos_scenes_byte_for_byte_and_resumes_its_roots(
     assert meta_old["params"].pop("generator") == "handmesh_tutorial.scenes.make_sample"
     assert meta_new == meta_old  # shards merged = one unsharded run
     # the old generator's root resumes through the driver and the demo's wrapper
-    s = generate_interactions(old, "mixed", 3, 5, image_size=32, progress=False)
-    assert (s.written, s.skipped) == (0, 3)
-    s = demo.generate_scenes(old, 3, 5, render_size=32, workers=1, progress=False)
-    assert (s.written, s.skipped) == (0, 3)
+    s = generate_interactions(old, "mixed", 2, 5, image_size=32, progress=False)
+    assert (s.written, s.skipped) == (0, 2)
+    s = demo.generate_scenes(old, 2, 5, render_size=32, workers=1, progress=False)
+    assert (s.written, s.skipped) == (0, 2)
     assert _hashes(old) == before
 
 
