@@ -149,15 +149,33 @@ def test_recipe_checks_its_values_and_makes_the_training_config(tmp_path):
             P.PretrainedRecipe(**bad)
 
 
+def _toy_driver(monkeypatch) -> list:
+    """The one scene driver with toy scenes (``testing.toy_sample``) in place of rendered ones;
+    returns the list of the shards it makes."""
+    import handmesh_tutorial.data.generate as G
+    import handmesh_tutorial.scenes as S
+
+    made, real = [], G.generate_dataset
+
+    def counted(root, fn, *args, shard=None, **kw):  # every call, the driver's shards included
+        if shard is not None:
+            made.append(shard)
+        return real(root, fn, *args, shard=shard, **kw)
+
+    def toy_scenes(root, kind, num, seed, *, image_size, workers, progress, parts=1,
+                   max_seconds=None):
+        assert kind == "mixed"  # the pretraining's scenes: all three kinds
+        return counted(root, lambda s: toy_sample(s, image_size=image_size), num, seed,
+                       "hand-hand", parts=parts, max_seconds=max_seconds, progress=False,
+                       durable=False)
+
+    monkeypatch.setattr(G, "generate_dataset", counted)
+    monkeypatch.setattr(S, "generate_interactions", toy_scenes)
+    return made
+
+
 def test_time_bounded_generation_keeps_whole_shards_in_a_valid_root(tmp_path, monkeypatch):
-    import handmesh_tutorial.apps.demo.run as demo_run
-    from handmesh_tutorial.data import generate_dataset
-
-    def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
-        return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
-                                "hand-hand", shard=shard, progress=False, durable=False)
-
-    monkeypatch.setattr(demo_run, "generate_scenes", toy_scenes)
+    _toy_driver(monkeypatch)
     said = []
     got = P.generate_training_scenes(tmp_path / "train", 12, 3, render_size=32, workers=1,
                                      max_seconds=0.0, parts=4, log=said.append)
@@ -165,7 +183,7 @@ def test_time_bounded_generation_keeps_whole_shards_in_a_valid_root(tmp_path, mo
     assert got["shards"] == 1 and got["scenes"] == 3
     ds = InterSHDataset(tmp_path / "train")
     assert len(ds) == 3 and not ds.missing and ds.meta["ranges"] == [[0, 3]]
-    assert "stopping after 1 of 4 shards" in said[0]
+    assert "stopped after 1 of 4 shards" in said[0]
     assert not (tmp_path / ".train-shards").exists()
     full = P.generate_training_scenes(tmp_path / "all", 12, 3, render_size=32, workers=1,
                                       max_seconds=math.inf, parts=4, log=said.append)
@@ -179,17 +197,7 @@ def test_a_rerun_keeps_the_shards_of_the_first_and_refuses_other_scenes(tmp_path
     """A time budget decides how many shards a run makes: a rerun with another budget (a run
     resumed on a GPU machine after a failure did this) must train on the first run's shards,
     not generate a different number that cannot merge with them."""
-    import handmesh_tutorial.apps.demo.run as demo_run
-    from handmesh_tutorial.data import generate_dataset
-
-    made = []
-
-    def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
-        made.append(shard)
-        return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
-                                "hand-hand", shard=shard, progress=False, durable=False)
-
-    monkeypatch.setattr(demo_run, "generate_scenes", toy_scenes)
+    made = _toy_driver(monkeypatch)
     said = []
     first = P.generate_training_scenes(tmp_path / "train", 12, 3, render_size=32, workers=1,
                                        max_seconds=math.inf, parts=4, log=said.append)
@@ -199,28 +207,22 @@ def test_a_rerun_keeps_the_shards_of_the_first_and_refuses_other_scenes(tmp_path
     assert made == [(0, 4), (1, 4), (2, 4), (3, 4)]  # nothing generated the second time
     assert again["scenes"] == 12 and again["shards"] == 4
     assert "reusing the 12 scenes (4 of 4 shards)" in said[-1]
-    with pytest.raises(ValueError, match=r"meta\.json.*not this build's.*'seed': \(3, 4\)"):
+    with pytest.raises(ValueError, match=r"meta\.json was written with different parameters; "
+                       r"differing keys: seed\n  seed: 3 on disk, 4 now"):
         P.generate_training_scenes(tmp_path / "train", 12, 4, render_size=32, workers=1,
                                    max_seconds=math.inf, parts=4, log=None)
     with pytest.raises(ValueError, match="num_samples"):
         P.generate_training_scenes(tmp_path / "train", 16, 3, render_size=32, workers=1,
                                    max_seconds=math.inf, parts=4, log=None)
     (tmp_path / "train" / "samples" / "000005").rename(tmp_path / "gone")
-    with pytest.raises(ValueError, match="1 of its scenes are missing"):
+    with pytest.raises(ValueError, match=r"1 of its 12 samples are missing \(first \[5\]\)"):
         P.generate_training_scenes(tmp_path / "train", 12, 3, render_size=32, workers=1,
                                    max_seconds=math.inf, parts=4, log=None)
 
 
 def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     """generate -> train -> export -> install, then a second run that starts from the first."""
-    import handmesh_tutorial.apps.demo.run as demo_run
-    from handmesh_tutorial.data import generate_dataset
-
-    def toy_scenes(root, num, seed, *, render_size, workers, progress, shard=None):
-        return generate_dataset(root, lambda s: toy_sample(s, image_size=render_size), num, seed,
-                                "hand-hand", shard=shard, progress=False, durable=False)
-
-    monkeypatch.setattr(demo_run, "generate_scenes", toy_scenes)
+    _toy_driver(monkeypatch)
     monkeypatch.setattr(_version, "ASSET_DIR", tmp_path / "assets")
     small = dict(train_scenes=6, val_scenes=3, render_size=64, image_size=32, epochs=2,
                  batch_size=3, workers=1, loader_workers=1, device="cpu", precision="float32")

@@ -81,7 +81,7 @@ class PretrainedRecipe:
     init: str | None = None
 
     def __post_init__(self):
-        from .demo.config import RECIPES
+        from .demo.config import RECIPES  # the names only: no torch before the generator
 
         if self.recipe not in RECIPES:
             raise ValueError(f"recipe must be one of {sorted(RECIPES)}, got {self.recipe!r}")
@@ -96,20 +96,23 @@ class PretrainedRecipe:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
 
     def train_config(self, data, val_data, out_dir, progress: bool = True):
-        """The [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] of the training run."""
+        """The [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] of the training run: the
+        ``pretraining`` preset
+        ([`TrainConfig.preset`][handmesh_tutorial.train.config.TrainConfig.preset]) at this
+        recipe's values, validated on ``val_data``, the learning rate decayed after every third
+        of the epochs."""
         from ..train import TrainConfig
-        from .demo.config import RECIPES
+        from .demo.config import _recipe_fields
 
         cpus = os.cpu_count() or 1
-        return TrainConfig(
-            data=str(data), val_data=str(val_data), val_fraction=0.0,
-            image_size=self.image_size, epochs=self.epochs, batch_size=self.batch_size,
-            lr=self.lr, lr_step=max(1, math.ceil(self.epochs / 3)), lr_gamma=self.lr_gamma,
-            augment=self.augment, encoder=self.encoder, decoder="multi", attention=True,
-            seed=self.seed, device=self.device, threads=None,
-            num_workers=self.loader_workers or max(0, cpus - 1), cache_data=False,
-            val_batch_size=256, precision=self.precision, out_dir=str(out_dir),
-            progress=progress, init=self.init, **RECIPES[self.recipe])
+        return TrainConfig.preset(
+            "pretraining", data=str(data), val_data=str(val_data), image_size=self.image_size,
+            epochs=self.epochs, batch_size=self.batch_size, lr=self.lr,
+            lr_step=max(1, math.ceil(self.epochs / 3)), lr_gamma=self.lr_gamma,
+            augment=self.augment, encoder=self.encoder, seed=self.seed, device=self.device,
+            num_workers=self.loader_workers or max(0, cpus - 1), precision=self.precision,
+            out_dir=str(out_dir), progress=progress, init=self.init,
+            **_recipe_fields(self.recipe))
 
 
 def _resumed_plan(saved: dict, history: list, epochs: int,

@@ -1,8 +1,11 @@
-"""The generation driver: ``generate_dataset`` (resumable, sharded, parallel) and its summary.
+"""The generation driver: ``generate_dataset`` (resumable, sharded, parallel, within a time
+budget) and its summary.
 
 The driver knows nothing about hands or rendering: it calls ``make_sample(sample_seed) -> dict``.
 [`synthetic_sample`][handmesh_tutorial.testing.synthetic_sample] is a tiny stand-in (two spheres
-ray-cast with numpy) for tests and demos; ``interact.generate`` passes the INTER-SH generator.
+ray-cast with numpy) for tests and demos;
+[`scenes.generate_interactions`][handmesh_tutorial.scenes.generate.generate_interactions] passes
+the INTER-SH generator.
 Taught in notebook 05 ("Rendering and the visibility ratio").
 """
 
@@ -11,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -20,8 +24,8 @@ from typing import Any
 
 from .candidates import _probe, _probe_summary, _Task
 from .files import read_annotation
-from .reader import _present, read_meta
-from .root import _coalesce, _lock, _open_root
+from .reader import _planned, _present, read_meta
+from .root import _coalesce, _diff, _diff_message, _lock, _open_root, merge_shards
 from .schema import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -63,6 +67,8 @@ class GenerationSummary:
             ``max_attempts`` reached it: the nearest one was kept).
         probe_attempts: ``make_sample`` calls of the probe in this call (0 when reused from
             ``meta.json``).
+        shards: shards the root was made of when generated in ``parts`` (a time budget may stop
+            before the last); 1 otherwise.
     """
 
     root: str
@@ -78,6 +84,7 @@ class GenerationSummary:
     vr_probe: dict | None = None
     off_bin: int = 0
     probe_attempts: int = 0
+    shards: int = 1
 
     @property
     def vr_unreachable(self) -> list[tuple[float, float]]:
@@ -125,6 +132,8 @@ def generate_dataset(
     worker_init: Callable[[], Any] | None = None,
     durable: bool = True,
     mp_context: str = "auto",
+    parts: int = 1,
+    max_seconds: float | None = None,
 ) -> GenerationSummary:
     """Generate (or resume generating) an INTER-SH root.
 
@@ -184,13 +193,23 @@ def generate_dataset(
             docs page "Performance").
             The bytes written are the same either way. A ``make_sample`` defined in a notebook
             needs ``"fork"``.
+        parts: make the set as this many shards (``shard=(k, parts)``, in
+            ``.<root name>-shards/`` beside ``root``), then hard-link them into ``root``
+            ([`merge_shards`][handmesh_tutorial.data.root.merge_shards]): the same files as one
+            run. With a time budget, a set cut short is still a valid root of the scenes it has.
+            A rerun after the merge keeps the root as it is (a budget decides how many shards a
+            run makes, so a rerun under another budget could not merge with the first).
+        max_seconds: time budget of a run in ``parts``: no new shard starts when the mean
+            time of the shards so far would end it past the budget (the first always runs).
+            ``None``: all parts.
 
     Returns:
         A [`GenerationSummary`][handmesh_tutorial.data.generate.GenerationSummary].
 
     Raises:
         ValueError: bad arguments, or ``root`` holds a dataset made with different parameters
-            (the message lists the differing ``meta.json`` keys).
+            (the message lists the differing ``meta.json`` keys), or a root made in parts has
+            lost samples.
         RuntimeError: no candidate accepted within ``max_attempts``, or another process is
             writing into ``root``.
     """
@@ -207,6 +226,13 @@ def generate_dataset(
     if workers < 1 or max_attempts < 1 or vr_probe < 1:
         raise ValueError(f"workers, max_attempts and vr_probe must be >= 1, got {workers}, "
                          f"{max_attempts}, {vr_probe}")
+    if isinstance(parts, bool) or not isinstance(parts, int) or not 1 <= parts <= num:
+        raise ValueError(f"parts must be an integer in [1, num={num}], got {parts!r}")
+    if max_seconds is not None and (parts == 1 or not max_seconds >= 0):
+        raise ValueError(f"max_seconds must be None or a number >= 0 with parts > 1 (a run is "
+                         f"cut between shards), got {max_seconds!r} with parts={parts}")
+    if parts > 1 and shard is not None:
+        raise ValueError(f"shard and parts exclude each other, got shard={shard}, parts={parts}")
     k, n = shard if shard is not None else (0, 1)
     indices = shard_range(num, k, n)
     if isinstance(image_size, int):
@@ -235,6 +261,16 @@ def generate_dataset(
         "shards": [[k, n]], "ranges": _coalesce([[indices.start, indices.stop]]),
     }
     root = Path(root)
+    if parts > 1:
+        def one(k: int) -> GenerationSummary:
+            return generate_dataset(
+                _shards_folder(root) / f"{k:04d}", make_sample, num, seed, kinds,
+                shard=(k, parts), workers=workers, progress=progress, params=params,
+                image_size=image_size, accept=accept, balance_vr=balance_vr,
+                max_attempts=max_attempts, vr_probe=vr_probe, worker_init=worker_init,
+                durable=durable, mp_context=mp_context)
+
+        return _generate_in_parts(root, meta, one, parts, max_seconds, bins, durable, t0)
     root.mkdir(parents=True, exist_ok=True)
     task = _Task(make_sample, accept, int(seed), kinds, bins if balance_vr else None,
                  tuple(image_size) if image_size else None, int(max_attempts),
@@ -297,3 +333,58 @@ def generate_dataset(
                              sum(r["attempts"] for r in results), stale,
                              time.perf_counter() - t0, list(bins), hist, outside, probe,
                              sum(r["off_bin"] for r in results), probe_calls)
+
+
+def _shards_folder(root: Path) -> Path:
+    """Where a run in ``parts`` keeps its shards until they are merged into ``root``."""
+    return root.parent / f".{root.name}-shards"
+
+
+def _generate_in_parts(root: Path, meta: dict, one: Callable[[int], GenerationSummary],
+                       parts: int, max_seconds: float | None, bins, durable: bool,
+                       t0: float) -> GenerationSummary:
+    """``generate_dataset(parts=...)``: the shards that fit the budget, merged into ``root``."""
+    if (root / META_FILE).exists() and not _shards_folder(root).exists():
+        return _kept_parts(root, meta, parts, bins, t0)
+    made: list[GenerationSummary] = []
+    for k in range(parts):
+        spent = time.perf_counter() - t0
+        if k and max_seconds is not None and spent + spent / k > max_seconds:
+            break
+        made.append(one(k))
+    merge_shards([s.root for s in made], root, link=True, progress=False, durable=durable)
+    shutil.rmtree(_shards_folder(root))
+    hist = [sum(h) for h in zip(*(s.vr_histogram for s in made), strict=True)]
+    return GenerationSummary(
+        str(root), read_meta(root)["ranges"], sum(s.written for s in made),
+        sum(s.skipped for s in made), sum(s.attempts for s in made),
+        sum(s.stale_removed for s in made), time.perf_counter() - t0, list(bins), hist,
+        sum(s.vr_outside for s in made), made[0].vr_probe, sum(s.off_bin for s in made),
+        sum(s.probe_attempts for s in made), len(made))
+
+
+def _kept_parts(root: Path, meta: dict, parts: int, bins, t0: float) -> GenerationSummary:
+    """The root that an earlier run in ``parts`` left: checked against this call, kept as is."""
+    old = read_meta(root)
+    ignore = ("generator_version", "shards", "ranges", "vr_probe")
+    keys = _diff({k: v for k, v in old.items() if k not in ignore},
+                 {k: v for k, v in meta.items() if k not in ignore})
+    if keys:
+        raise ValueError(_diff_message(root / META_FILE, old, meta, keys) + "\nuse another "
+                         "root, or delete the folder to generate anew")
+    samples, width = root / SAMPLES_DIR, old["index_width"]
+    present = set(_present(samples))
+    planned = _planned(old)
+    absent = [i for i in planned if i not in present]
+    if absent:
+        raise ValueError(f"{root}: {len(absent)} of its {len(planned)} samples are missing "
+                         f"(first {absent[:5]}); delete the folder to generate anew")
+    vrs = []
+    for i in planned:
+        ann = read_annotation(samples / f"{i:0{width}d}")
+        vrs.append(float(ann["vr"][ann["target"]]))
+    hist = vr_histogram(vrs, bins)
+    return GenerationSummary(str(root), old["ranges"], 0, len(planned), 0, 0,
+                             time.perf_counter() - t0, list(bins), hist, len(vrs) - sum(hist),
+                             old.get("vr_probe"), 0, 0,
+                             round(len(planned) * parts / old["num_samples"]))

@@ -1,5 +1,6 @@
-"""The dataset driver of the generator: `generate_interactions` (``handmesh generate``), a thin
-wrapper of [`dataset.generate_dataset`][handmesh_tutorial.data.generate_dataset].
+"""The one driver of the scene generator: `generate_interactions` (``handmesh generate``, the
+demo's and the pretraining's scenes), a thin wrapper of
+[`data.generate_dataset`][handmesh_tutorial.data.generate_dataset].
 
 Taught in notebook 05 ("Rendering and visibility").
 """
@@ -12,13 +13,26 @@ from dataclasses import asdict
 import numpy as np
 
 from ..budget import MAX_IMAGE_SIZE, MIN_IMAGE_SIZE  # one source of the image-size range
-from ..data import KINDS, generate_dataset
+from ..data import KINDS, generate_dataset, read_meta
 from ..lcs import THUMB_ZERO_ELEVATION_DEG
 from .config import InteractionConfig
 from .framing import _check_share
 from .sample import init_worker, make_sample
 
 __all__ = ["MAX_IMAGE_SIZE", "MIN_IMAGE_SIZE", "generate_interactions"]
+
+_LABELS = ("handmesh_tutorial.scenes", "handmesh_tutorial.scenes.make_sample")
+"""``meta.json`` ``params.generator`` of the roots this driver writes (the first), and of the
+roots of the demo's former generator (the same scenes): a root labelled either way resumes."""
+
+
+def _label(root) -> str:
+    """The ``params.generator`` label that ``root`` already has, else this driver's."""
+    try:
+        on_disk = read_meta(root).get("params", {}).get("generator")
+    except (OSError, ValueError, AttributeError):  # no root yet (or a broken one: named later)
+        return _LABELS[0]
+    return on_disk if on_disk in _LABELS else _LABELS[0]
 
 
 def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: int = 224,
@@ -27,7 +41,8 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
                           durable: bool = True, progress: bool = True, max_attempts: int = 100,
                           vr_probe: int = 64, mp_context: str = "auto",
                           frame_share: tuple[float, float] | None = None,
-                          thumb_zero_elevation: float | None = THUMB_ZERO_ELEVATION_DEG):
+                          thumb_zero_elevation: float | None = THUMB_ZERO_ELEVATION_DEG,
+                          parts: int = 1, max_seconds: float | None = None):
     """Generate (or resume) an INTER-SH dataset of rendered interactions on disk.
 
     A thin wrapper of
@@ -66,6 +81,10 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
         mp_context: start method of the worker processes: ``"auto"`` (fork where it is safe,
             else spawn; same bytes either way), ``"spawn"`` or ``"fork"`` (see
             [`generate_dataset`][handmesh_tutorial.data.generate_dataset]).
+        parts: make the set as this many shards, merged into ``root`` when done (the same files
+            as one run); a rerun keeps the merged root as it is.
+        max_seconds: time budget of a run in ``parts``: no new shard starts when the next would
+            end past it (``None``: all). A set cut short is a valid root of what it has.
 
     Returns:
         The
@@ -86,7 +105,7 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
     fn = functools.partial(make_sample, kind=kind, image_size=int(image_size), config=config,
                            **extra)
     kinds = list(KINDS) if kind == "mixed" else kind
-    params = {"generator": "handmesh_tutorial.scenes", "kind": kind, "limits": limits,
+    params = {"generator": _label(root), "kind": kind, "limits": limits,
               "config": {k: (list(v) if isinstance(v, tuple) else v)
                          for k, v in asdict(config).items()}}
     if extra:  # only when given: roots made before this option keep their meta.json
@@ -96,4 +115,5 @@ def generate_interactions(root, kind: str, num: int, seed: int, *, image_size: i
                             balance_vr=balance_vr, max_attempts=max_attempts,
                             vr_probe=vr_probe,
                             worker_init=functools.partial(init_worker, int(image_size)),
-                            durable=durable, mp_context=mp_context)
+                            durable=durable, mp_context=mp_context, parts=parts,
+                            max_seconds=max_seconds)

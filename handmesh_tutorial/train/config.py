@@ -4,7 +4,10 @@ Paper, Sec. "Training": the loss is the L1 distance between predicted and ground
 vertices, the vertices translated so that the middle MCP joint (keypoint 9) is at the origin; Adam
 with learning rate ``1e-4`` for 200 epochs, halved every 50 epochs; batch size 32; images normalised
 with mean 0.5 and standard deviation 1.0; random crops and transformations. Those are the defaults
-of [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig]. Also here: which fields define the
+of [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig]; the other recipes of the project
+(the CPU recipe, the demo's, the pretrained network's) are named presets of it
+([`TrainConfig.preset`][handmesh_tutorial.train.config.TrainConfig.preset]). Also here: which
+fields define the
 network (compared when resuming or loading a checkpoint) and which a resumed run may change
 ([`RESUMABLE_KEYS`][handmesh_tutorial.train.config.RESUMABLE_KEYS],
 [`changed_settings`][handmesh_tutorial.train.config.changed_settings]).
@@ -14,6 +17,7 @@ Taught in notebook 08 ("Training").
 
 from __future__ import annotations
 
+import copy
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
@@ -21,7 +25,25 @@ from dataclasses import asdict, dataclass, field, fields
 from ..budget import budget as _budget
 from ..budget import check_image_size
 
-__all__ = ["TrainConfig", "changed_settings", "RESUMABLE_KEYS"]
+__all__ = ["TrainConfig", "changed_settings", "RESUMABLE_KEYS", "PRESETS"]
+
+_CPU = {"model_kwargs": {"keypoints": True, "global_rotation": True, "output": "skinned"},
+        "keypoint_weight": 0.5, "aligned_weight": 1.0}
+_SMALL = {"encoder": "resnet10", "image_size": 128, "lr": 1e-3}
+
+PRESETS: dict[str, dict] = {
+    "paper": {},
+    "cpu": _CPU,
+    "demo": {**_CPU, **_SMALL, "epochs": 10, "batch_size": 16, "lr_step": 8, "augment": False,
+             "val_fraction": 0.1, "device": "cpu", "threads": 2, "cache_data": True,
+             "init_encoder": "pretrained", "freeze_encoder": 10, "encoder_lr_scale": 0.1},
+    "pretraining": {**_CPU, **_SMALL, "epochs": 16, "batch_size": 128, "lr_step": 6,
+                    "lr_gamma": 0.3, "augment": True, "precision": "bfloat16",
+                    "val_fraction": 0.0, "val_batch_size": 256},
+}
+"""The named recipes of [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig], each a plain
+dict of its fields on top of the defaults; the table and the way to build one:
+[`TrainConfig.preset`][handmesh_tutorial.train.config.TrainConfig.preset]."""
 
 # config keys that define the network: they must match when resuming or loading
 _ARCH_KEYS = ("encoder", "decoder", "attention", "channels", "latent_channels", "model_kwargs")
@@ -203,6 +225,67 @@ class TrainConfig:
             raise ValueError(f"encoder_lr_scale must be >= 0, got {self.encoder_lr_scale}")
         if self.num_workers < 0:
             raise ValueError(f"num_workers must be >= 0, got {self.num_workers}")
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> TrainConfig:
+        """A named recipe ([`PRESETS`][handmesh_tutorial.train.config.PRESETS]) with overrides.
+
+        ``TrainConfig.preset("cpu", data="runs/intersh", epochs=5)`` is
+        ``TrainConfig(**PRESETS["cpu"], data="runs/intersh", epochs=5)``; nothing else is
+        derived (``lr_step`` stays the preset's when ``epochs`` changes). One recipe, one place:
+        the demo ([`train_config`][handmesh_tutorial.apps.demo.config.train_config]), its
+        [`RECIPES`][handmesh_tutorial.apps.demo.config.RECIPES] and the pretrained network's
+        [`PretrainedRecipe`][handmesh_tutorial.apps.pretrain_network.PretrainedRecipe] build on
+        these. The fields each preset sets (``cpu_heads``: ``model_kwargs={"keypoints": True,
+        "global_rotation": True, "output": "skinned"}``: a 2D keypoint head with pose pooling, a
+        global-rotation head, the skinned output):
+
+        | field | `paper` (defaults) | `cpu` | `demo` | `pretraining` |
+        |---|---|---|---|---|
+        | `model_kwargs` | {} | cpu_heads | cpu_heads | cpu_heads |
+        | `keypoint_weight` | 0.0 | 0.5 | 0.5 | 0.5 |
+        | `aligned_weight` | 0.0 | 1.0 | 1.0 | 1.0 |
+        | `encoder` | "resnet18" | "resnet18" | "resnet10" | "resnet10" |
+        | `image_size` | 224 | 224 | 128 | 128 |
+        | `epochs` | 200 | 200 | 10 | 16 |
+        | `batch_size` | 32 | 32 | 16 | 128 |
+        | `lr` | 1e-4 | 1e-4 | 1e-3 | 1e-3 |
+        | `lr_step` | 50 | 50 | 8 | 6 |
+        | `lr_gamma` | 0.5 | 0.5 | 0.5 | 0.3 |
+        | `augment` | True | True | False | True |
+        | `precision` | "float32" | "float32" | "float32" | "bfloat16" |
+        | `val_fraction` | 0.1 | 0.1 | 0.1 | 0.0 |
+        | `val_batch_size` | None | None | None | 256 |
+        | `device` | "auto" | "auto" | "cpu" | "auto" |
+        | `threads` | None | None | 2 | None |
+        | `cache_data` | False | False | True | False |
+        | `init_encoder` | None | None | "pretrained" | None |
+        | `freeze_encoder` | 0 | 0 | 10 | 0 |
+        | `encoder_lr_scale` | 1.0 | 1.0 | 0.1 | 1.0 |
+
+        `demo` is the demo at its ``default`` run-size tier (other tiers:
+        [`DemoConfig.from_budget`][handmesh_tutorial.apps.demo.config.DemoConfig.from_budget]);
+        `pretraining` makes the shipped network. Why the CPU recipe: docs page "Why the paper
+        starts from pretrained weights".
+
+        Args:
+            name: ``"paper"``, ``"cpu"``, ``"demo"`` or ``"pretraining"``.
+            **overrides: any field of [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig].
+
+        Returns:
+            The config.
+
+        Raises:
+            ValueError: an unknown ``name`` (the message lists the presets) or field.
+        """
+        if name not in PRESETS:
+            raise ValueError(f"unknown TrainConfig preset {name!r}; the presets are "
+                             f"{sorted(PRESETS)} (train.config.PRESETS)")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(overrides) - known)
+        if unknown:
+            raise ValueError(f"unknown TrainConfig fields {unknown} given to preset {name!r}")
+        return cls(**{**copy.deepcopy(PRESETS[name]), **overrides})
 
     @classmethod
     def from_budget(cls, budget=None, **overrides) -> TrainConfig:

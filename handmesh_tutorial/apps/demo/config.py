@@ -10,30 +10,65 @@ notebook 08 ("Training").
 
 from __future__ import annotations
 
+import copy
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ...budget import budget as _budget
 
 __all__ = ["DemoConfig", "train_config", "RECIPES"]
 
-RECIPES = {
-    "paper": {},
-    "cpu": {"model_kwargs": {"keypoints": True, "global_rotation": True, "output": "skinned"},
-            "keypoint_weight": 0.5, "aligned_weight": 1.0},
-}
-"""Training recipes ([`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] fields on top of
-[`train_config`][handmesh_tutorial.apps.demo.config.train_config]): the paper's (one L1 vertex loss,
-an encoder that ends in global average pooling) and the CPU recipe, which adds a 2D keypoint head
-whose
-features are pooled at the joints
-([`handmesh_tutorial.nn.keypoints`][handmesh_tutorial.nn.keypoints]), a global-rotation head
-([`handmesh_tutorial.nn.rotation`][handmesh_tutorial.nn.rotation]), the skinned
-decoder output ([`handmesh_tutorial.nn.skinned`][handmesh_tutorial.nn.skinned]: every prediction is
-a skinned hand surface) and the keypoint and aligned-joint losses
-([`handmesh_tutorial.nn.losses`][handmesh_tutorial.nn.losses]). Why: docs page "Training from
-scratch on a CPU".
+class _Recipes(Mapping):
+    """The training recipes by name: the ``paper`` and ``cpu`` presets of ``TrainConfig``.
+
+    The names are known here; the fields are read from the presets on first use, since
+    importing ``train`` imports torch, which the scene generator's forked workers must not
+    inherit (the demo and ``handmesh pretrain`` check a recipe name before they generate).
+    """
+
+    _names = ("paper", "cpu")
+
+    def __getitem__(self, name: str) -> dict:
+        if name not in self._names:
+            raise KeyError(name)
+        from ...train.config import PRESETS  # lazy: torch
+
+        return copy.deepcopy(PRESETS[name])
+
+    def __contains__(self, name) -> bool:
+        return name in self._names
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __repr__(self) -> str:
+        return repr(dict(self))
+
+
+RECIPES: Mapping[str, dict] = _Recipes()
+"""Training recipes by name, [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] fields on
+top of [`train_config`][handmesh_tutorial.apps.demo.config.train_config]: the ``paper`` and
+``cpu`` presets of [`TrainConfig.preset`][handmesh_tutorial.train.config.TrainConfig.preset]
+(the paper's L1 vertex loss with a globally pooled encoder; the CPU recipe adds a 2D keypoint
+head with pose pooling, a global-rotation head, the skinned output and the keypoint and
+aligned-joint losses). Why: docs page "Why the paper starts from pretrained weights".
 """
+
+
+def _recipe_fields(name: str) -> dict:
+    """The fields of recipe ``name`` with those of the other recipe set back to the defaults
+    (the ``demo`` and ``pretraining`` presets start from ``cpu``)."""
+    from ...train import TrainConfig  # lazy: torch
+
+    if name not in RECIPES:
+        raise ValueError(f"recipe must be one of {sorted(RECIPES)}, got {name!r}")
+    default = TrainConfig()
+    reset = {k: getattr(default, k) for r in RECIPES for k in RECIPES[r]}
+    return {**reset, **RECIPES[name]}
 
 
 @dataclass
@@ -120,7 +155,9 @@ class DemoConfig:
 def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.PathLike,
                  seed: int = 0, progress: bool = True, **overrides):
     """The demo's [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] (notebooks 08-10 train
-    with it).
+    with it): the ``demo`` preset
+    ([`TrainConfig.preset`][handmesh_tutorial.train.config.TrainConfig.preset]) at the sizes and
+    choices of ``config``.
 
     10% of ``data`` is held out for per-epoch validation; the learning rate is halved once, after
     three quarters of the epochs; crops are cached in memory; CPU; the loss terms and keypoint head
@@ -140,16 +177,14 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
     """
     from ...train import TrainConfig  # lazy: torch
 
-    if config.recipe not in RECIPES:
-        raise ValueError(f"recipe must be one of {sorted(RECIPES)}, got {config.recipe!r}")
-    kw = dict(data=str(data), out_dir=str(out_dir), val_fraction=0.1,
-              image_size=config.image_size, epochs=config.epochs, batch_size=config.batch_size,
-              lr=config.lr, lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
+    kw = dict(data=str(data), out_dir=str(out_dir), image_size=config.image_size,
+              epochs=config.epochs, batch_size=config.batch_size, lr=config.lr,
+              lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
               encoder=config.encoder, decoder=config.decoder, attention=config.attention,
-              seed=seed, device="cpu", threads=config.threads, cache_data=True,
-              progress=progress, init_encoder=config.init_encoder,
+              seed=seed, threads=config.threads, progress=progress,
+              init_encoder=config.init_encoder,
               freeze_encoder=config.freeze_encoder if config.init_encoder else 0,
               encoder_lr_scale=config.encoder_lr_scale if config.init_encoder else 1.0,
-              **RECIPES[config.recipe])
+              **_recipe_fields(config.recipe))
     kw.update(overrides)
-    return TrainConfig(**kw)
+    return TrainConfig.preset("demo", **kw)

@@ -8,7 +8,6 @@ Taught in notebook 00 ("Quickstart"); notebooks 08-10 share its data through
 
 from __future__ import annotations
 
-import functools
 import os
 import time
 from dataclasses import asdict, dataclass
@@ -65,36 +64,30 @@ class DemoResult:
 def generate_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
                     workers: int, progress: bool = True, balance: bool = False,
                     shard: tuple[int, int] | None = None):
-    """Generate (or resume) an INTER-SH root of mixed-kind scenes as the demo makes them.
+    """The demo's scenes: ``generate_interactions(root, "mixed", num, seed, ...)``.
+
+    A thin call of the one scene driver,
+    [`scenes.generate_interactions`][handmesh_tutorial.scenes.generate.generate_interactions],
+    under the demo's argument names.
 
     Args:
         root: the dataset folder.
         num: scenes of the whole set (all shards).
         seed: the set's seed.
-        render_size: image side, pixels.
+        render_size: image side, pixels (``image_size`` of the driver).
         workers: generator processes.
         progress: tqdm bar.
-        balance: spread the target VRs over the VR bins.
-        shard: ``(k, n)``: only the k-th of n parts of the set (see
-            [`generate_dataset`][handmesh_tutorial.data.generate.generate_dataset]).
+        balance: spread the target VRs over the VR bins (``balance_vr``).
+        shard: ``(k, n)``: only the k-th of n parts of the set.
 
     Returns:
         The [`GenerationSummary`][handmesh_tutorial.data.GenerationSummary].
     """
-    from ...data import generate_dataset
-    from ...scenes import KINDS, InteractionConfig, init_worker, make_sample
+    from ...scenes import generate_interactions
 
-    # a seed whose scene cannot be built raises InteractionError, a SampleRejected: the
-    # writer then tries the next attempt's seed
-    fn = functools.partial(make_sample, kind="mixed", image_size=render_size)
-    config = {k: (list(v) if isinstance(v, tuple) else v)
-              for k, v in asdict(InteractionConfig()).items()}
-    params = {"generator": "handmesh_tutorial.scenes.make_sample", "kind": "mixed",
-              "limits": config["limits"], "config": config}
-    return generate_dataset(root, fn, num, seed, list(KINDS), workers=workers,
-                            progress=progress, params=params, shard=shard,
-                            image_size=render_size, balance_vr=balance,
-                            worker_init=functools.partial(init_worker, render_size))
+    return generate_interactions(root, "mixed", num, seed, image_size=render_size,
+                                 workers=workers, progress=progress, balance_vr=balance,
+                                 shard=shard)
 
 
 def generate_data(root: str | os.PathLike, config: DemoConfig | None = None, seed: int = 0,
