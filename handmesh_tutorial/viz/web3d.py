@@ -18,6 +18,7 @@ from __future__ import annotations
 import base64
 import gzip
 import html
+import importlib.util
 import os
 import struct
 import uuid
@@ -53,8 +54,10 @@ def viewer_js_path() -> Path:
     Raises:
         ModuleNotFoundError: ``meshcat`` is not installed (the ``notebooks`` extra).
     """
-    meshcat = require("meshcat", "hmt.viz 3D views")
-    return Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
+    spec = importlib.util.find_spec("meshcat")    # not imported: its server side needs zmq
+    if spec is None or spec.origin is None:
+        require("meshcat", "hmt.viz 3D views")      # raises, naming the extra
+    return Path(spec.origin).parent / "viewer" / "dist" / "main.min.js"
 
 
 @lru_cache(maxsize=1)
