@@ -141,14 +141,19 @@ def on_post_build(config, **kwargs):
 
 def copy_view_scripts(site: Path) -> None:
     """The 3D views' loader and meshcat's viewer (with its licences), served by the site."""
-    import meshcat  # the notebooks extra; the docs extra's build needs it for the 3D views
+    import importlib.util
 
-    dist = Path(meshcat.__file__).parent / "viewer" / "dist"
+    # the notebooks extra; found, not imported (its server side needs ZeroMQ)
+    spec = importlib.util.find_spec("meshcat")
+    if spec is None or spec.origin is None:
+        raise RuntimeError("the 3D views need meshcat's viewer: pip install -e '.[notebooks]'")
+    package = Path(spec.origin).parent
+    dist = package / "viewer" / "dist"
     vendor = site / "javascripts" / "vendor" / "meshcat"
     vendor.mkdir(parents=True, exist_ok=True)
     for name in ("main.min.js", "main.min.js.LICENSE.txt", "main.min.js.THIRD_PARTY_LICENSES.json"):
         shutil.copy2(dist / name, vendor / name)
-    licence = Path(meshcat.__file__).parent / "viewer" / "LICENSE"
+    licence = package / "viewer" / "LICENSE"
     if licence.is_file():
         shutil.copy2(licence, vendor / "LICENSE")
     shutil.copy2(ROOT / "handmesh_tutorial" / "assets" / "hmt_views.js",

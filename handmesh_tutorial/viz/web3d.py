@@ -99,7 +99,9 @@ def _object(key: str, kind: str, vertices: np.ndarray, faces: np.ndarray | None,
                 "type": "MeshLambertMaterial" if kind == "Mesh" else "LineBasicMaterial",
                 "color": 0xFFFFFF if colors is not None else hexcolor,
                 "vertexColors": colors is not None, "side": 2, "opacity": float(opacity),
-                "transparent": bool(opacity < 1.0), "depthWrite": bool(opacity >= 1.0)}
+                "transparent": bool(opacity < 1.0), "depthWrite": bool(opacity >= 1.0),
+                # lines (skeletons) drawn over the meshes, as the matplotlib figures do
+                "depthTest": kind == "Mesh"}
     return {"metadata": {"version": 4.5, "type": "Object"},
             "geometries": [{"uuid": gid, "type": "BufferGeometry", "data": data}],
             "materials": [material],
