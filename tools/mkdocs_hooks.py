@@ -281,8 +281,8 @@ def _pipe_tables(output: str) -> str:
 
 
 # the copy of meshcat's viewer that the first 3D view of a kernel carries (the site has its own)
-_INLINE_VIEWER = re.compile(r'<script type="application/octet-stream" class="hmt-viewer-js">'
-                            r"[^<]*</script>")
+# (nbconvert may reorder the attributes)
+_INLINE_VIEWER = re.compile(r'<script\b[^>]*\bclass="hmt-viewer-js"[^>]*>[^<]*</script>')
 
 
 def _strip_inline_viewer(output: str) -> str:
