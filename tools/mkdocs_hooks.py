@@ -156,7 +156,7 @@ def copy_view_scripts(site: Path) -> None:
     licence = package / "viewer" / "LICENSE"
     if licence.is_file():
         shutil.copy2(licence, vendor / "LICENSE")
-    shutil.copy2(ROOT / "handmesh_tutorial" / "assets" / "hmt_views.js",
+    shutil.copy2(ROOT / "handmesh_tutorial" / "viz" / "hmt_views.js",
                  site / "javascripts" / "hmt_views.js")
 
 

@@ -34,7 +34,7 @@ from .mesh3d import FINGER_COLORS, HAND_VIEW, view_direction
 
 __all__ = ["View3D", "view_meshes", "view_hand", "view_prediction", "viewer_js_path"]
 
-_ASSET = Path(__file__).resolve().parents[1] / "assets" / "hmt_views.js"
+_ASSET = Path(__file__).resolve().parent / "hmt_views.js"
 _FOV = 30.0           # degrees, vertical: little perspective, close to matplotlib's figures
 _UP_TO_Y = {          # rotation taking the view's vertical axis to +y (three.js's up)
     "x": np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]]).T,
