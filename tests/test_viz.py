@@ -33,3 +33,68 @@ def test_plot_cylinders_autoscales_on_the_cylinders_only(capsule):
         plt.close(fig)
         assert np.isfinite(limits).all()
         assert (limits[:, 0] >= lo - 1e-9).all() and (limits[:, 1] <= hi + 1e-9).all(), limits
+
+
+def _matplotlib_viewing_direction(ax) -> np.ndarray:
+    """The direction matplotlib's projection looks along, from its projection matrix alone: the
+    data direction that leaves the screen position unchanged, oriented towards growing depth."""
+    from mpl_toolkits.mplot3d import proj3d
+
+    ax.figure.canvas.draw()
+    m = ax.get_proj()
+    centre = np.array([np.mean(ax.get_xlim3d()), np.mean(ax.get_ylim3d()),
+                       np.mean(ax.get_zlim3d())])
+    step = 1e-4 * (ax.get_xlim3d()[1] - ax.get_xlim3d()[0])
+
+    def project(p):
+        return np.array(proj3d.proj_transform(*(np.asarray(p)[:, None]), m)).ravel()
+
+    jac = np.stack([(project(centre + step * e) - project(centre - step * e)) / (2 * step)
+                    for e in np.eye(3)], axis=1)          # (3 outputs: x, y, depth) x (3 inputs)
+    d = np.cross(jac[0], jac[1])
+    d /= np.linalg.norm(d)
+    return d if d @ jac[2] > 0 else -d
+
+
+def test_the_hand_camera_is_a_three_quarter_view_never_from_the_wrist_end():
+    # hand template frame: +x wrist -> fingers, palm -y (back +y), right thumb -z
+    d = viz.view_direction(viz.HAND_VIEW)
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d")
+    viz.set_axes_equal(ax, np.array([[-1.0, -1, -1], [1, 1, 1]]))
+    ax.view_init(**viz.HAND_VIEW)
+    seen = _matplotlib_viewing_direction(ax)
+    plt.close(fig)
+    assert np.degrees(np.arccos(np.clip(seen @ d, -1, 1))) < 1.0, (seen, d)
+    eye = -d
+    assert abs(d[0]) < 0.8, f"looks along the wrist-fingers axis: {d}"
+    assert eye[0] > -0.2, f"the eye sits behind the wrist (views from the wrist end): {eye}"
+    assert eye[1] > 0.5, f"the eye does not look at the back of the hand from above: {eye}"
+    assert abs(eye[2]) > 0.3, f"not a three-quarter view (no side component): {eye}"
+
+
+def test_view_direction_follows_matplotlib_for_every_vertical_axis():
+    for view in ({"elev": 30, "azim": -60}, {"elev": -20, "azim": 100, "vertical_axis": "x"},
+                 {"elev": 10, "azim": 200, "vertical_axis": "y"}):
+        fig = plt.figure()
+        ax = fig.add_subplot(projection="3d")
+        viz.set_axes_equal(ax, np.array([[-1.0, -1, -1], [1, 1, 1]]))
+        ax.view_init(**view)
+        seen = _matplotlib_viewing_direction(ax)
+        plt.close(fig)
+        assert np.allclose(seen, viz.view_direction(view), atol=1e-3), view
+    with pytest.raises(ValueError, match="vertical_axis"):
+        viz.view_direction({"elev": 0, "azim": 0, "vertical_axis": "w"})
+
+
+def test_hand_figures_use_the_shared_camera_by_default():
+    from handmesh_tutorial import hand
+
+    model = hand.HandModel("right")
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d")
+    viz.plot_hand(ax, model.template_vertices, model.faces)
+    ax2 = viz.hand_axes(fig, 1, 2, 2)
+    got = [(a.elev, a.azim) for a in (ax, ax2)]
+    plt.close(fig)
+    assert got == [(viz.HAND_VIEW["elev"], viz.HAND_VIEW["azim"])] * 2

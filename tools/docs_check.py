@@ -10,7 +10,10 @@ DevTools Protocol, MathJax is awaited, and the rendered page is checked for
 - raw mermaid source (a ``.mermaid`` block or a ``language-mermaid`` code block),
 - visible Sphinx roles (``:func:``, ``:class:`` ...) or literal ``!!! note`` admonitions,
 - console errors, uncaught exceptions, failed requests and requests to other hosts,
-- images that fail to load.
+- images that fail to load,
+- 3D views (``div.hmt-view``, ``handmesh_tutorial.viz.web3d``) that do not draw: each is scrolled
+  into view and must show its WebGL canvas (WebGL by SwiftShader, no GPU needed); a screenshot
+  of each view goes to ``--out``.
 
 Screenshots (the top of the home page, an API page, a concept page and notebook pages, plus the
 first formula of pages with math) go to ``--out``; ``report.json`` there lists every page checked.
@@ -41,6 +44,9 @@ CHROMIUM_FLAGS = [
     "--headless",
     "--no-sandbox",
     "--disable-gpu",
+    # WebGL for the 3D views without a GPU (SwiftShader, software)
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
     "--disable-quic",
     "--no-first-run",
     "--disable-background-networking",
@@ -60,7 +66,35 @@ SCREENSHOT_PAGES = (
     "notebooks/07_multi_path_decoder/index.html",
     "notebooks/08_training/index.html",
     "notebooks/learning_path/index.html",
+    "concepts/3d_views/index.html",
 )
+
+# Scrolls each 3D view into view (they start lazily), waits until each has started or failed;
+# returns the problems and each view's box (for a screenshot).
+VIEWS_PROBE = r"""
+(async () => {
+  const views = [...document.querySelectorAll(".hmt-view")];
+  const problems = [];
+  const boxes = [];
+  for (const [i, el] of views.entries()) {
+    el.scrollIntoView({block: "center"});
+    const t0 = Date.now();
+    while (!["ready", "failed"].includes(el.dataset.state) && Date.now() - t0 < 30000)
+      await new Promise(r => setTimeout(r, 100));
+    await new Promise(r => setTimeout(r, 300));   // a few frames drawn
+    const canvas = el.querySelector("canvas");
+    if (el.dataset.state !== "ready")
+      problems.push(`3D view ${i + 1} did not start (${el.dataset.state || "never seen"}): `
+                    + (el.textContent || "").slice(0, 160));
+    else if (!canvas || canvas.width < 50 || canvas.height < 50)
+      problems.push(`3D view ${i + 1} has no canvas`);
+    const r = el.getBoundingClientRect();
+    boxes.push({x: r.left, y: r.top + window.scrollY, width: r.width, height: r.height});
+  }
+  window.scrollTo(0, 0);
+  return {problems, boxes};
+})()
+"""
 
 # Runs inside each page once MathJax has finished; returns the problems a reader would see.
 PAGE_PROBE = r"""
@@ -287,15 +321,25 @@ def check_site(site: Path, out: Path, pages: list[str] | None = None) -> dict:
                 )
                 browser.evaluate("new Promise(r => setTimeout(r, 200))", await_promise=True)
                 probe = browser.evaluate(PAGE_PROBE)
+                views = {"problems": [], "boxes": []}
+                if browser.evaluate("document.querySelectorAll('.hmt-view').length"):
+                    views = browser.evaluate(VIEWS_PROBE, await_promise=True)
                 browser.call("Runtime.evaluate", expression="0")  # flush queued events
-                problems = probe["problems"] + event_problems(browser.events, base)
+                problems = (probe["problems"] + views["problems"]
+                            + event_problems(browser.events, base))
                 entry = {
                     "title": probe["title"],
                     "math": probe["math"],
                     "images": probe["images"],
                     "seconds": round(time.time() - t0, 2),
                     "problems": problems,
+                    "views": len(views["boxes"]),
                 }
+                stem = rel.removesuffix("index.html").strip("/").replace("/", "__") or "home"
+                for k, box in enumerate(views["boxes"]):
+                    vshot = out / f"{stem}__view{k + 1}.png"
+                    browser.screenshot(vshot, clip=box)
+                    report["screenshots"].append(str(vshot))
                 if rel in SCREENSHOT_PAGES:
                     stem = rel.removesuffix("index.html").strip("/").replace("/", "__") or "home"
                     shot = out / f"{stem}.png"
@@ -314,7 +358,7 @@ def check_site(site: Path, out: Path, pages: list[str] | None = None) -> dict:
                 report["pages"][rel] = entry
                 flag = "FAIL" if problems else "ok  "
                 print(f"{flag} {rel}  ({entry['math']} formulas, {entry['images']} images, "
-                      f"{entry['seconds']} s)", flush=True)
+                      f"{entry['views']} 3D views, {entry['seconds']} s)", flush=True)
                 for p in problems[:12]:
                     print(f"       {p}", flush=True)
         finally:

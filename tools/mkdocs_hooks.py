@@ -13,6 +13,12 @@ concept, API or notebook, is typeset by the same MathJax 3 with the configuratio
 Notebook pages also get: ipywidgets outputs as static, labelled HTML (the widget manager would come
 from a CDN and cannot run without a kernel anyway; a tqdm bar becomes its last line of text), and
 Markdown pipe tables printed as text turned into HTML tables.
+
+3D views (``handmesh_tutorial.viz.web3d``): the build copies meshcat's viewer (MIT, from the
+installed ``meshcat``) to ``site/javascripts/vendor/meshcat/`` and the views' loader to
+``site/javascripts/hmt_views.js`` (listed in ``extra_javascript``), once for the whole site; the
+copy of the viewer that a notebook's first view carries inline is removed from notebook pages,
+and an explorer's widget (``handmesh_tutorial.viz.explore``) shows its strip of frames.
 """
 
 from __future__ import annotations
@@ -130,6 +136,28 @@ def on_post_build(config, **kwargs):
     shutil.rmtree(dest, ignore_errors=True)
     shutil.copytree(src / "es5", dest)
     shutil.copy2(src / "LICENSE", dest / "LICENSE")
+    copy_view_scripts(Path(config["site_dir"]))
+
+
+def copy_view_scripts(site: Path) -> None:
+    """The 3D views' loader and meshcat's viewer (with its licences), served by the site."""
+    import importlib.util
+
+    # the notebooks extra; found, not imported (its server side needs ZeroMQ)
+    spec = importlib.util.find_spec("meshcat")
+    if spec is None or spec.origin is None:
+        raise RuntimeError("the 3D views need meshcat's viewer: pip install -e '.[notebooks]'")
+    package = Path(spec.origin).parent
+    dist = package / "viewer" / "dist"
+    vendor = site / "javascripts" / "vendor" / "meshcat"
+    vendor.mkdir(parents=True, exist_ok=True)
+    for name in ("main.min.js", "main.min.js.LICENSE.txt", "main.min.js.THIRD_PARTY_LICENSES.json"):
+        shutil.copy2(dist / name, vendor / name)
+    licence = package / "viewer" / "LICENSE"
+    if licence.is_file():
+        shutil.copy2(licence, vendor / "LICENSE")
+    shutil.copy2(ROOT / "handmesh_tutorial" / "viz" / "hmt_views.js",
+                 site / "javascripts" / "hmt_views.js")
 
 
 # nbconvert's MathJax 2 block as mkdocs-jupyter writes it into every notebook page.
@@ -182,6 +210,9 @@ def _static_widgets(output: str, src: str) -> str:
             model_id = json.loads(m.group(1)).get("model_id", "")
         except json.JSONDecodeError:
             model_id = ""
+        fallback = json.loads(m.group(1)).get("hmt_fallback") if model_id else None
+        if isinstance(fallback, str):  # hmt.viz.explore: its strip of frames
+            return fallback
         text = _widget_text(model_id, state)
         if text is not None:  # a tqdm bar: its last state as one line of text
             return f'<pre class="hmt-widget-progress">{html.escape(text)}</pre>'
@@ -249,8 +280,18 @@ def _pipe_tables(output: str) -> str:
     return _TEXT_OUTPUT.sub(convert, output)
 
 
+# the copy of meshcat's viewer that the first 3D view of a kernel carries (the site has its own)
+# (nbconvert may reorder the attributes)
+_INLINE_VIEWER = re.compile(r'<script\b[^>]*\bclass="hmt-viewer-js"[^>]*>[^<]*</script>')
+
+
+def _strip_inline_viewer(output: str) -> str:
+    return _INLINE_VIEWER.sub("", output)
+
+
 def on_post_page(output, page, config, **kwargs):
     if page.file.src_uri.endswith(".ipynb"):
+        output = _strip_inline_viewer(output)
         output, n = _NB_MATHJAX2.subn("", output, count=1)
         if n != 1:
             log.warning("%s: no nbconvert MathJax block found to replace", page.file.src_uri)

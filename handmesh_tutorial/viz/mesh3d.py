@@ -17,8 +17,9 @@ from .._optional import require
 from ._common import _to_numpy
 from .files import save_figure
 
-__all__ = ["FINGER_COLORS", "HAND_VIEW", "HAND_LIGHT", "set_axes_equal", "shade_faces", "plot_mesh",
-           "plot_skeleton", "plot_frames", "plot_hand", "save_hand_gallery", "plot_cylinders"]
+__all__ = ["FINGER_COLORS", "HAND_VIEW", "HAND_LIGHT", "view_direction", "hand_axes",
+           "set_axes_equal", "shade_faces", "plot_mesh", "plot_skeleton", "plot_frames",
+           "plot_hand", "save_hand_gallery", "plot_cylinders"]
 
 # One colour per finger, FreiHAND order: thumb, index, middle, ring, pinky.
 FINGER_COLORS = ("#d62728", "#ff7f0e", "#2ca02c", "#1f77b4", "#9467bd")
@@ -172,12 +173,67 @@ def plot_frames(ax, origins, frames, length: float = 0.012,
             ax.text(*tip, "xyz"[axis], color=colors[axis], fontsize=9)
 
 
-HAND_VIEW = {"elev": 40.0, "azim": -65.0, "vertical_axis": "y"}
-"""Default camera for hands in the hand template's frame (fingers +x, palm -y): y is drawn
-up, seen from above the back of the hand and from the side.
+HAND_VIEW = {"elev": 45.0, "azim": 25.0, "vertical_axis": "y"}
+"""The one camera for hands in the hand template's frame (+x wrist to fingers, palm -y, right
+thumb -z): a three-quarter view from above the back of the hand (+y up), from the pinky side of
+a right hand and a little towards the fingertips, never from the wrist end. ``ax.view_init``
+keywords; [`view_direction`][handmesh_tutorial.viz.mesh3d.view_direction] gives its viewing
+direction, which [`plot_hand`][handmesh_tutorial.viz.mesh3d.plot_hand],
+[`hand_axes`][handmesh_tutorial.viz.mesh3d.hand_axes] and the browser views of
+[`handmesh_tutorial.viz.web3d`][handmesh_tutorial.viz.web3d] share.
 """
 HAND_LIGHT = (-0.3, -1.0, -0.6)
 """Light for that view (travels down and away from the viewer)."""
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def view_direction(view: dict | None = None) -> np.ndarray:
+    """Unit vector along which a matplotlib 3D view looks (from the eye towards the target).
+
+    Matplotlib places the eye at ``(cos e cos a, cos e sin a, sin e)`` for the vertical axis z,
+    the components rolled so that the third one lands on ``vertical_axis``
+    ([`Axes3D.view_init`](https://matplotlib.org/stable/api/toolkits/mplot3d/view_angles.html)).
+
+    Args:
+        view: ``ax.view_init`` keywords ``elev``, ``azim`` (degrees), ``vertical_axis``
+            (``"x"``, ``"y"`` or ``"z"``, default ``"z"``);
+            [`HAND_VIEW`][handmesh_tutorial.viz.mesh3d.HAND_VIEW] when ``None``.
+
+    Returns:
+        ``(3,)`` unit vector in the data frame, pointing from the eye to the target.
+
+    Raises:
+        ValueError: an unknown ``vertical_axis``.
+    """
+    view = HAND_VIEW if view is None else view
+    axis = view.get("vertical_axis", "z")
+    if axis not in _AXES:
+        raise ValueError(f"vertical_axis must be 'x', 'y' or 'z', got {axis!r}")
+    e, a = np.deg2rad(view.get("elev", 30.0)), np.deg2rad(view.get("azim", -60.0))
+    eye = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+    return -np.roll(eye, _AXES[axis] - 2)
+
+
+def hand_axes(fig, *subplot, view: dict | None = None):
+    """A 3D axes on ``fig`` seen from the shared hand camera, axes hidden.
+
+    For figures of hands that draw with the primitives (``plot_mesh``, ``plot_skeleton``,
+    ``plot_frames``) rather than [`plot_hand`][handmesh_tutorial.viz.mesh3d.plot_hand].
+
+    Args:
+        fig: a matplotlib ``Figure``.
+        *subplot: ``fig.add_subplot`` position, e.g. ``1, 3, 2`` (default ``1, 1, 1``).
+        view: ``ax.view_init`` keywords; [`HAND_VIEW`][handmesh_tutorial.viz.mesh3d.HAND_VIEW]
+            when ``None``.
+
+    Returns:
+        The ``Axes3D``.
+    """
+    ax = fig.add_subplot(*(subplot or (1, 1, 1)), projection="3d")
+    ax.view_init(**(HAND_VIEW if view is None else view))
+    ax.set_axis_off()
+    return ax
 
 
 def plot_hand(ax, vertices, faces, colors=None, joints=None, view: dict | None = None,
