@@ -161,7 +161,7 @@ def main() -> int:
     failures = []
 
     gen = [*HANDMESH, "generate", "--kind", "mixed", "--num", str(args.num), "--seed",
-           str(args.seed), "--image-size", "64", "--workers", "2", "--no-fsync", "--quiet"]
+           str(args.seed), "--image-size", "64", "--workers", "2", "--no-fsync", "--no-progress"]
     ref_s = run([*gen, "--out", str(base / "gen_ref")])
     print(f"generate: reference of {args.num} scenes in {ref_s:.1f} s")
     g = [*gen, "--out", str(base / "gen_run")]
@@ -322,7 +322,7 @@ def replaced_data(tr: list[str], base: Path, args) -> bool:
     resume must be refused (exit code 3) naming what differs."""
     data = base / "replaced_data"
     gen = [*HANDMESH, "generate", "--kind", "hand-hand", "--num", "4", "--image-size", "64",
-           "--no-fsync", "--quiet"]
+           "--no-fsync", "--no-progress"]
     run([*gen, "--seed", str(args.seed), "--out", str(data)])
     t = [a if a != str(base / "gen_ref") else str(data) for a in tr]
     t = [*t[:t.index("--epochs") + 1], "1", *t[t.index("--epochs") + 2:], "--val-fraction", "0"]

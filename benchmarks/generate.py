@@ -92,7 +92,7 @@ def end_to_end(kind: str, num: int, workers: int, start: str = "cli") -> dict:
         if start == "cli":
             cmd = [sys.executable, "-m", "handmesh_tutorial.apps.cli", "generate", "--kind", kind,
                    "--num", str(num), "--seed", "0", "--out", str(tmp / "ds"), "--image-size",
-                   str(SIZE), "--workers", str(workers), "--quiet", "--no-fsync"]
+                   str(SIZE), "--workers", str(workers), "--no-progress", "--no-fsync"]
         else:
             cmd = [sys.executable, "-c",
                    "import sys; from handmesh_tutorial.scenes import generate_interactions as g; "

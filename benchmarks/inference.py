@@ -57,7 +57,7 @@ def main() -> None:
         from handmesh_tutorial.apps.cli import main as cli
 
         cli(["generate", "--kind", "mixed", "--num", str(args.num), "--seed", str(args.seed),
-             "--out", args.data, "--quiet"])
+             "--out", args.data, "--no-progress"])
     ds = hmt.data.InterSHDataset(args.data)
     net = hmt.pretrained.pretrained()
     rows: dict[str, list] = {k: [] for k in (

@@ -164,7 +164,7 @@ def test_damaged_annotation_json_is_a_named_bad_sample(root, damage, pattern, ca
     report = D.verify_dataset(root, progress=False)
     assert [n for n, _ in report.bad] == ["000001"]
     capsys.readouterr()
-    assert cli.main(["verify", str(root), "--quiet"]) == cli.EXIT_CODES["bad-input"]
+    assert cli.main(["verify", str(root), "--no-progress"]) == cli.EXIT_CODES["bad-input"]
     out, err = capsys.readouterr()
     assert "1 bad" in out and "000001" in out and err == ""
 

@@ -26,7 +26,7 @@ def _run(capsys, *argv):
 def test_generate_writes_a_readable_dataset_and_resumes(tmp_path, capsys):
     root = tmp_path / "intersh"
     args = ("--kind", "mixed", "--num", "3", "--seed", "5", "--out", str(root),
-            "--image-size", "64", "--quiet", "--no-fsync")
+            "--image-size", "64", "--no-progress", "--no-fsync")
     code, out = _run(capsys, *args)
     assert code == 0
     assert "3 samples written, 0 already present" in out
@@ -64,7 +64,7 @@ def test_generate_shard_and_options(tmp_path, capsys):
     root = tmp_path / "shard1"
     code, out = _run(capsys, "--kind", "hand-object", "--num", "4", "--seed", "2", "--out",
                      str(root), "--image-size", "64", "--shard", "1/2", "--limits",
-                     "paper", "--quiet", "--no-fsync")
+                     "paper", "--no-progress", "--no-fsync")
     assert code == 0 and "2 samples written" in out
     ds = dataset.InterSHDataset(root)
     assert ds.meta["shards"] == [[1, 2]] and ds.meta["params"]["limits"] == "paper"
@@ -78,7 +78,7 @@ def test_generate_shard_and_options(tmp_path, capsys):
     # naming the differing key
     capsys.readouterr()
     code = cli.main(["generate", "--kind", "hand-object", "--num", "4", "--seed", "2", "--out",
-                     str(root), "--image-size", "64", "--shard", "1/2", "--quiet"])
+                     str(root), "--image-size", "64", "--shard", "1/2", "--no-progress"])
     err = capsys.readouterr().err
     assert code == cli.EXIT_CODES["bad-input"]
     assert "meta.json was written with different parameters" in err and "params" in err
@@ -92,7 +92,7 @@ def test_balanced_hand_chain_reports_unreachable_bins_and_fills_the_rest(tmp_pat
     with pytest.warns(UserWarning, match=r"VR balancing: .*\[0\.40, 0\.60\).* left out"):
         code, out = _run(capsys, "--kind", "hand-chain", "--num", "3", "--seed", "0", "--out",
                          str(root), "--image-size", "48", "--balance-vr", "--vr-probe", "24",
-                         "--quiet", "--no-fsync")
+                         "--no-progress", "--no-fsync")
     assert code == 0 and "3 samples written" in out
     assert "left out: [0.40, 0.60)" in out
     ds = dataset.InterSHDataset(root)
@@ -109,7 +109,7 @@ def test_balanced_hand_chain_reports_unreachable_bins_and_fills_the_rest(tmp_pat
     with pytest.warns(UserWarning, match=r"\[0\.40, 0\.60\).* left out"):
         code, out = _run(capsys, "--kind", "hand-chain", "--num", "3", "--seed", "0", "--out",
                          str(root), "--image-size", "48", "--balance-vr", "--vr-probe", "24",
-                         "--quiet", "--no-fsync")
+                         "--no-progress", "--no-fsync")
     assert code == 0 and "0 samples written, 3 already present (skipped), 0 candidates" in out
 
 
@@ -136,7 +136,7 @@ def test_generate_help_through_the_module_entry_point():
 def test_a_bad_image_size_is_refused_before_anything_is_written(tmp_path, capsys, size):
     out = tmp_path / "root"
     code = cli.main(["generate", "--kind", "hand-hand", "--num", "2", "--out", str(out),
-                     "--image-size", size, "--quiet"])
+                     "--image-size", size, "--no-progress"])
     err = capsys.readouterr().err
     assert code == cli.EXIT_CODES["bad-input"]
     assert f"image_size must be an integer in [32, 4096] pixels, got {size}" in err
@@ -145,25 +145,25 @@ def test_a_bad_image_size_is_refused_before_anything_is_written(tmp_path, capsys
 
 def test_verify_command_and_generate_verify(tmp_path, capsys):
     argv = ["generate", "--kind", "hand-object", "--num", "3", "--seed", "4", "--out",
-            str(tmp_path / "r"), "--image-size", "48", "--quiet", "--no-fsync"]
+            str(tmp_path / "r"), "--image-size", "48", "--no-progress", "--no-fsync"]
     assert cli.main(argv) == 0
     ref = (tmp_path / "r" / "samples" / "000001" / "annotation.npz").read_bytes()
     (tmp_path / "r" / "samples" / "000001" / "annotation.npz").write_bytes(ref[:64])
     capsys.readouterr()
-    assert cli.main(["verify", str(tmp_path / "r"), "--quiet"]) == cli.EXIT_CODES["bad-input"]
+    assert cli.main(["verify", str(tmp_path / "r"), "--no-progress"]) == cli.EXIT_CODES["bad-input"]
     out = capsys.readouterr().out
     assert "3 samples read, 1 bad" in out and "000001" in out
     assert cli.main([*argv, "--verify"]) == 0
     out = capsys.readouterr().out
     assert "1 removed" in out and "1 samples written, 2 already present" in out
     assert (tmp_path / "r" / "samples" / "000001" / "annotation.npz").read_bytes() == ref
-    assert cli.main(["verify", str(tmp_path / "r"), "--quiet"]) == 0
+    assert cli.main(["verify", str(tmp_path / "r"), "--no-progress"]) == 0
 
 
 def test_frame_share_sets_the_target_hands_share_and_is_recorded(tmp_path, capsys):
     root = tmp_path / "loose"
     args = ["--kind", "mixed", "--num", "3", "--seed", "6", "--out", str(root), "--image-size",
-            "64", "--quiet", "--no-fsync"]
+            "64", "--no-progress", "--no-fsync"]
     code, _ = _run(capsys, *args, "--frame-share", "0.3,0.4")
     assert code == 0
     ds = dataset.InterSHDataset(root)
@@ -185,7 +185,7 @@ def test_frame_share_sets_the_target_hands_share_and_is_recorded(tmp_path, capsy
 def test_a_bad_frame_share_is_refused_before_anything_is_written(tmp_path, capsys, share, why):
     out = tmp_path / "root"
     code = cli.main(["generate", "--kind", "hand-hand", "--num", "2", "--out", str(out),
-                     "--frame-share", share, "--quiet"])
+                     "--frame-share", share, "--no-progress"])
     assert code == cli.EXIT_CODES["bad-input"]
     assert why in capsys.readouterr().err
     assert not out.exists()
@@ -205,7 +205,7 @@ def test_thumb_zero_elevation_flag_is_recorded_and_none_is_the_earlier_generator
     default = next(a.default for a in gen._actions if a.dest == "thumb_zero_elevation")
     assert default == hmt.lcs.THUMB_ZERO_ELEVATION_DEG
     args = ["--kind", "hand-object", "--num", "2", "--seed", "4", "--image-size", "64",
-            "--quiet", "--no-fsync"]
+            "--no-progress", "--no-fsync"]
     roots = {}
     for flag in ("5", "none"):
         roots[flag] = tmp_path / flag
@@ -235,13 +235,13 @@ def test_thumb_zero_elevation_flag_is_recorded_and_none_is_the_earlier_generator
 def test_repair_commands_never_delete_samples_when_meta_json_disagrees(tmp_path, capsys):
     root = tmp_path / "r"
     argv = ["generate", "--kind", "hand-object", "--num", "2", "--seed", "4", "--out", str(root),
-            "--image-size", "32", "--quiet", "--no-fsync"]
+            "--image-size", "32", "--no-progress", "--no-fsync"]
     assert cli.main(argv) == 0
     before = _hashes(root)
     good = (root / "meta.json").read_text()
     (root / "meta.json").write_text(good.replace('"seed": 4', '"seed": 5'))  # one edited field
     capsys.readouterr()
-    assert cli.main(["verify", str(root), "--remove-bad", "--quiet"]) == \
+    assert cli.main(["verify", str(root), "--remove-bad", "--no-progress"]) == \
         cli.EXIT_CODES["bad-input"]
     out, err = capsys.readouterr()
     assert "0 bad" in out and "meta.json 'seed' disagrees with 2 sample(s) (000000, 000001)" in out
@@ -258,7 +258,7 @@ def test_a_num_above_the_readers_maximum_is_refused_before_anything_is_written(t
     out = tmp_path / "root"  # a 2-sample shard of it would be quick to write: nothing is
     code = cli.main(["generate", "--kind", "hand-hand", "--num", str(dataset.MAX_SAMPLES + 1),
                      "--shard", f"0/{dataset.MAX_SAMPLES // 2}", "--out", str(out),
-                     "--image-size", "32", "--quiet", "--no-fsync"])
+                     "--image-size", "32", "--no-progress", "--no-fsync"])
     assert code == cli.EXIT_CODES["bad-input"]
     assert "num must be an integer in [1, 100,000,000] (MAX_SAMPLES" in capsys.readouterr().err
     assert not out.exists()  # no meta.json that read_meta would refuse

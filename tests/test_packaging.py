@@ -36,18 +36,31 @@ def _dist(requirement: str) -> str:
     return re.sub(r"[-_.]+", "-", name).lower()
 
 
-@pytest.mark.slow  # a fresh interpreter: torch's import and the network's load
-def test_core_components_and_the_pretrained_network_work_without_any_extra():
+# the compiled kernels need numba (the [scenes] extra); their numpy references need nothing more
+NEEDS_AN_EXTRA = ["handmesh_tutorial.collision._numba", "handmesh_tutorial.scenes._contact_numba"]
+
+
+@pytest.mark.slow  # a fresh interpreter: torch's import, the network's load, one evaluation
+def test_core_components_and_the_pretrained_network_work_without_any_extra(tmp_path):
+    """Every module imports without the extras (their import at the top of any file fails
+    here), and the components a researcher lifts run (their imports inside functions too)."""
     code = textwrap.dedent(f"""
-        import sys
+        import importlib, json, pkgutil, sys
         for name in {ABSENT!r}:
             sys.modules[name] = None  # as if not installed
         import numpy as np, torch
         import handmesh_tutorial as hmt
+        failed = {{}}
+        for m in pkgutil.walk_packages(hmt.__path__, "handmesh_tutorial."):
+            if m.name not in {NEEDS_AN_EXTRA!r} and not m.name.startswith("handmesh_tutorial._al"):
+                try:
+                    importlib.import_module(m.name)
+                except Exception as err:
+                    failed[m.name] = repr(err)
         from handmesh_tutorial import collision, hand, lcs, metrics, visibility
         from handmesh_tutorial.data import freihand
         from handmesh_tutorial.hand import mano
-        from handmesh_tutorial.nn import blocks, decoder, encoder, model, spiral
+        from handmesh_tutorial.nn import blocks, decoder, encoder, hierarchy, model, spiral
         net = hmt.pretrained.pretrained()
         s = hmt.pretrained.pretrained_info()["config"]["image_size"]
         with torch.no_grad():
@@ -56,22 +69,47 @@ def test_core_components_and_the_pretrained_network_work_without_any_extra():
         hm = hmt.hand.HandModel("right")
         idx = hmt.nn.spiral.spiral_indices(hm.faces, 9)
         y = hmt.nn.spiral.SpiralConv(3, 4, idx)(hm().vertices)
+        levels = hierarchy.mesh_hierarchy(hm().vertices[0], hm.faces, (2, 2), use_cache=False)
         a0, a1 = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]])
         hit = hmt.collision.cylinders_intersect(a0, a1, np.array([0.1]), a0 + [0.15, 0, 0],
                                                 a1 + [0.15, 0, 0], np.array([0.1]))
         j = out["joints"].numpy().astype(float)
         sc = hmt.metrics.freihand_scores(pred_joints=j, gt_joints=j + 0.001)
         art = hmt.lcs.hand_lcs(hm)
+        ok = art.within_limits(art.from_pose(art.random_pose(0)))
         m = np.zeros((4, 4), int); m[1:3, 1:3] = 1
         vr = hmt.visibility.visibility_ratio(m, m, 1)
+        image = np.random.default_rng(0).integers(0, 256, (96, 128, 3), dtype=np.uint8)
+        K = np.array([[150.0, 0, 64], [0, 150, 48], [0, 0, 1]])
+        p = hmt.inference.predict_hand(image, (30, 20, 90, 80), "left", K=K)
+        root = hmt.testing.write_freihand_root(sys.argv[1], 2)
+        from handmesh_tutorial.apps.cli import main
+        code = main(["evaluate", "--checkpoint", "pretrained", "--data", str(root),
+                     "--dataset", "freihand", "--no-progress", "--threads", "1"])
         bad = sorted(n for n in {ABSENT!r} if sys.modules.get(n) is not None)
-        print(tuple(y.shape), bool(hit[0]), round(sc["mpjpe"], 3), vr, bad)
+        print(json.dumps({{"failed": failed, "spiral": list(y.shape), "hit": bool(hit[0]),
+                          "mpjpe": round(sc["mpjpe"], 3), "limits": bool(ok), "vr": vr,
+                          "levels": [len(v) for v in levels.vertices], "frame": p.frame,
+                          "predicted": [list(p.vertices.shape), list(p.joints.shape)],
+                          "evaluate": code, "extras_imported": bad}}))
     """)
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=300)
+    res = subprocess.run([sys.executable, "-c", code, str(tmp_path / "freihand")],
+                         capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
+    got = json.loads(res.stdout.strip().splitlines()[-1])
     hand_v = hmt.hand.HandModel("right").num_vertices
-    assert res.stdout.split() == ["(1,", f"{hand_v},", "4)", "True", "1.732", "1.0", "[]"]
+    assert got == {"failed": {}, "spiral": [1, hand_v, 4], "hit": True, "mpjpe": 1.732,
+                   "limits": True, "vr": 1.0, "levels": [hand_v, -(-hand_v // 2),
+                                                         -(-hand_v // 4)],
+                   "frame": "camera", "predicted": [[hand_v, 3], [21, 3]], "evaluate": 0,
+                   "extras_imported": []}
+
+
+def test_the_modules_that_need_an_extra_are_the_compiled_kernels():
+    for name in NEEDS_AN_EXTRA:  # an import of numba at their top, nothing else optional
+        path = ROOT / (name.replace(".", "/") + ".py")
+        source = path.read_text()
+        assert re.search(r"^import numba|^from numba import", source, re.M), path
 
 
 def test_a_missing_extra_is_named_in_the_error(monkeypatch):

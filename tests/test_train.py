@@ -837,3 +837,37 @@ def test_evaluate_on_freihand_data(tmp_path, capsys, mano_freihand):
                          "--no-progress", "--threads", "1", *extra])
         assert code == 0, extra
         assert "handmesh evaluate: 3 samples" in capsys.readouterr().out
+
+
+def test_evaluate_scores_joints_only_when_the_network_s_mesh_is_not_the_data_s(tmp_path, capsys,
+                                                                               mano_freihand):
+    """The shipped network (the MakeHuman hand's vertices) on FreiHAND (MANO's 778): joint
+    scores equal to ``freihand_scores`` of the predictions against the reader's joints, no
+    vertex keys, a note that says why; ``handmesh evaluate --checkpoint pretrained`` on a
+    FreiHAND root prints them (it stopped on the vertex shapes)."""
+    from handmesh_tutorial import metrics
+    from handmesh_tutorial.data.freihand import FreiHAND
+
+    _, root = mano_freihand
+    ev = T.evaluate("pretrained", root, kind="freihand", progress=False, threads=1,
+                    out_dir=tmp_path / "ev")
+    nv = ev["predictions"]["vertices"].shape[1]
+    assert nv != 778 and ev["predictions"]["frame"] == "camera"
+    gt = np.stack([FreiHAND(root, "evaluation")[i]["joints"] for i in range(3)])
+    want = metrics.freihand_scores(pred_joints=ev["predictions"]["joints"].astype(float),
+                                   gt_joints=gt)
+    assert set(ev["scores"]) == set(want)  # no vertex keys, no surface scores
+    for key, value in want.items():
+        assert ev["scores"][key] == pytest.approx(value, rel=1e-4, abs=1e-3), key
+    assert not {"mpvpe", "pa_mpvpe", "f_at_15mm"} & set(ev["per_sample"])
+    assert "pa_mpvpe" not in ev["baseline"]["scores"]  # the rest hand: joints only too
+    note = next(n for n in ev["notes"] if n.startswith("vertex scores left out"))
+    assert f"predicts {nv} vertices, the ground truth has 778" in note and "--template" in note
+    saved = json.loads((tmp_path / "ev" / "eval.json").read_text())
+    assert saved["scores"]["pa_mpjpe"] == pytest.approx(ev["scores"]["pa_mpjpe"])
+    capsys.readouterr()
+    assert cli_main(["evaluate", "--checkpoint", "pretrained", "--data", str(root), "--dataset",
+                     "freihand", "--no-progress", "--threads", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "handmesh evaluate: 3 samples" in out and "note: vertex scores left out" in out
+    assert not [ln for ln in out.splitlines() if ln.startswith("MPVPE")]  # no vertex line

@@ -53,6 +53,7 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
 
 def add_pretrain_commands(sub) -> None:
     """Add ``pretrain`` and ``pretrain-encoder`` to the ``handmesh`` sub-parsers."""
+    from .cli import _DeprecatedAlias  # at call time: cli imports this module
     pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
                          "(a GPU when there is one), export a small int8 file (resumable)")
     pre.add_argument("--out", default="runs/pretrained",
@@ -104,7 +105,9 @@ def add_pretrain_commands(sub) -> None:
     pe.add_argument("--render-size", type=int, help="scene image side (default: 224)")
     pe.add_argument("--image-sizes", help="crop sides trained on, comma-separated (default: "
                     "64,96,128)")
-    pe.add_argument("--backbone", help="ResNet (default: resnet10)")
+    pe.add_argument("--encoder", dest="backbone", help="image encoder, a ResNet (default: "
+                    "resnet10)")
+    pe.add_argument("--backbone", action=_DeprecatedAlias, dest="backbone", canonical="--encoder")
     pe.add_argument("--batch-size", type=int, help="batch size (default: 256)")
     pe.add_argument("--lr", type=float, help="AdamW peak learning rate (default: 2e-3)")
     pe.add_argument("--max-steps", type=int, help="the most training steps (default: 60000)")

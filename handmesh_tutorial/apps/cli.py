@@ -10,10 +10,10 @@ full traceback instead. The sub-commands import their library modules when they 
 --help`` starts fast without torch or OpenGL.
 
 One name per concept: ``--dataset intersh|freihand`` is the data format (``train``,
-``evaluate``), ``--kind`` the scene kind (``generate``), ``--workers`` generator processes
-(``generate``, ``pretrain``, ``pretrain-encoder``) and ``--loader-workers`` DataLoader processes
-(``train``, ``pretrain``). Old spellings (``evaluate --kind``, ``train --workers``) still work,
-hidden from ``--help``, and print a warning naming the new one.
+``evaluate``), ``--kind`` the scene kind (``generate``), ``--workers`` generator processes,
+``--loader-workers`` DataLoader processes, ``--encoder`` the image encoder and ``--no-progress``
+turns progress bars off. Old spellings (``evaluate --kind``, ``train --workers``, ``--quiet``,
+``pretrain-encoder --backbone``) still work, hidden from ``--help``, and warn with the new name.
 
 Taught in notebook 00 ("Quickstart") and notebook 08 ("Training").
 """
@@ -113,7 +113,7 @@ def _shard(text: str) -> tuple[int, int]:
 def _cmd_verify(args: argparse.Namespace) -> int:
     from ..data import verify_dataset
 
-    report = verify_dataset(args.root, remove=args.remove_bad, progress=not args.quiet)
+    report = verify_dataset(args.root, remove=args.remove_bad, progress=not args.no_progress)
     print(f"handmesh verify: {report}")
     if report.removed:
         print("rerun the same `handmesh generate` command to write the removed samples again")
@@ -127,7 +127,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     from ..data import META_FILE, verify_dataset
 
     if args.verify and (Path(args.out) / META_FILE).exists():
-        report = verify_dataset(args.out, remove=True, progress=not args.quiet)
+        report = verify_dataset(args.out, remove=True, progress=not args.no_progress)
         print(f"handmesh generate --verify: {report}")
         if not report.ok:  # nothing generated: the samples left would count as done
             raise ValueError(report.advice() or "some bad samples could not be removed (see "
@@ -136,7 +136,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     s = interact.generate_interactions(
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,
         workers=args.workers, balance_vr=args.balance_vr, shard=args.shard, limits=args.limits,
-        durable=not args.no_fsync, progress=not args.quiet, vr_probe=args.vr_probe,
+        durable=not args.no_fsync, progress=not args.no_progress, vr_probe=args.vr_probe,
         frame_share=args.frame_share, thumb_zero_elevation=args.thumb_zero_elevation)
     print(f"handmesh generate: {s.written} samples written, {s.skipped} already present "
           f"(skipped), {s.attempts} candidates, {s.samples_per_second:.2f} samples/s, "
@@ -160,9 +160,8 @@ def _channels(text: str) -> tuple[int, ...]:
     except ValueError:
         channels = ()
     if not channels or min(channels) < 1:
-        raise argparse.ArgumentTypeError(
-            f"--channels must be comma-separated positive integers (e.g. 16,24,32,48,64), got "
-            f"{text!r}")
+        raise argparse.ArgumentTypeError("--channels must be comma-separated positive integers "
+                                         f"(e.g. 16,24,32,48,64), got {text!r}")
     return channels
 
 
@@ -178,8 +177,7 @@ def _positive_int(text: str) -> int:
 
 
 def _device(text: str) -> str:
-    """``auto``, ``cpu``, ``cuda``, ``cuda:N`` or ``mps`` (torch's other device types are not
-    trained on)."""
+    """``auto``, ``cpu``, ``cuda``, ``cuda:N`` or ``mps`` (other torch devices: not trained on)."""
     if not re.fullmatch(r"auto|cpu|cuda(:\d+)?|mps", text):
         raise argparse.ArgumentTypeError(f"must be auto, cpu, cuda, cuda:N or mps, got {text!r}")
     return text
@@ -246,7 +244,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     print(f"handmesh evaluate: {ev['num_samples']} samples of {args.data} (targets centred at "
           f"joint 9; '{BASELINE_ROW}' = the template's open hand for every image)")
     print(headline(sc, ev["baseline"]["scores"]))
-    print(f"MPVPE {sc['mpvpe']:.2f} mm, AUC vertices {sc['auc_verts']:.3f} (0-50 mm)")
+    if "mpvpe" in sc:  # joints only when the network's mesh is not the data's (a note says so)
+        print(f"MPVPE {sc['mpvpe']:.2f} mm, AUC vertices {sc['auc_verts']:.3f} (0-50 mm)")
     print(ev["comparison"])
     for name, path in ev["files"].items():
         print(f"{name}: {path}")
@@ -258,10 +257,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of the ``handmesh`` command (sub-commands included)."""
-    parser = argparse.ArgumentParser(
-        prog="handmesh",
-        description="MSMR-Net tutorial toolkit: generate INTER-SH scenes, train, evaluate, demo.",
-    )
+    parser = argparse.ArgumentParser(prog="handmesh", description="MSMR-Net tutorial toolkit: "
+                                     "generate INTER-SH scenes, train, evaluate, demo.")
     parser.add_argument("--debug", action="store_true",
                         help="show the full traceback of an error instead of one line")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -321,7 +318,6 @@ def build_parser() -> argparse.ArgumentParser:
                      help="before resuming, re-read every sample already in OUT and remove "
                      "the unreadable ones, so that this run writes them again (a meta.json "
                      "that disagrees with the samples stops it: nothing removed)")
-    gen.add_argument("--quiet", action="store_true", help="no progress bar")
     gen.set_defaults(func=_cmd_generate)
 
     ver = sub.add_parser("verify", help="re-read every sample of an INTER-SH root and list the "
@@ -332,8 +328,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="delete the unreadable samples; rerunning the same generate command "
                      "writes them again, byte for byte (samples that read correctly but "
                      "disagree with meta.json are never removed)")
-    ver.add_argument("--quiet", action="store_true", help="no progress bar")
     ver.set_defaults(func=_cmd_verify)
+    for p in (gen, ver):  # --quiet: their old spelling
+        p.add_argument("--no-progress", action="store_true", help="no progress bar")
+        p.add_argument("--quiet", action=_DeprecatedAlias, nargs=0, dest="no_progress",
+                       canonical="--no-progress")
 
     tr = sub.add_parser("train", help="train MSMR-Net on an INTER-SH (or FreiHAND) root; "
                         "sizes default to the HANDMESH_BUDGET tier; works under torchrun")

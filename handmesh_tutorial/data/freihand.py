@@ -30,7 +30,8 @@ as the template (``handmesh train --dataset freihand --template MANO_RIGHT.pkl``
 own hand has 779 vertices: its 778 skin vertices (all but the last, the wrist cap's centre) are
 the MakeHuman mesh's, not MANO's, so no conversion gives meaningful vertex scores; its joints can
 be scored alone ([`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores] with
-``pred_verts=None``). [`handmesh_tutorial.testing`][handmesh_tutorial.testing] writes a tiny
+``pred_verts=None``; ``handmesh evaluate --dataset freihand`` does so for such a network, and
+says so). [`handmesh_tutorial.testing`][handmesh_tutorial.testing] writes a tiny
 MANO-format pickle and a tiny FreiHAND-format root to try the whole way on.
 
 No notebook reads FreiHAND (it cannot be downloaded here); notebook 09 ("Evaluation") scores

@@ -148,11 +148,14 @@ def _item_kinds(dataset, index: np.ndarray) -> list | None:
 
 def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kinds,
                        faces) -> dict:
-    """Scores, per-sample errors and the VR / kind / overall rows of one set of predictions."""
+    """Scores, per-sample errors and the VR / kind / overall rows of one set of predictions;
+    joints only when the predicted mesh has another vertex count than the ground truth's."""
+    verts = pred_vertices.shape[1] == r["vertices"].shape[1]
     errors = M.per_sample_scores(pred_joints=pred_joints, gt_joints=r["joints"],
-                                 pred_verts=pred_vertices, gt_verts=r["vertices"])
+                                 pred_verts=pred_vertices if verts else None,
+                                 gt_verts=r["vertices"] if verts else None)
     scores = M.scores_from_errors(errors)
-    if faces is not None:
+    if faces is not None and verts:
         pv, gv = pred_vertices.double().numpy(), r["vertices"].double().numpy()
         errors["roughness_deg"] = roughness_deg(pv, gv, faces)
         errors["flipped"] = flipped_face_fraction(pv, gv, faces)
@@ -160,11 +163,13 @@ def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kind
         scores["flipped"] = float(errors["flipped"].mean())
     per_sample = {
         "index": r["index"].numpy(), "vr": vr, "mirrored": r["mirrored"].numpy(),
-        "mpjpe": 1000 * errors["joint_err"].mean(1), "mpvpe": 1000 * errors["vert_err"].mean(1),
+        "mpjpe": 1000 * errors["joint_err"].mean(1),
         "pa_mpjpe": 1000 * errors["joint_err_pa"].mean(1),
-        "pa_mpvpe": 1000 * errors["vert_err_pa"].mean(1),
-        "f_at_5mm": errors["fscore"][:, 0], "f_at_15mm": errors["fscore"][:, 1],
     }
+    if verts:
+        per_sample.update(mpvpe=1000 * errors["vert_err"].mean(1),
+                          pa_mpvpe=1000 * errors["vert_err_pa"].mean(1),
+                          f_at_5mm=errors["fscore"][:, 0], f_at_15mm=errors["fscore"][:, 1])
     for key in M.SURFACE_KEYS:
         if key in errors:
             per_sample[key] = errors[key]
@@ -175,10 +180,8 @@ def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kind
         errors, kinds, order=[k for k in KINDS if k in set(kinds)])
     overall = {"bin": "all", "count": len(vr), "mpjpe": scores["mpjpe"],
                "rr_mpjpe": 1000 * float(errors["joint_err_rr"].mean()),
-               "pa_mpjpe": scores["pa_mpjpe"], "auc": scores["auc_joints_20mm"],
-               "pa_mpvpe": scores["pa_mpvpe"], "f_at_5mm": scores["f_at_5mm"],
-               "f_at_15mm": scores["f_at_15mm"]}
-    for key in M.SURFACE_KEYS:
+               "pa_mpjpe": scores["pa_mpjpe"], "auc": scores["auc_joints_20mm"]}
+    for key in ("pa_mpvpe", "f_at_5mm", "f_at_15mm", *M.SURFACE_KEYS):
         if key in scores:
             overall[key] = scores[key]
     return {"errors": errors, "scores": scores, "per_sample": per_sample, "vr_table": vr_table,
@@ -258,7 +261,9 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
         ``skipped`` (``[{"index": reader index, "sample": folder name such as "000015",
         "error": message}, ...]``, the items ``skip_bad`` left out; also in ``eval.json``),
-        ``notes`` (list of str: files not written, and why).
+        ``notes`` (list of str: files not written, and why). A network whose mesh is not the
+        data's (the shipped MakeHuman hand on FreiHAND's 778-vertex MANO meshes) is scored on
+        its joints only: the vertex and surface keys are absent and a note says so.
 
     Shapes:
         ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
@@ -323,9 +328,9 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     mean = None
     if mean_hand is not None:
         mv = torch.as_tensor(mean_hand, dtype=torch.float64).detach().cpu().numpy()
-        if mv.shape != tuple(r["vertices"].shape[1:]):
-            raise ValueError(f"mean_hand must be {tuple(r['vertices'].shape[1:])}, got "
-                             f"{mv.shape}")
+        if mv.shape != tuple(r["pred_vertices"].shape[1:]):
+            raise ValueError(f"mean_hand must be {tuple(r['pred_vertices'].shape[1:])}, got "
+                             f"{mv.shape}: the network's vertices")
         mean_v, mean_j = constant_hand_predictions(mv, net.joint_regressor, len(vr))
         mean = _score_predictions(mean_j, mean_v, r, vr, kinds, faces)
     table = M.format_table([*model["vr_table"], *model["kind_table"], model["overall"]])
@@ -355,6 +360,12 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         "skipped": skipped,
     }
     result["notes"] = []
+    nv, ngt = r["pred_vertices"].shape[1], r["vertices"].shape[1]
+    if nv != ngt:
+        result["notes"].append(
+            f"vertex scores left out: the network predicts {nv} vertices, the ground truth has "
+            f"{ngt} (another mesh); joints only. To score vertices, train with the data's mesh "
+            "(FreiHAND: handmesh train --template MANO_RIGHT.pkl)")
     if out_dir is not None:
         result["files"] = _write_eval(Path(out_dir), result, source, errors)
         if _is_freihand(dataset):
@@ -421,8 +432,9 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
         return files
 
     fig, ax = plt.subplots(figsize=(5, 3.6))
-    curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors["vert_err_pa"],
+    curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors.get("vert_err_pa"),
               "joints (root-rel.)": errors["joint_err_rr"]}
+    curves = {k: v for k, v in curves.items() if v is not None}  # joints only: no vertices
     if res["baseline"] is not None:  # the bar to clear, on the same samples
         curves["rest hand, joints (PA)"] = res["baseline"]["errors"]["joint_err_pa"]
     if res["mean_hand_baseline"] is not None:
