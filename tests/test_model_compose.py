@@ -4,6 +4,7 @@ heads one can pass, and ``ModelConfig`` presets, against digests of the networks
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from pathlib import Path
@@ -14,7 +15,12 @@ import torch
 import trimesh
 
 from handmesh_tutorial.nn import model as M
+from handmesh_tutorial.nn import outputs as O
+from handmesh_tutorial.nn.config import ModelConfig
+from handmesh_tutorial.nn.decoder import MultiPathDecoder, SinglePathDecoder
 from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+from handmesh_tutorial.nn.keypoints import KeypointEncoder
+from handmesh_tutorial.nn.spiral import SpiralConv
 
 torch.set_num_threads(1)
 
@@ -59,7 +65,7 @@ CASES = {
 
 def build_case(name: str, tmpl_h, **extra):
     tmpl, h = tmpl_h
-    kw = dict(CASES[name])
+    kw = {**CASES[name], **extra}
     if kw.get("output") == "skinned":  # needs a hand with skinning weights
         from handmesh_tutorial.hand import HandModel
 
@@ -68,7 +74,7 @@ def build_case(name: str, tmpl_h, **extra):
     torch.manual_seed(0)
     kw.setdefault("encoder", TinyEncoder())
     return M.build_model(template=tmpl, hierarchy=h, channels=(4, 8, 8), latent_channels=8,
-                         **kw, **extra).eval()
+                         **kw).eval()
 
 
 def digest(net) -> dict:
@@ -101,6 +107,168 @@ def test_the_default_networks_are_bit_identical_to_the_recorded_ones(sphere, nam
     if ref["torch"].split("+")[0] != torch.__version__.split("+")[0]:
         pytest.skip(f"reference recorded with torch {ref['torch']}, this is {torch.__version__}")
     assert digest(build_case(name, sphere)) == ref["cases"][name], name
+
+
+# --- conv= hooks ----------------------------------------------------------------------------
+
+
+class DepthwiseSpiralConv(torch.nn.Module):
+    """A depthwise-separable spiral convolution (HandMesh's DSConv idea, written here): one weight
+    per spiral position and input channel, summed over the spiral, then a per-vertex Linear."""
+
+    def __init__(self, in_channels, out_channels, indices):
+        super().__init__()
+        idx = torch.as_tensor(np.asarray(indices), dtype=torch.long)
+        self.register_buffer("indices", idx, persistent=False)
+        self.depthwise = torch.nn.Parameter(torch.randn(idx.shape[1], in_channels) * 0.3)
+        self.pointwise = torch.nn.Linear(in_channels, out_channels)
+
+    def forward(self, x):
+        b, v, c = x.shape
+        g = x.index_select(1, self.indices.reshape(-1)).view(b, v, -1, c)
+        return self.pointwise((g * self.depthwise).sum(2))
+
+
+@pytest.mark.parametrize("name", ["default", "single-xyz-spiral", "multi-offset-fuse-2blocks"])
+def test_the_default_conv_is_spiralconv_bit_for_bit(sphere, name):
+    assert digest(build_case(name, sphere, conv=SpiralConv)) == digest(build_case(name, sphere))
+
+
+@pytest.mark.parametrize("name", ["single-xyz-spiral", "multi-offset-fuse-2blocks"])
+def test_a_custom_conv_is_used_everywhere_and_trains(sphere, name):
+    made = []
+
+    def conv(cin, cout, indices):
+        made.append((cin, cout, np.shape(indices)))
+        return DepthwiseSpiralConv(cin, cout, indices)
+
+    plain = build_case(name, sphere)
+    net = build_case(name, sphere, conv=conv).train()
+    n_spiral = sum(isinstance(m, SpiralConv) for m in plain.modules())
+    customs = [m for m in net.modules() if isinstance(m, DepthwiseSpiralConv)]
+    # every spiral convolution (blocks, spiral head) became the custom one, none is left
+    assert n_spiral > 0 and len(customs) == len(made) == n_spiral
+    assert not any(isinstance(m, SpiralConv) for m in net.modules())
+    assert isinstance(net.decoder.head, DepthwiseSpiralConv)
+    assert net.decoder.depth == plain.decoder.depth > 0
+    levels = {len(v) for v in sphere[1].vertices}
+    assert {shape[0] for _, _, shape in made} <= levels and {s[1] for _, _, s in made} == {9}
+    # a training step moves every custom conv's weights, through finite gradients
+    before = [m.depthwise.detach().clone() for m in customs]
+    opt = torch.optim.SGD(net.parameters(), lr=0.1)
+    x = torch.randn(2, 3, 32, 32, generator=torch.Generator().manual_seed(2))
+    out = net(x)
+    (out["vertices"].pow(2).mean() + out["joints"].abs().mean()).backward()
+    assert all(torch.isfinite(m.depthwise.grad).all() for m in customs)
+    opt.step()
+    assert all(not torch.equal(b, m.depthwise) for b, m in zip(before, customs, strict=True))
+
+
+# --- ModelConfig ------------------------------------------------------------------------------
+
+
+def test_a_config_builds_the_same_network_as_the_keywords(sphere):
+    tmpl, h = sphere
+    kw = dict(CASES["multi-pyramid-rotation"], channels=(4, 8, 8), latent_channels=8)
+    torch.manual_seed(0)
+    cfg = ModelConfig(encoder=TinyEncoder(), **kw)
+    by_config = M.build_model(config=cfg, template=tmpl, hierarchy=h).eval()
+    ref = digest(build_case("multi-pyramid-rotation", sphere))
+    assert digest(by_config) == ref and by_config.config is cfg
+    torch.manual_seed(0)
+    positional = M.build_model(cfg.replace(encoder=TinyEncoder()), template=tmpl, hierarchy=h)
+    assert digest(positional.eval()) == ref
+    # the plain form round-trips through JSON into build_model's keywords
+    plain = cfg.replace(encoder="resnet10").to_dict()
+    assert ModelConfig(**json.loads(json.dumps(plain))) == cfg.replace(encoder="resnet10")
+    with pytest.raises(ValueError, match=r"\['encoder'\] hold modules"):
+        cfg.to_dict()
+
+
+def test_presets_name_whole_architectures(sphere):
+    tmpl, h = sphere
+    assert ModelConfig.preset("default") == ModelConfig()
+    paper = ModelConfig.preset("paper")
+    assert paper.output == "xyz" and paper.smoothing_length == 0.0 and paper.decoder == "multi"
+    cpu = ModelConfig.preset("cpu", global_rotation=False)
+    assert (cpu.encoder, cpu.keypoints, cpu.output, cpu.global_rotation) == (
+        "resnet10", True, "skinned", False)
+    small = dict(encoder=TinyEncoder(), channels=(4, 8, 8), latent_channels=8)
+    single = M.build_model(ModelConfig.preset("single-path", **small), template=tmpl, hierarchy=h)
+    assert isinstance(single.decoder, SinglePathDecoder)
+    assert isinstance(single.transformer, torch.nn.Identity)
+    multi = M.build_model(ModelConfig.preset("multi-path", **small), template=tmpl, hierarchy=h)
+    assert isinstance(multi.decoder, MultiPathDecoder)
+    assert isinstance(multi.transformer, torch.nn.Identity)
+    with pytest.raises(ValueError, match=r"unknown model preset 'tiny'; presets: \['cpu'"):
+        ModelConfig.preset("tiny")
+
+
+def test_config_values_are_checked_and_do_not_mix_with_keywords(sphere):
+    with pytest.raises(ValueError, match="num_blocks must be a positive integer, got 0"):
+        ModelConfig(num_blocks=0)
+    with pytest.raises(ValueError, match="decoder must be 'multi' or 'single', got 'double'"):
+        ModelConfig(decoder="double")
+    with pytest.raises(ValueError, match="head must be one of"):
+        ModelConfig(head="conv")
+    with pytest.raises(ValueError, match="output must be one of"):
+        ModelConfig(output="mesh")
+    assert ModelConfig(channels=[4, 8]).channels == (4, 8)
+    with pytest.raises(TypeError, match=r"config= and the keywords \['decoder'\].*replace"):
+        M.build_model(config=ModelConfig(), decoder="single", template=sphere[0])
+
+
+# --- output modules and heads one can pass ---------------------------------------------------
+
+
+def test_an_output_module_passed_in_equals_the_named_output(sphere):
+    tmpl, _ = sphere
+    for kind, case in (("offset", "multi-offset-fuse-2blocks"), ("xyz", "single-xyz-spiral")):
+        module = O.make_output(kind, tmpl, scale=0.1)
+        net = build_case(case, sphere, output=module)
+        assert net.vertex_output is module and net.output == kind
+        assert digest(net) == digest(build_case(case, sphere))
+
+
+def test_a_custom_output_module_sets_the_field_width_and_its_smoothing(sphere):
+    class Scaled(torch.nn.Module):
+        channels = 4  # xyz and a per-vertex gain
+
+        def forward(self, field):
+            return field[..., :3] * torch.sigmoid(field[..., 3:])
+
+    net = build_case("default", sphere, output=Scaled())
+    assert net.decoder.head.out_features == 4 and net.output == "Scaled"
+    assert not isinstance(net.smoothing, torch.nn.Identity)  # smoothed by default
+    Scaled.smooth_field = False
+    assert isinstance(build_case("default", sphere, output=Scaled()).smoothing, torch.nn.Identity)
+    out = net(torch.randn(1, 3, 32, 32))
+    assert out["vertices"].shape == (1, len(sphere[0].vertices), 3)
+    with pytest.raises(ValueError, match="needs an integer attribute channels"):
+        build_case("default", sphere, output=torch.nn.Identity())
+    with pytest.raises(ValueError, match=r"field must be \(B, 162, 12\), got \(1, 162, 3\)"):
+        O.make_output("affine", sphere[0])(torch.zeros(1, 162, 3))
+
+
+def test_a_rotation_head_and_a_keypoint_head_can_be_passed(sphere):
+    class Quarter(torch.nn.Module):  # a fixed quarter turn about z
+        def forward(self, features):
+            r = torch.tensor([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+            return r.expand(len(features), 3, 3)
+
+    plain = build_case("single-xyz-spiral", sphere)
+    turned = build_case("single-xyz-spiral", sphere, global_rotation=Quarter())
+    assert isinstance(turned.rotation, Quarter)
+    f = torch.randn(2, TinyEncoder.out_features)
+    with torch.no_grad():
+        a, b = plain.decode(f)["vertices"], turned.decode(f)["vertices"]
+    torch.testing.assert_close(b, a @ Quarter()(f).transpose(1, 2))
+    tmpl, h = sphere
+    narrow = functools.partial(KeypointEncoder, width=32)
+    net = M.build_model("resnet10", keypoints=narrow, template=tmpl, hierarchy=h,
+                        channels=(4, 8, 8), latent_channels=8)
+    assert isinstance(net.encoder, KeypointEncoder) and net.encoder.heatmaps.in_channels == 32
+    assert net(torch.randn(1, 3, 64, 64))["uv"].shape == (1, 21, 2)
 
 
 if __name__ == "__main__":  # record the reference (run once, at a commit whose networks it pins)
