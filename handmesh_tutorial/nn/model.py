@@ -15,7 +15,7 @@ Paper section "Multi-path Mesh Decoder" (architecture figure) and Table 3 (ablat
 5. joints ``(B, J, 3)`` = the template's joint regressor ``(J, V)`` applied to the vertices.
 
 [`build_model`][handmesh_tutorial.nn.model.build_model] builds it from keywords or a
-[`ModelConfig`][handmesh_tutorial.nn.model.ModelConfig] (named presets:
+[`ModelConfig`][handmesh_tutorial.nn.config.ModelConfig] (named presets:
 ``ModelConfig.preset("paper")``), and takes the parts one may swap: the encoder, the output module
 (``output=``), the rotation head (``global_rotation=``), the keypoint head (``keypoints=``) and the
 mesh convolution of every block and decoder (``conv=``, as HandMesh's ``meshconv=``). Everything
@@ -82,8 +82,8 @@ class MSMRNet(nn.Module):
             the translation ``t_v`` only.
         faces: ``(F, 3)`` faces of the output mesh (kept for plotting and export).
         template_vertices: ``(V, 3)`` root-centred template
-            ([`root_centred_template`][handmesh_tutorial.nn.model.root_centred_template]), needed by
-            ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
+            ([`root_centred_template`][handmesh_tutorial.nn.mesh_template.root_centred_template]),
+            needed by ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
         output: a name, ``"affine"``, ``"offset"``, ``"xyz"`` or ``"skinned"``, or an output
             module ``field (B, V, C_out) -> vertices (B, V, 3)``
             ([`handmesh_tutorial.nn.outputs`][handmesh_tutorial.nn.outputs]); kept as
@@ -237,14 +237,14 @@ def build_model(encoder: str | nn.Module | ModelConfig = "resnet18", decoder: st
     Args:
         encoder: encoder name (``resnet10``, ``resnet18``, ``resnet34``, ``resnet50``,
             ``hrnet18``), a module ``(B, 3, H, W) -> (B, D)`` with attribute ``out_features``, or
-            a [`ModelConfig`][handmesh_tutorial.nn.model.ModelConfig] (as ``config``).
+            a [`ModelConfig`][handmesh_tutorial.nn.config.ModelConfig] (as ``config``).
         decoder: ``"multi"`` (MSMR multi-path) or ``"single"`` (coarse-to-fine baseline).
         attention: put the transformer on the coarse-mesh tokens.
         template: see [`as_template`][handmesh_tutorial.nn.mesh_template.as_template]; default the
             open right hand.
         channels: decoder channels per hierarchy level, finest first (default
-            [`DEFAULT_MULTI_CHANNELS`][handmesh_tutorial.nn.model.DEFAULT_MULTI_CHANNELS] or
-            [`DEFAULT_SINGLE_CHANNELS`][handmesh_tutorial.nn.model.DEFAULT_SINGLE_CHANNELS]).
+            [`DEFAULT_MULTI_CHANNELS`][handmesh_tutorial.nn.config.DEFAULT_MULTI_CHANNELS] or
+            [`DEFAULT_SINGLE_CHANNELS`][handmesh_tutorial.nn.config.DEFAULT_SINGLE_CHANNELS]).
         latent_channels: channels per coarse-mesh token (FC output, transformer width).
         spiral_length: spiral length ``L``.
         dilation: spiral dilation.
@@ -281,7 +281,7 @@ def build_model(encoder: str | nn.Module | ModelConfig = "resnet18", decoder: st
         skinning: for ``output="skinned"``, the hand model whose skinning weights, joints and
             shape space are used (default: ``template`` when it has them, else the library's right
             hand); its rest vertices must be the template's.
-        config: the architecture as a [`ModelConfig`][handmesh_tutorial.nn.model.ModelConfig]
+        config: the architecture as a [`ModelConfig`][handmesh_tutorial.nn.config.ModelConfig]
             (e.g. ``ModelConfig.preset("cpu")``) instead of the keywords ``encoder`` to
             ``global_rotation``, which must then be left out.
         conv: the mesh convolution of every residual block and of a spiral head,
