@@ -41,7 +41,7 @@ class ModelConfig:
     per keyword (see there for each one's meaning); named presets in ``PRESETS``.
 
     Fields hold plain values (names, numbers, tuples), which
-    [`to_dict`][handmesh_tutorial.nn.model.ModelConfig.to_dict] gives back as ``build_model``
+    [`to_dict`][handmesh_tutorial.nn.config.ModelConfig.to_dict] gives back as ``build_model``
     keywords; ``encoder``, ``output`` and ``global_rotation`` may also hold a module and
     ``keypoints`` a factory (such a config has no plain form).
 

@@ -341,7 +341,7 @@ def _build(c: ModelConfig, template, hierarchy, skinning, conv) -> MSMRNet:
     enc = build_encoder(c.encoder) if isinstance(c.encoder, str) else c.encoder
     if not hasattr(enc, "out_features"):
         raise ValueError("a custom encoder needs an attribute out_features (its output width D)")
-    if c.keypoints is not False:
+    if c.keypoints:
         factory = c.keypoints if callable(c.keypoints) else KeypointEncoder
         enc = factory(enc, num_joints=len(tmpl.joint_regressor))
     if isinstance(c.output, nn.Module):
