@@ -6,8 +6,10 @@
   coarse mesh; single- and multi-path decoders; notebook 07.
 * `encoder`, `keypoints`, `rotation`, `pose_encoder`: ResNet/HRNet encoders, the 2D keypoint head,
   the global-rotation head, the pretrained hand encoder's network and file.
-* `skinned`, `smoothing`, `model`: the skinned output, the output smoothing, `build_model` /
-  `MSMRNet`; notebook 07.
+* `outputs`, `skinned`, `smoothing`: what the decoder's field means (affine, offset, xyz,
+  skinned output modules), the output smoothing; notebook 07.
+* `mesh_template`, `config`, `model`: the template a network is built on, `ModelConfig` and its
+  presets, `build_model` / `MSMRNet`; notebook 07.
 * `losses`, `quantize`: the training losses; int8 weight files.
 
 Submodules are imported on first attribute access (``hmt.nn.spiral``). Docs page "The pipeline".
@@ -17,8 +19,9 @@ from __future__ import annotations
 
 import importlib
 
-_SUBMODULES = ("blocks", "decoder", "encoder", "hierarchy", "keypoints", "losses", "model",
-               "pose_encoder", "quantize", "rotation", "skinned", "smoothing", "spiral")
+_SUBMODULES = ("blocks", "config", "decoder", "encoder", "hierarchy", "keypoints", "losses",
+               "mesh_template", "model", "outputs", "pose_encoder", "quantize", "rotation",
+               "skinned", "smoothing", "spiral")
 
 __all__ = list(_SUBMODULES)
 

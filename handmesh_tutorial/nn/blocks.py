@@ -12,15 +12,15 @@ Hierarchy level ``0`` is the finest mesh, level ``L-1`` the coarsest (the order 
 ``mesh_hierarchy``). ``down[l]`` maps level ``l`` to ``l+1`` (shape ``V_{l+1} x V_l``), ``up[l]``
 maps level ``l+1`` to ``l`` (shape ``V_l x V_{l+1}``).
 
-Sparse matrices are applied as torch CSR matrix products (forward ``M @ x``, backward ``M^T @ g``
-with the transpose precomputed), on features laid out vertex-major ``(V, B*C)``: one sparse
-product per map and batch instead of a gather of ``(B, V, K, C)`` and a scatter-add in the
-backward pass (about 8x faster on a CPU at the demo's sizes, ``benchmarks/train.py``). The
-original formulation (a gather and a weighted sum over at most ``K`` non-zeros per row) stays as
-``method="gather"``, the reference the tests compare against, and the path taken while
-``torch.compile``, ``torch.export``, the ONNX exporter or ``torch.jit.trace`` capture a graph
-(sparse tensors cannot be traced). No ``torch_scatter`` is needed, the result is deterministic
-and the matrices are buffers that follow ``.to(device)``.
+The mesh convolution is a hook: every block that convolves takes ``conv``, a factory
+``conv(in_channels, out_channels, indices) -> nn.Module`` mapping ``(B, V, C_in)`` to
+``(B, V, C_out)`` with ``indices`` the ``(V, L)`` spiral indices (default
+[`SpiralConv`][handmesh_tutorial.nn.spiral.SpiralConv]; HandMesh's ``meshconv=`` swaps in its
+depthwise-separable ``DSConv`` the same way).
+
+Fixed sparse maps ([`SparseVertexMap`][handmesh_tutorial.nn.blocks.SparseVertexMap]) are torch CSR
+products on vertex-major features, with a gather-and-sum reference path that graph capture uses;
+why and how fast: docs page "The network".
 
 Taught in notebook 07 ("The multi-path decoder").
 
@@ -28,7 +28,7 @@ Taught in notebook 07 ("The multi-path decoder").
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -269,26 +269,28 @@ def channel_map(in_channels: int, out_channels: int) -> nn.Sequential:
 class ResSpiralBlock(nn.Module):
     """Residual spiral block: a ResNet basic block on a mesh.
 
-    ``y = ELU(LN(conv2(ELU(LN(conv1(x))))) + shortcut(x))`` with ``conv1``, ``conv2``
-    [`SpiralConv`][handmesh_tutorial.nn.spiral.SpiralConv] layers, LayerNorm over the channels
-    instead of BatchNorm, ELU as in the paper. The shortcut is the identity, or ``Linear +
-    LayerNorm`` (a
-    projection) when the channel count changes.
+    ``y = ELU(LN(conv2(ELU(LN(conv1(x))))) + shortcut(x))`` with ``conv1``, ``conv2`` made by
+    ``conv`` ([`SpiralConv`][handmesh_tutorial.nn.spiral.SpiralConv] layers by default),
+    LayerNorm over the channels instead of BatchNorm, ELU as in the paper. The shortcut is the
+    identity, or ``Linear + LayerNorm`` (a projection) when the channel count changes.
 
     Args:
         in_channels: ``C_in``.
         out_channels: ``C_out``.
         indices: spiral indices ``(V, L)`` of the mesh this block runs on.
+        conv: the mesh convolution's factory, ``conv(in_channels, out_channels, indices)``,
+            a module ``(B, V, C_in) -> (B, V, C_out)``.
 
     Shapes:
         ``(B, V, C_in) -> (B, V, C_out)``.
     """
 
-    def __init__(self, in_channels: int, out_channels: int, indices):
+    def __init__(self, in_channels: int, out_channels: int, indices,
+                 conv: Callable[..., nn.Module] = SpiralConv):
         super().__init__()
-        self.conv1 = SpiralConv(in_channels, out_channels, indices)
+        self.conv1 = conv(in_channels, out_channels, indices)
         self.norm1 = nn.LayerNorm(out_channels)
-        self.conv2 = SpiralConv(out_channels, out_channels, indices)
+        self.conv2 = conv(out_channels, out_channels, indices)
         self.norm2 = nn.LayerNorm(out_channels)
         self.act = nn.ELU()
         self.shortcut = (nn.Identity() if in_channels == out_channels
@@ -308,12 +310,15 @@ class MultiResolutionGroupConv(nn.Module):
         channels: channels of each branch, ``C_b``.
         spirals: spiral indices of each branch's mesh, ``(V_b, L)``, same order as ``channels``.
         num_blocks: residual spiral blocks per branch (each has two spiral convolutions).
+        conv: the mesh convolution's factory
+            ([`ResSpiralBlock`][handmesh_tutorial.nn.blocks.ResSpiralBlock]).
 
     Shapes:
         list of ``(B, V_b, C_b)`` -> list of ``(B, V_b, C_b)``.
     """
 
-    def __init__(self, channels: Sequence[int], spirals: Sequence, num_blocks: int = 1):
+    def __init__(self, channels: Sequence[int], spirals: Sequence, num_blocks: int = 1,
+                 conv: Callable[..., nn.Module] = SpiralConv):
         super().__init__()
         if len(channels) != len(spirals):
             raise ValueError(f"got {len(channels)} channel counts but {len(spirals)} spiral "
@@ -322,7 +327,7 @@ class MultiResolutionGroupConv(nn.Module):
             raise ValueError(f"num_blocks must be >= 1, got {num_blocks}")
         self.num_blocks = num_blocks
         self.branches = nn.ModuleList(
-            nn.Sequential(*[ResSpiralBlock(c, c, idx) for _ in range(num_blocks)])
+            nn.Sequential(*[ResSpiralBlock(c, c, idx, conv) for _ in range(num_blocks)])
             for c, idx in zip(channels, spirals, strict=True))
 
     def forward(self, xs: Sequence[torch.Tensor]) -> list[torch.Tensor]:

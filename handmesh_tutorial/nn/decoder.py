@@ -4,48 +4,44 @@ Paper section "Multi-path Mesh Decoder" and Table 3 (ablation single vs multi-pa
 
 Both decoders take a mesh hierarchy
 ([`handmesh_tutorial.nn.hierarchy.mesh_hierarchy`][handmesh_tutorial.nn.hierarchy.mesh_hierarchy]:
-level 0 finest, level ``L-1`` coarsest; ``down[l]`` ``(V_{l+1}, V_l)``, ``up[l]`` ``(V_l,
-V_{l+1})``) and
-one spiral index array per level
+level 0 finest, level ``L-1`` coarsest; ``down[l]`` ``(V_{l+1}, V_l)``, ``up[l]``
+``(V_l, V_{l+1})``) and one spiral index array per level
 ([`hierarchy_spirals`][handmesh_tutorial.nn.decoder.hierarchy_spirals]). They map features on the
-coarsest mesh ``(B, V_{L-1}, channels[-1])`` to vertex coordinates on the finest mesh
-``(B, V_0, 3)``. ``channels`` is given per level, finest first.
+coarsest mesh ``(B, V_{L-1}, C_in)`` to a per-vertex field on the finest mesh
+``(B, V_0, out_channels)``. ``channels`` is given per level, finest first.
 
 * [`SinglePathDecoder`][handmesh_tutorial.nn.decoder.SinglePathDecoder] walks coarse to fine: blocks
-  on the coarsest mesh, upsample, blocks, ..., blocks on the finest mesh, spiral convolution to xyz.
+  on the coarsest mesh, upsample, blocks, ..., blocks on the finest mesh, then the head.
 * [`MultiPathDecoder`][handmesh_tutorial.nn.decoder.MultiPathDecoder] has ``L`` stages (five for the
   usual 4-fold hierarchy). Stage 1 runs on the coarsest mesh only; each later stage first adds the
   next finer resolution (a transition that upsamples the previous finest branch, like HRNet's
   transition layers) and then applies a multi-resolution group convolution and a multi-resolution
-  fusion to all its parallel branches. The output head reads the finest branch (optionally all
+  fusion to all its parallel branches. The head reads the finest branch (optionally all
   branches upsampled and concatenated).
 
-With the same ``num_blocks`` both have the same depth: ``2 * num_blocks`` spiral convolutions per
-level (single) or per stage (multi) on every input-to-output path, plus the head when it is a spiral
-convolution; see [`SinglePathDecoder.depth`][handmesh_tutorial.nn.decoder.SinglePathDecoder.depth].
-The fusion and transition layers are per-vertex ``Linear`` maps, which HRNet counts as 1x1
-convolutions,
-not as spatial depth.
+With the same ``num_blocks`` both have the same depth: ``2 * num_blocks`` mesh convolutions per
+level (single) or per stage (multi) on every input-to-output path, plus the head when it is a
+spiral convolution
+([`SinglePathDecoder.depth`][handmesh_tutorial.nn.decoder.SinglePathDecoder.depth]).
+Fusion and transition layers are per-vertex ``Linear`` maps (HRNet's 1x1 convolutions), not depth.
 
-**Output head** (``head``, measured with
-``fit_decoder`` (``benchmarks/fit_probe.py``), 32 posed hands):
-``"linear"`` (default), a per-vertex ``Linear`` on the finest features; ``"spiral"``, a
-[`SpiralConv`][handmesh_tutorial.nn.spiral.SpiralConv] as in CMR/MobRecon (slower and slightly worse
-in the fit: 1.48 vs 1.16 mm); ``"pyramid"``, a ``Linear`` on every level, upsampled and summed
-([`PyramidHead`][handmesh_tutorial.nn.decoder.PyramidHead]; worse in the fit). By default the head
-starts at zero (``zero_head``), so the decoder's first output is all zeros instead of a random
-field: with the Xavier-initialised spiral head the first output of the default decoder was ~0.6 m of
-noise (after the model's ``output_scale``), and 300 fit steps left 10 mm of error and a crumpled
-surface; with a zero head 2.1 mm. [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet] reads the output
-as a deformation of its template, so it starts exactly at the template.
+**Output head** (``head``): ``"linear"`` (default), a per-vertex ``Linear`` on the finest features;
+``"spiral"``, a mesh convolution as in CMR/MobRecon; ``"pyramid"``, a ``Linear`` on every level,
+upsampled and summed ([`PyramidHead`][handmesh_tutorial.nn.decoder.PyramidHead]). ``zero_head``
+starts it at zero, so the first field is all zeros and
+[`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet] starts at its template.
 
-Taught in notebook 07 ("The multi-path decoder").
+**The mesh convolution** (``conv``): every spiral convolution, the spiral head's included, is made
+by ``conv(in_channels, out_channels, indices)`` (default
+[`SpiralConv`][handmesh_tutorial.nn.spiral.SpiralConv]), as HandMesh's ``meshconv=``.
 
+Why these defaults (fits of the heads, the zero start): docs page "The network". Taught in
+notebook 07 ("The multi-path decoder").
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 from torch import nn
@@ -83,6 +79,11 @@ def hierarchy_spirals(hierarchy, length: int = 9, dilation: int = 1) -> list:
 def count_spiral_convs(module: nn.Module) -> int:
     """Number of [`SpiralConv`][handmesh_tutorial.nn.spiral.SpiralConv] layers inside ``module``."""
     return sum(isinstance(m, SpiralConv) for m in module.modules())
+
+
+def _conv_depth(module: nn.Module) -> int:
+    """Mesh convolutions in ``module``'s residual blocks (two per block), whatever ``conv``."""
+    return 2 * sum(isinstance(m, ResSpiralBlock) for m in module.modules())
 
 
 def _check(hierarchy, spirals, channels) -> int:
@@ -144,9 +145,10 @@ class PyramidHead(nn.Module):
 HEADS = ("spiral", "linear", "pyramid")
 
 
-def _head(kind: str, channels: Sequence[int], out_channels: int, indices, up) -> nn.Module:
+def _head(kind: str, channels: Sequence[int], out_channels: int, indices, up,
+          conv: Callable[..., nn.Module] = SpiralConv) -> nn.Module:
     if kind == "spiral":
-        return SpiralConv(channels[0], out_channels, indices)
+        return conv(channels[0], out_channels, indices)
     if kind == "linear":
         return nn.Linear(channels[0], out_channels)
     if kind == "pyramid":
@@ -172,8 +174,8 @@ def _stem(in_channels: int, out_channels: int) -> nn.Module:
 class SinglePathDecoder(nn.Module):
     """Single-path coarse-to-fine spiral decoder (the baseline of the paper's ablation).
 
-    ``coarsest blocks -> up -> blocks -> ... -> finest blocks -> SpiralConv -> xyz``. The first
-    block of a level changes the channel count (projection shortcut).
+    ``coarsest blocks -> up -> blocks -> ... -> finest blocks -> head``. The first block of a
+    level changes the channel count (projection shortcut).
 
     Args:
         hierarchy: mesh hierarchy with ``.down`` and ``.up`` (scipy sparse), finest first.
@@ -184,15 +186,22 @@ class SinglePathDecoder(nn.Module):
         in_channels: channels of the coarse input ``C_in`` (default ``channels[-1]``); when it
             differs, a stem ``ELU(LN(Linear))`` maps it to ``channels[-1]``.
         head: ``"linear"``, ``"spiral"`` or ``"pyramid"`` (see the module docstring).
-        zero_head: initialise the head's weights and bias to zero (output 0 at the start).
+        zero_head: initialise the head's ``Linear`` weights and biases to zero (output 0 at the
+            start).
+        conv: the mesh convolution's factory, ``conv(in_channels, out_channels, indices)`` ->
+            module ``(B, V, C_in) -> (B, V, C_out)``; used by every block and a spiral head.
 
     Shapes:
         ``(B, V_{L-1}, C_in) -> (B, V_0, out_channels)``.
+
+    Raises:
+        ValueError: channels, spirals and hierarchy disagree on the number of levels or vertices.
     """
 
     def __init__(self, hierarchy, spirals: Sequence, channels: Sequence[int],
                  num_blocks: int = 1, out_channels: int = 3, in_channels: int | None = None,
-                 head: str = "linear", zero_head: bool = True):
+                 head: str = "linear", zero_head: bool = True,
+                 conv: Callable[..., nn.Module] = SpiralConv):
         super().__init__()
         n = _check(hierarchy, spirals, channels)
         self.channels = list(channels)
@@ -205,21 +214,21 @@ class SinglePathDecoder(nn.Module):
         self.upsample = nn.ModuleList()  # upsample[k] feeds levels[k + 1]
         for lv in range(n - 1, -1, -1):
             c_in = channels[min(lv + 1, n - 1)]  # the level above (the stem feeds the first)
-            blocks = [ResSpiralBlock(c_in if b == 0 else channels[lv], channels[lv], spirals[lv])
-                      for b in range(num_blocks)]
+            blocks = [ResSpiralBlock(c_in if b == 0 else channels[lv], channels[lv], spirals[lv],
+                                     conv) for b in range(num_blocks)]
             self.levels.append(nn.Sequential(*blocks))
             if lv > 0:
                 self.upsample.append(SparseVertexMap(hierarchy.up[lv - 1]))
         self.head_kind = head
-        self.head = _head(head, channels, out_channels, spirals[0], hierarchy.up)
+        self.head = _head(head, channels, out_channels, spirals[0], hierarchy.up, conv)
         if zero_head:
             _zero(self.head)
 
     @property
     def depth(self) -> int:
-        """Spiral convolutions on the longest input-to-output path (all of them, here; the
+        """Mesh convolutions on the longest input-to-output path (all of them, here; the
         head counts only when it is a spiral convolution)."""
-        return count_spiral_convs(self)
+        return _conv_depth(self) + int(self.head_kind == "spiral")
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Args: x ``(B, V_{L-1}, C_in)``. Returns ``(B, V_0, out_channels)``."""
@@ -247,17 +256,20 @@ class DecoderStage(nn.Module):
         num_blocks: residual blocks per branch.
         out_levels: levels the fusion outputs (default all; ``None`` and a single branch: no
             fusion).
+        conv: the mesh convolution's factory
+            ([`ResSpiralBlock`][handmesh_tutorial.nn.blocks.ResSpiralBlock]).
 
     Shapes:
         list of ``(B, V_l, C_l)`` (one per branch) -> list (one per output level).
     """
 
     def __init__(self, levels: Sequence[int], channels: Sequence[int], hierarchy,
-                 spirals: Sequence, num_blocks: int = 1, out_levels: Sequence[int] | None = None):
+                 spirals: Sequence, num_blocks: int = 1, out_levels: Sequence[int] | None = None,
+                 conv: Callable[..., nn.Module] = SpiralConv):
         super().__init__()
         self.levels = list(levels)
         self.group = MultiResolutionGroupConv(channels, [spirals[lv] for lv in levels],
-                                              num_blocks)
+                                              num_blocks, conv)
         if len(self.levels) > 1:
             self.fusion = MultiResolutionFusion(levels, channels, hierarchy.down, hierarchy.up,
                                                 out_levels=out_levels)
@@ -292,15 +304,23 @@ class MultiPathDecoder(nn.Module):
         in_channels: channels of the coarse input ``C_in`` (default ``channels[-1]``); when it
             differs, a stem ``ELU(LN(Linear))`` maps it to ``channels[-1]``.
         head: ``"linear"``, ``"spiral"`` or ``"pyramid"`` (see the module docstring).
-        zero_head: initialise the head's weights and bias to zero (output 0 at the start).
+        zero_head: initialise the head's ``Linear`` weights and biases to zero (output 0 at the
+            start).
+        conv: the mesh convolution's factory, ``conv(in_channels, out_channels, indices)`` ->
+            module ``(B, V, C_in) -> (B, V, C_out)``; used by every block and a spiral head.
 
     Shapes:
         ``(B, V_{L-1}, C_in) -> (B, V_0, out_channels)``.
+
+    Raises:
+        ValueError: channels, spirals and hierarchy disagree; ``fuse_head`` with
+            ``head="pyramid"``.
     """
 
     def __init__(self, hierarchy, spirals: Sequence, channels: Sequence[int],
                  num_blocks: int = 1, out_channels: int = 3, fuse_head: bool = False,
-                 in_channels: int | None = None, head: str = "linear", zero_head: bool = True):
+                 in_channels: int | None = None, head: str = "linear", zero_head: bool = True,
+                 conv: Callable[..., nn.Module] = SpiralConv):
         super().__init__()
         n = _check(hierarchy, spirals, channels)
         self.channels = list(channels)
@@ -322,7 +342,7 @@ class MultiPathDecoder(nn.Module):
             last = s == n - 1
             out_levels = levels[:1] if last and not (fuse_head or head == "pyramid") else None
             self.stages.append(DecoderStage(levels, [channels[lv] for lv in levels], hierarchy,
-                                            spirals, num_blocks, out_levels))
+                                            spirals, num_blocks, out_levels, conv))
         self.head_kind = head
         if fuse_head and head == "pyramid":
             raise ValueError("fuse_head and head='pyramid' exclude each other (the pyramid head "
@@ -336,19 +356,19 @@ class MultiPathDecoder(nn.Module):
             self.head_upsample = None
             head_in = channels[0]
         self.head = _head(head, [head_in] if fuse_head else channels, out_channels, spirals[0],
-                          hierarchy.up)
+                          hierarchy.up, conv)
         if zero_head:
             _zero(self.head)
 
     @property
     def depth(self) -> int:
-        """Spiral convolutions on the longest input-to-output path.
+        """Mesh convolutions on the longest input-to-output path.
 
         Every path crosses each stage once through one branch's blocks, so this is the sum over
         stages of the deepest branch, plus the head when it is a spiral convolution.
         """
-        per_stage = [max(count_spiral_convs(b) for b in st.group.branches) for st in self.stages]
-        return sum(per_stage) + count_spiral_convs(self.head)
+        per_stage = [max(_conv_depth(b) for b in st.group.branches) for st in self.stages]
+        return sum(per_stage) + int(self.head_kind == "spiral")
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Args: x ``(B, V_{L-1}, C_in)``. Returns ``(B, V_0, out_channels)``."""

@@ -9,176 +9,55 @@ Paper section "Multi-path Mesh Decoder" (architecture figure) and Table 3 (ablat
 3. ``transformer`` ([`CoarseMeshTransformer`][handmesh_tutorial.nn.blocks.CoarseMeshTransformer], or
    identity when ``attention=False``): long-range interactions between the coarse vertices;
 4. ``decoder`` ([`handmesh_tutorial.nn.decoder`][handmesh_tutorial.nn.decoder], single- or
-   multi-path) to a per-vertex field ``(B, V, 12)`` (or ``(B, V, 3)``), then ``smoothing`` (a fixed
-   sparse Laplacian smoothing of that field) and
-   [`MSMRNet.vertices_from_field`][handmesh_tutorial.nn.model.MSMRNet.vertices_from_field] to
-   vertices ``(B, V, 3)``;
+   multi-path) to a per-vertex field ``(B, V, C_out)``, then ``smoothing`` (a fixed sparse
+   Laplacian smoothing of that field) and ``vertex_output``
+   ([`handmesh_tutorial.nn.outputs`][handmesh_tutorial.nn.outputs]) to vertices ``(B, V, 3)``;
 5. joints ``(B, J, 3)`` = the template's joint regressor ``(J, V)`` applied to the vertices.
 
-**What the decoder predicts** (``output`` of
-[`build_model`][handmesh_tutorial.nn.model.build_model]). The paper's decoder regresses vertex
-coordinates. Fitting it to known hands
-(``fit_decoder`` (``benchmarks/fit_probe.py``), an auto-decoder: one
-learnable code per hand instead of an image) showed why every trained model came out as crumpled
-foil: the finest-level features differ from vertex to vertex, so the regressed coordinates carry
-vertex-level noise, and the surface is very sensitive to it (0.3 mm of independent noise per vertex
-already gives ~3 degrees of roughness,
-[`roughness_deg`][handmesh_tutorial.metrics.surface.roughness_deg]). Smoothing the output removes
-the noise, but not when the output is a position or an offset from the template: a bent finger moves
-its vertices by a *rotation* of the template, and the offsets of a thin curved finger are themselves
-rough (two smoothing steps on exact offsets already cost 0.95 mm and 3.2 degrees). The default
-``output="affine"`` therefore predicts, per vertex, an affine map ``A_v`` and a translation ``t_v``
-applied to the root-centred template vertex ``p_v``: ``v = (I + A_v) p_v + t_v``. A skinned hand is
-exactly of this form with ``A_v, t_v`` the skinning-weighted blends of the bone transforms, which
-are smooth (two smoothing steps on exact fields cost 0.35 mm and 1.1 degrees), so the field is
-smoothed before it is applied (``smoothing_length``). With the head starting at zero the model's
-first output is the template itself. ``"offset"`` (``v = p_v + s * d_v``) and ``"xyz"`` (``v = s *
-d_v``, the paper's) are kept for comparison. ``"skinned"`` goes one step further
-([`handmesh_tutorial.nn.skinned`][handmesh_tutorial.nn.skinned]): the field is pooled per bone with
-the template's skinning weights into one local rotation per joint and the shape parameters, and the
-vertices are the template skinned with them, so every output is a hand surface.
+[`build_model`][handmesh_tutorial.nn.model.build_model] builds it from keywords or a
+[`ModelConfig`][handmesh_tutorial.nn.config.ModelConfig] (named presets:
+``ModelConfig.preset("paper")``), and takes the parts one may swap: the encoder, the output module
+(``output=``), the rotation head (``global_rotation=``), the keypoint head (``keypoints=``) and the
+mesh convolution of every block and decoder (``conv=``, as HandMesh's ``meshconv=``). Everything
+topological (hierarchy, spirals, up/down maps, joint regressor) comes from the template and is
+rebuilt; the state dict holds only learned weights.
 
-The FC is kept modest by a small coarse width ``C`` (``latent_channels``, default 16); in CMR the FC
-is ~73% of the decoder's parameters; with a ResNet-18, our hand (49 coarse vertices) and the default
-channels ours is 410k parameters, 0.76 of the single-path decoder and 0.61 of the multi-path one.
-[`parameter_table`][handmesh_tutorial.nn.model.parameter_table] prints the split.
-
-Everything topological (hierarchy, spirals, up/down maps, joint regressor) comes from the template
-and is rebuilt by [`build_model`][handmesh_tutorial.nn.model.build_model]; the state dict holds only
-learned weights.
-
+Why the defaults (the affine output and its smoothing, the FC's width): docs page "The network".
 Taught in notebooks 07 ("The multi-path decoder") and 08 ("Training").
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+import dataclasses
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import torch
 from torch import nn
 
 from .blocks import CoarseMeshTransformer, SparseVertexMap
+from .config import (
+    DEFAULT_LATENT_CHANNELS,
+    DEFAULT_MULTI_CHANNELS,
+    DEFAULT_SINGLE_CHANNELS,
+    DEFAULT_SMOOTHING_LENGTH,
+    ModelConfig,
+)
 from .decoder import MultiPathDecoder, SinglePathDecoder, hierarchy_spirals
 from .encoder import build_encoder
 from .hierarchy import mesh_hierarchy
 from .keypoints import KeypointEncoder
+from .mesh_template import MeshTemplate, as_template, root_centred_template
+from .outputs import OUTPUTS, AffineOutput, OffsetOutput, XYZOutput, skinned_output
 from .rotation import GlobalRotationHead
-from .skinned import SkinnedOutput, skinning_of
+from .skinned import SkinnedOutput
 from .smoothing import smoothing_matrix, smoothing_steps
+from .spiral import SpiralConv
 
 __all__ = ["MeshTemplate", "as_template", "root_centred_template", "MSMRNet", "OUTPUTS",
-           "build_model", "parameter_counts", "parameter_table",
+           "ModelConfig", "build_model", "parameter_counts", "parameter_table",
            "DEFAULT_LATENT_CHANNELS", "DEFAULT_SINGLE_CHANNELS", "DEFAULT_MULTI_CHANNELS",
            "DEFAULT_SMOOTHING_LENGTH"]
-
-DEFAULT_SINGLE_CHANNELS = (32, 32, 64, 64, 128)
-"""Per-level decoder channels of the single-path baseline, finest level first."""
-DEFAULT_MULTI_CHANNELS = (16, 24, 32, 48, 64)
-"""Per-level branch channels of the multi-path decoder, finest first. Narrower than the
-single path because level ``l`` (0 = finest) runs in ``L - l`` stages; with these widths the
-multi-path decoder plus transformer has ~20-25% more parameters than the single path at the same
-depth (``benchmarks/model.py`` prints the ratio).
-"""
-DEFAULT_SMOOTHING_LENGTH = 0.009
-"""Default ``smoothing_length`` of [`build_model`][handmesh_tutorial.nn.model.build_model], metres:
-3 smoothing steps on the open hand (mean edge 7.3 mm), 0 on a 200-vertex hand, ~6 on a 1,600-vertex
-one.
-"""
-OUTPUTS = ("xyz", "offset", "affine", "skinned")
-"""What the decoder's per-vertex output means
-([`MSMRNet.vertices_from_field`][handmesh_tutorial.nn.model.MSMRNet.vertices_from_field])."""
-DEFAULT_LATENT_CHANNELS = 16
-"""Channels per coarse-mesh token (output of the FC, width of the transformer)."""
-
-
-@dataclass
-class MeshTemplate:
-    """A template mesh with a joint regressor: all the model needs to know about the hand.
-
-    Attributes:
-        vertices: ``(V, 3)`` float64 rest positions, metres.
-        faces: ``(F, 3)`` int64 triangles.
-        joint_regressor: ``(J, V)`` float64; joints = ``joint_regressor @ vertices``.
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    joint_regressor: np.ndarray
-
-
-def as_template(template=None) -> MeshTemplate:
-    """Normalise a template argument.
-
-    Args:
-        template: ``None`` (the library's open right hand, ``hmt.hand.HandModel("right")``); a
-            [`MeshTemplate`][handmesh_tutorial.nn.model.MeshTemplate]; a mapping with keys
-            ``vertices``, ``faces``, ``joint_regressor``; a ``(vertices, faces, joint_regressor)``
-            tuple; or any object with attributes ``faces``, ``joint_regressor`` and
-            ``template_vertices`` or ``vertices`` (e.g. a ``HandModel`` or a user's MANO model).
-
-    Returns:
-        A validated [`MeshTemplate`][handmesh_tutorial.nn.model.MeshTemplate].
-
-    Raises:
-        ValueError: wrong shapes, face ids out of range, or a missing field.
-    """
-    if template is None:
-        from ..hand import HandModel  # lazy: the hand is built only when needed
-
-        template = HandModel("right")
-    if isinstance(template, MeshTemplate):
-        v, f, jr = template.vertices, template.faces, template.joint_regressor
-    elif isinstance(template, Mapping):
-        missing = {"vertices", "faces", "joint_regressor"} - set(template)
-        if missing:
-            raise ValueError(f"template mapping lacks keys {sorted(missing)}")
-        v, f, jr = template["vertices"], template["faces"], template["joint_regressor"]
-    elif isinstance(template, tuple | list):
-        if len(template) != 3:
-            raise ValueError("a template tuple must be (vertices, faces, joint_regressor), got "
-                             f"{len(template)} items")
-        v, f, jr = template
-    else:
-        v = getattr(template, "template_vertices", None)
-        if v is None:
-            v = getattr(template, "vertices", None)
-        f = getattr(template, "faces", None)
-        jr = getattr(template, "joint_regressor", None)
-        if v is None or f is None or jr is None:
-            raise ValueError("template object needs attributes faces, joint_regressor and "
-                             f"template_vertices (or vertices); got {type(template).__name__}")
-    v, f, jr = (np.asarray(_numpy(x)) for x in (v, f, jr))
-    v = v.astype(np.float64)
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise ValueError(f"template vertices must be (V, 3), got {v.shape}")
-    if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
-        raise ValueError(f"template faces must be (F, 3) integers, got {f.shape} {f.dtype}")
-    if f.min() < 0 or f.max() >= len(v):
-        raise ValueError(f"template face ids must lie in [0, {len(v)}), got [{f.min()}, "
-                         f"{f.max()}]")
-    jr = jr.astype(np.float64)
-    if jr.ndim != 2 or jr.shape[1] != len(v):
-        raise ValueError(f"joint_regressor must be (J, {len(v)}), got {jr.shape}")
-    return MeshTemplate(v, f.astype(np.int64), jr)
-
-
-def root_centred_template(template) -> np.ndarray:
-    """Template vertices centred like the training targets.
-
-    Args:
-        template: anything [`as_template`][handmesh_tutorial.nn.model.as_template] accepts.
-
-    Returns:
-        ``(V, 3)`` float64 vertices minus the root keypoint (joint 9, the middle-finger MCP,
-        for a 21-joint regressor; the vertex centroid otherwise), metres.
-    """
-    t = as_template(template)
-    root = (t.joint_regressor[9] @ t.vertices if len(t.joint_regressor) == 21
-            else t.vertices.mean(0))
-    return t.vertices - root
-
 
 def _numpy(x):
     return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else x
@@ -203,40 +82,43 @@ class MSMRNet(nn.Module):
             the translation ``t_v`` only.
         faces: ``(F, 3)`` faces of the output mesh (kept for plotting and export).
         template_vertices: ``(V, 3)`` root-centred template
-            ([`root_centred_template`][handmesh_tutorial.nn.model.root_centred_template]), needed by
-            ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
-        output: ``"affine"``, ``"offset"``, ``"xyz"`` or ``"skinned"``: how
-            [`vertices_from_field`][handmesh_tutorial.nn.model.MSMRNet.vertices_from_field] reads
-            the decoder's output (12, 3, 3 or ``skinned.channels`` channels per vertex).
+            ([`root_centred_template`][handmesh_tutorial.nn.mesh_template.root_centred_template]),
+            needed by ``output`` ``"offset"`` and ``"affine"``; a non-persistent buffer.
+        output: a name, ``"affine"``, ``"offset"``, ``"xyz"`` or ``"skinned"``, or an output
+            module ``field (B, V, C_out) -> vertices (B, V, 3)``
+            ([`handmesh_tutorial.nn.outputs`][handmesh_tutorial.nn.outputs]); kept as
+            ``vertex_output``, its name as ``output``.
         smoothing: ``(V, V)`` sparse matrix applied to the decoder's output field (e.g.
             [`smoothing_matrix`][handmesh_tutorial.nn.smoothing.smoothing_matrix]), a sequence of
             them applied in order (``k`` one-step matrices are cheaper than their ``k``-step
-            product,
-            whose rows hold the whole ``k``-ring), or ``None``.
-        global_rotation: turn the decoded mesh by a rotation predicted from the features
-            ([`GlobalRotationHead`][handmesh_tutorial.nn.rotation.GlobalRotationHead]; not in the
-            paper).
+            product, whose rows hold the whole ``k``-ring), or ``None``.
+        global_rotation: ``True`` for a
+            [`GlobalRotationHead`][handmesh_tutorial.nn.rotation.GlobalRotationHead] (not in the
+            paper), or a module ``features (B, D) -> (B, 3, 3)`` rotations; the decoded mesh is
+            turned by it about the root.
         skinned: the [`SkinnedOutput`][handmesh_tutorial.nn.skinned.SkinnedOutput] that
             ``output="skinned"`` needs.
 
     Shapes:
         ``images (B, 3, H, W)`` -> ``{"vertices": (B, V, 3), "joints": (B, J, 3)}``, metres.
+
+    Raises:
+        ValueError: an unknown output name, or one without the template or skinning it needs.
     """
 
     def __init__(self, encoder: nn.Module, decoder: nn.Module, coarse_vertices: int,
                  latent_channels: int, joint_regressor, transformer: nn.Module | None = None,
                  output_scale: float = 0.1, faces=None, template_vertices=None,
-                 output: str = "xyz", smoothing=None, global_rotation: bool = False,
-                 skinned: nn.Module | None = None):
+                 output: str | nn.Module = "xyz", smoothing=None,
+                 global_rotation: bool | nn.Module = False, skinned: nn.Module | None = None):
         super().__init__()
-        if output not in OUTPUTS:
-            raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
-        if output != "xyz" and template_vertices is None:
-            raise ValueError(f"output={output!r} needs template_vertices")
-        if output == "skinned" and skinned is None:
-            raise ValueError("output='skinned' needs a SkinnedOutput (skinned=)")
-        self.output = output
-        self.skinned = skinned if output == "skinned" else None
+        if isinstance(output, nn.Module):
+            self.vertex_output = output
+            self.output = getattr(output, "name", None) or (
+                "skinned" if isinstance(output, SkinnedOutput) else type(output).__name__)
+        else:
+            self.vertex_output = _named_output(output, template_vertices, output_scale, skinned)
+            self.output = output
         self.encoder = encoder
         self.coarse_vertices = coarse_vertices
         self.latent_channels = latent_channels
@@ -253,13 +135,23 @@ class MSMRNet(nn.Module):
             tv = torch.as_tensor(np.asarray(_numpy(template_vertices)), dtype=torch.float32)
             self.register_buffer("template", tv, persistent=False)
         # the hand's orientation from the features; the decoder's mesh is turned by it
-        self.rotation = GlobalRotationHead(encoder.out_features) if global_rotation else None
+        if isinstance(global_rotation, nn.Module):
+            self.rotation = global_rotation
+        else:
+            self.rotation = GlobalRotationHead(encoder.out_features) if global_rotation else None
         if smoothing is None:
             self.smoothing = nn.Identity()
         elif isinstance(smoothing, list | tuple):
             self.smoothing = nn.Sequential(*[SparseVertexMap(m) for m in smoothing])
         else:
             self.smoothing = SparseVertexMap(smoothing)
+
+    @property
+    def skinned(self) -> SkinnedOutput | None:
+        """The [`SkinnedOutput`][handmesh_tutorial.nn.skinned.SkinnedOutput] when the output is
+        skinned, else ``None``."""
+        out = self.vertex_output
+        return out if isinstance(out, SkinnedOutput) else None
 
     def decode(self, features: torch.Tensor) -> dict[str, torch.Tensor]:
         """Everything after the encoder.
@@ -283,29 +175,19 @@ class MSMRNet(nn.Module):
         return {"vertices": vertices, "joints": joints}
 
     def vertices_from_field(self, raw: torch.Tensor) -> torch.Tensor:
-        """Vertices from the decoder's per-vertex output field.
+        """Vertices from the decoder's per-vertex output field (``vertex_output``).
 
         Args:
             raw: ``(B, V, 3)`` (``output`` ``"xyz"`` or ``"offset"``), ``(B, V, 12)``
-                (``"affine"``: 9 entries of ``A_v - I`` row-major, then 3 of ``t_v``) or
-                ``(B, V, 6 + S)`` (``"skinned"``, see
-                [`SkinnedOutput`][handmesh_tutorial.nn.skinned.SkinnedOutput]).
+                (``"affine"``: 9 entries of ``A_v - I`` row-major, then 3 of ``t_v``),
+                ``(B, V, 6 + S)`` (``"skinned"``) or what a custom output module reads.
 
         Returns:
             ``(B, V, 3)`` vertices, metres: ``s * raw`` (xyz), ``p_v + s * raw`` (offset) or
             ``(I + A_v) p_v + s * t_v`` (affine), with ``p_v`` the root-centred template and
             ``s`` the ``output_scale``, or the skinned template (skinned).
         """
-        if self.output == "skinned":
-            return self.skinned(raw)
-        if self.output == "xyz":
-            return raw * self.output_scale
-        tmpl = self.template.to(raw.dtype)
-        if self.output == "offset":
-            return tmpl + raw * self.output_scale
-        lin = raw[..., :9].unflatten(-1, (3, 3))
-        return (tmpl + torch.einsum("bvrc,vc->bvr", lin, tmpl)
-                + raw[..., 9:] * self.output_scale)
+        return self.vertex_output(raw)
 
     def forward(self, images: torch.Tensor) -> dict[str, torch.Tensor]:
         """Args: images ``(B, 3, H, W)`` float. Returns ``{"vertices", "joints"}`` (metres), and
@@ -319,28 +201,50 @@ class MSMRNet(nn.Module):
         return self.decode(enc)
 
 
-def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
+def _named_output(output: str, template_vertices, scale: float, skinned) -> nn.Module:
+    """The output module ``MSMRNet(output=<name>)`` makes."""
+    if output not in OUTPUTS:
+        raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+    if output != "xyz" and template_vertices is None:
+        raise ValueError(f"output={output!r} needs template_vertices")
+    if output == "skinned":
+        if skinned is None:
+            raise ValueError("output='skinned' needs a SkinnedOutput (skinned=)")
+        return skinned
+    if output == "xyz":
+        return XYZOutput(scale)
+    tv = np.asarray(_numpy(template_vertices))
+    return (AffineOutput if output == "affine" else OffsetOutput)(tv, scale)
+
+
+_ARCH = tuple(f.name for f in dataclasses.fields(ModelConfig))
+
+
+def build_model(encoder: str | nn.Module | ModelConfig = "resnet18", decoder: str = "multi",
                 attention: bool = True, template=None, channels: Sequence[int] | None = None,
                 latent_channels: int = DEFAULT_LATENT_CHANNELS, spiral_length: int = 9,
                 dilation: int = 1, num_blocks: int = 1,
                 factors: Sequence[float] = (2, 2, 2, 2), num_heads: int = 2,
                 transformer_layers: int = 1, fuse_head: bool = False,
-                output_scale: float = 0.1, hierarchy=None, output: str = "affine",
+                output_scale: float = 0.1, hierarchy=None, output: str | nn.Module = "affine",
                 smoothing_length: float = DEFAULT_SMOOTHING_LENGTH, zero_head: bool = True,
-                head: str = "linear", keypoints: bool = False,
-                global_rotation: bool = False, skinning=None) -> MSMRNet:
+                head: str = "linear", keypoints: bool | Callable[..., nn.Module] = False,
+                global_rotation: bool | nn.Module = False, skinning=None, *,
+                config: ModelConfig | None = None,
+                conv: Callable[..., nn.Module] = SpiralConv) -> MSMRNet:
     """Build MSMR-Net (or the single-path / no-attention ablations of the paper's Table 3).
 
     Args:
-        encoder: encoder name (``resnet18``, ``resnet34``, ``resnet50``, ``hrnet18``) or a module
-            ``(B, 3, H, W) -> (B, D)`` with attribute ``out_features``.
+        encoder: encoder name (``resnet10``, ``resnet18``, ``resnet34``, ``resnet50``,
+            ``hrnet18``), a module ``(B, 3, H, W) -> (B, D)`` with attribute ``out_features``, or
+            a [`ModelConfig`][handmesh_tutorial.nn.config.ModelConfig] (as ``config``).
         decoder: ``"multi"`` (MSMR multi-path) or ``"single"`` (coarse-to-fine baseline).
         attention: put the transformer on the coarse-mesh tokens.
-        template: see [`as_template`][handmesh_tutorial.nn.model.as_template]; default the open
-            right hand.
+        template: see [`as_template`][handmesh_tutorial.nn.mesh_template.as_template]; default the
+            open right hand.
         channels: decoder channels per hierarchy level, finest first (default
-            [`DEFAULT_MULTI_CHANNELS`][handmesh_tutorial.nn.model.DEFAULT_MULTI_CHANNELS] or
-            [`DEFAULT_SINGLE_CHANNELS`][handmesh_tutorial.nn.model.DEFAULT_SINGLE_CHANNELS]).
+            [`DEFAULT_MULTI_CHANNELS`][handmesh_tutorial.nn.config.DEFAULT_MULTI_CHANNELS] or
+            [`DEFAULT_SINGLE_CHANNELS`][handmesh_tutorial.nn.config.DEFAULT_SINGLE_CHANNELS]).
         latent_channels: channels per coarse-mesh token (FC output, transformer width).
         spiral_length: spiral length ``L``.
         dilation: spiral dilation.
@@ -351,109 +255,126 @@ def build_model(encoder: str | nn.Module = "resnet18", decoder: str = "multi",
         transformer_layers: transformer blocks.
         fuse_head: multi-path only; head on all branches upsampled and concatenated.
         output_scale: metres per decoder output unit (the translation part for ``"affine"``).
-        output: what the decoder predicts per vertex: ``"affine"`` (default; ``I + A_v`` and
-            ``t_v`` applied to the template vertex), ``"offset"`` (from the template), ``"xyz"``
-            (coordinates, as the paper) or ``"skinned"`` (per-joint rotations and shape pooled
-            from the field, then skinning;
-            [`handmesh_tutorial.nn.skinned`][handmesh_tutorial.nn.skinned]; no output smoothing).
-            See the module docstring.
+        hierarchy: a precomputed [`MeshHierarchy`][handmesh_tutorial.nn.hierarchy.MeshHierarchy] of
+            the template (default: computed, cached on disk by ``mesh_hierarchy``).
+        output: what the decoder's field means
+            ([`handmesh_tutorial.nn.outputs`][handmesh_tutorial.nn.outputs]): ``"affine"``
+            (default; ``I + A_v`` and ``t_v`` applied to the template vertex), ``"offset"`` (from
+            the template), ``"xyz"`` (coordinates, as the paper), ``"skinned"`` (joint rotations
+            and shape, then skinning; no output smoothing), or a module with attribute
+            ``channels`` (the field width), field ``(B, V, channels)`` -> ``(B, V, 3)``.
         smoothing_length: metres; the decoder's output field is smoothed by
             [`smoothing_matrix`][handmesh_tutorial.nn.smoothing.smoothing_matrix] with
             [`smoothing_steps`][handmesh_tutorial.nn.smoothing.smoothing_steps] steps for this
-            length (0 = none; default
-            [`DEFAULT_SMOOTHING_LENGTH`][handmesh_tutorial.nn.model.DEFAULT_SMOOTHING_LENGTH]).
+            length (0 = none).
         zero_head: start the decoder's head at zero, so the first output is the template
             (``"affine"``, ``"offset"``) or zeros (``"xyz"``).
         head: the decoder's output head, ``"linear"``, ``"spiral"`` or ``"pyramid"``
             ([`handmesh_tutorial.nn.decoder`][handmesh_tutorial.nn.decoder]).
-        keypoints: wrap a ResNet encoder in a
+        keypoints: ``True`` wraps a ResNet encoder in a
             [`KeypointEncoder`][handmesh_tutorial.nn.keypoints.KeypointEncoder] (2D keypoint head,
-            features pooled at the predicted joints; the model then also returns ``uv``). Not in the
-            paper; what lets training from scratch on a CPU learn articulation (see
-            [`handmesh_tutorial.nn.keypoints`][handmesh_tutorial.nn.keypoints]).
-        global_rotation: predict the hand's orientation with a separate head and turn the decoded
-            mesh by it ([`handmesh_tutorial.nn.rotation`][handmesh_tutorial.nn.rotation]; not in the
-            paper).
+            features pooled at the predicted joints; the model then also returns ``uv``; not in the
+            paper); or a factory ``keypoints(encoder, num_joints=J)`` -> such a module.
+        global_rotation: ``True`` for a
+            [`GlobalRotationHead`][handmesh_tutorial.nn.rotation.GlobalRotationHead] that turns
+            the decoded mesh (not in the paper), or a module ``(B, D) -> (B, 3, 3)``.
         skinning: for ``output="skinned"``, the hand model whose skinning weights, joints and
             shape space are used (default: ``template`` when it has them, else the library's right
             hand); its rest vertices must be the template's.
-        hierarchy: a precomputed [`MeshHierarchy`][handmesh_tutorial.nn.hierarchy.MeshHierarchy] of
-            the template (default: computed, cached on disk by ``mesh_hierarchy``).
+        config: the architecture as a [`ModelConfig`][handmesh_tutorial.nn.config.ModelConfig]
+            (e.g. ``ModelConfig.preset("cpu")``) instead of the keywords ``encoder`` to
+            ``global_rotation``, which must then be left out.
+        conv: the mesh convolution of every residual block and of a spiral head,
+            ``conv(in_channels, out_channels, indices)`` -> module ``(B, V, C_in) ->
+            (B, V, C_out)`` (default [`SpiralConv`][handmesh_tutorial.nn.spiral.SpiralConv]).
 
     Returns:
         [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet] with submodules ``encoder``,
-        ``latent_to_mesh``, ``transformer``, ``decoder``, and attributes ``hierarchy`` and
-        ``spirals``.
+        ``latent_to_mesh``, ``transformer``, ``decoder``, ``vertex_output``, and attributes
+        ``hierarchy``, ``spirals`` and ``config``.
 
     Raises:
-        ValueError: unknown encoder or decoder, bad template, channel count mismatch.
+        ValueError: unknown encoder, decoder, head or output, bad template, channel count
+            mismatch, a config field out of range.
+        TypeError: ``config`` together with architecture keywords.
     """
+    args = dict(locals())
+    given = {k: args[k] for k in _ARCH}
+    if isinstance(encoder, ModelConfig):
+        config, given["encoder"] = encoder, "resnet18"
+    if config is None:
+        config = ModelConfig(**given)
+    else:
+        clash = [k for k, v in given.items() if not _is_default(v, _DEFAULTS[k])]
+        if clash:
+            raise TypeError(f"build_model got config= and the keywords {clash}; put them in the "
+                            f"config instead: config.replace({clash[0]}=...)")
+    return _build(config, template, hierarchy, skinning, conv)
+
+
+def _is_default(value, default) -> bool:
+    if value is default:
+        return True
+    try:
+        return type(value) is type(default) and bool(value == default)
+    except (TypeError, ValueError, RuntimeError):  # arrays, tensors
+        return False
+
+
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ModelConfig)}
+
+
+def _build(c: ModelConfig, template, hierarchy, skinning, conv) -> MSMRNet:
     tmpl = as_template(template)
-    if decoder not in ("multi", "single"):
-        raise ValueError(f"decoder must be 'multi' or 'single', got {decoder!r}")
     if hierarchy is None:
-        hierarchy = mesh_hierarchy(tmpl.vertices, tmpl.faces, factors)
+        hierarchy = mesh_hierarchy(tmpl.vertices, tmpl.faces, c.factors)
     if len(hierarchy.vertices[0]) != len(tmpl.vertices):
         raise ValueError(f"hierarchy has {len(hierarchy.vertices[0])} finest vertices, the "
                          f"template {len(tmpl.vertices)}")
-    spirals = hierarchy_spirals(hierarchy, spiral_length, dilation)
+    spirals = hierarchy_spirals(hierarchy, c.spiral_length, c.dilation)
+    channels = c.channels
     if channels is None:
-        channels = DEFAULT_MULTI_CHANNELS if decoder == "multi" else DEFAULT_SINGLE_CHANNELS
+        channels = DEFAULT_MULTI_CHANNELS if c.decoder == "multi" else DEFAULT_SINGLE_CHANNELS
         channels = tuple(channels)[:len(spirals)] if len(spirals) <= len(channels) else None
         if channels is None:
             raise ValueError(f"{len(spirals)} levels: pass channels (one per level)")
-    enc = build_encoder(encoder) if isinstance(encoder, str) else encoder
+    enc = build_encoder(c.encoder) if isinstance(c.encoder, str) else c.encoder
     if not hasattr(enc, "out_features"):
         raise ValueError("a custom encoder needs an attribute out_features (its output width D)")
-    if keypoints:
-        enc = KeypointEncoder(enc, num_joints=len(tmpl.joint_regressor))
-    if output not in OUTPUTS:
-        raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
-    skinned = _skinned_output(template, tmpl, skinning) if output == "skinned" else None
-    out_ch = skinned.channels if skinned else (12 if output == "affine" else 3)
-    if decoder == "multi":
-        dec = MultiPathDecoder(hierarchy, spirals, channels, num_blocks, fuse_head=fuse_head,
-                               in_channels=latent_channels, head=head, out_channels=out_ch,
-                               zero_head=zero_head)
+    if c.keypoints:
+        factory = c.keypoints if callable(c.keypoints) else KeypointEncoder
+        enc = factory(enc, num_joints=len(tmpl.joint_regressor))
+    if isinstance(c.output, nn.Module):
+        out, skinned = c.output, None
+        if not isinstance(getattr(out, "channels", None), int):
+            raise ValueError(f"an output module needs an integer attribute channels (the field "
+                             f"width), {type(out).__name__} has none")
+        smooth = getattr(out, "smooth_field", not isinstance(out, SkinnedOutput))
     else:
-        dec = SinglePathDecoder(hierarchy, spirals, channels, num_blocks,
-                                in_channels=latent_channels, head=head, out_channels=out_ch,
-                                zero_head=zero_head)
+        skinned = skinned_output(template, skinning) if c.output == "skinned" else None
+        out, smooth = c.output, skinned is None
+    out_ch = out.channels if isinstance(out, nn.Module) else (
+        skinned.channels if skinned else (12 if out == "affine" else 3))
+    kw = dict(in_channels=c.latent_channels, head=c.head, out_channels=out_ch,
+              zero_head=c.zero_head, conv=conv)
+    if c.decoder == "multi":
+        dec = MultiPathDecoder(hierarchy, spirals, channels, c.num_blocks, fuse_head=c.fuse_head,
+                               **kw)
+    else:
+        dec = SinglePathDecoder(hierarchy, spirals, channels, c.num_blocks, **kw)
     coarse = len(spirals[-1])
-    transformer = (CoarseMeshTransformer(coarse, latent_channels, num_heads, transformer_layers)
-                   if attention else None)
-    steps = smoothing_steps(tmpl.vertices, tmpl.faces, smoothing_length) if not skinned else 0
-    smooth = [smoothing_matrix(tmpl.faces, 1, len(tmpl.vertices))] * steps if steps else None
-    model = MSMRNet(enc, dec, coarse, latent_channels, tmpl.joint_regressor, transformer,
-                    output_scale, faces=tmpl.faces, template_vertices=root_centred_template(tmpl),
-                    output=output, smoothing=smooth, global_rotation=global_rotation,
-                    skinned=skinned)
+    transformer = (CoarseMeshTransformer(coarse, c.latent_channels, c.num_heads,
+                                         c.transformer_layers) if c.attention else None)
+    steps = smoothing_steps(tmpl.vertices, tmpl.faces, c.smoothing_length) if smooth else 0
+    smoothing = [smoothing_matrix(tmpl.faces, 1, len(tmpl.vertices))] * steps if steps else None
+    model = MSMRNet(enc, dec, coarse, c.latent_channels, tmpl.joint_regressor, transformer,
+                    c.output_scale, faces=tmpl.faces,
+                    template_vertices=root_centred_template(tmpl), output=out,
+                    smoothing=smoothing, global_rotation=c.global_rotation, skinned=skinned)
     model.hierarchy = hierarchy
     model.spirals = spirals
+    model.config = c
     return model
-
-
-def _skinned_output(template, tmpl: MeshTemplate, skinning) -> SkinnedOutput:
-    """The skinned output head for ``tmpl``, from ``skinning``, ``template`` or the library's
-    right hand (the first that has skinning data), checked against ``tmpl``'s vertices."""
-    if skinning is None:
-        skinning = template if getattr(template, "skinning_weights", None) is not None else None
-    if skinning is None:
-        from ..hand import HandModel
-
-        skinning = HandModel("right")
-    data = skinning_of(skinning)
-    if data["vertices"].shape != tmpl.vertices.shape or \
-            np.abs(data["vertices"] - tmpl.vertices).max() > 1e-6:
-        raise ValueError(f"output='skinned': the skinning model's rest vertices "
-                         f"{data['vertices'].shape} are not the template's "
-                         f"{tmpl.vertices.shape}; pass skinning= the template's hand model")
-    from ..hand import MANO_TO_FREIHAND
-
-    # the targets' root is keypoint 9 (middle MCP): MANO joint 4 on a 16-joint tree
-    root = int(MANO_TO_FREIHAND[9]) if len(data["joints"]) == 16 else 0
-    return SkinnedOutput(data["vertices"], data["weights"], data["joints"], data["parents"],
-                         root, data.get("shape_dirs"), data.get("joint_shape_dirs"))
 
 
 def _count(module: nn.Module) -> int:
