@@ -87,8 +87,6 @@ RUN_HISTORY = re.compile(
     r"|\bcommits? `{0,2}[0-9a-f]{7,40}\b"  # a commit hash
     r"|\b[Rr]un \d+\b"  # a numbered run
 )
-# Rewritten on the `compose` branch (model, decoder, blocks); drop from this set once merged.
-HISTORY_PENDING = {"nn/model.py", "nn/decoder.py", "nn/blocks.py"}
 
 
 def test_the_pattern_catches_run_history():
@@ -100,8 +98,7 @@ def test_the_pattern_catches_run_history():
         assert not RUN_HISTORY.search(text), text
 
 
-CHECKED = [p for p in MODULES if str(p.relative_to(ROOT / "handmesh_tutorial")) not in
-           HISTORY_PENDING]
+CHECKED = MODULES
 
 
 @pytest.mark.parametrize("path", CHECKED,
