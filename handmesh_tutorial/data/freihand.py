@@ -83,6 +83,8 @@ def _read_json(path: Path):
         raise FileNotFoundError(f"FreiHAND file not found: {path}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"{path}: not valid JSON (truncated or corrupt?): {err}") from None
+    except RecursionError:  # '[[[[...' deeper than the interpreter's stack
+        raise ValueError(f"{path}: not valid JSON (nested too deeply)") from None
 
 
 def _stack(data, path: Path, shape: tuple, what: str) -> np.ndarray:

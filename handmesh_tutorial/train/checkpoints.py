@@ -180,12 +180,17 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
 
     Raises:
         FileNotFoundError: no such file (or template file).
-        ValueError: not a checkpoint, a different template, or weights that do not fit the
-            architecture (the message names the mismatching keys).
+        ValueError: not a checkpoint, an invalid config, a different template, or weights
+            that do not fit the architecture (the message names the file and the mismatching
+            keys).
     """
     device = _resolve_device(device)
     ck = _read_checkpoint(path, map_location=device)
-    cfg = TrainConfig.from_dict(ck["config"])
+    try:
+        cfg = TrainConfig.from_dict(ck["config"])
+    except (ValueError, TypeError) as e:  # TrainConfig's checks name no file
+        raise ValueError(f"{path}: its 'config' is not a valid TrainConfig ({e}); the file was "
+                         "altered or damaged") from None
     tmpl = resolve_template(cfg.template if template is None else template)
     got = template_hash(tmpl)
     if got != ck["template_hash"]:
@@ -193,7 +198,11 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
             f"{path}: trained with template {ck['template_hash']} "
             f"({ck.get('num_vertices')} vertices), but the template given has hash {got} "
             f"({len(tmpl.vertices)} vertices); pass template= the training template")
-    net = build_model_from_config(cfg, tmpl)
+    try:
+        net = build_model_from_config(cfg, tmpl)
+    except (ValueError, TypeError, IndexError) as e:
+        raise ValueError(f"{path}: its config {cfg.architecture()} builds no network "
+                         f"({type(e).__name__}: {e})") from None
     try:
         net.load_state_dict(ck["model"], strict=True)
     except RuntimeError as e:
