@@ -62,7 +62,7 @@ TARGETS = ("intersh-verify", "intersh-evaluate", "checkpoint", "template", "mano
            "freihand-read", "freihand-evaluate")
 MUTATIONS = ("bitflip", "truncate", "insert", "zero", "swap", "value", "header")
 FAILURES = ("crash", "timeout", "memory", "exception", "unnamed", "implausible")
-OUTCOMES = ("clean", "refused", *FAILURES)
+OUTCOMES = ("clean", "refused", *FAILURES, "skipped")
 IMAGE = 32  # pixels, corpus images and crops
 
 # ------------------------------------------------------------------ the corpus
@@ -206,6 +206,8 @@ def _odd_array(rng: random.Random, a):
 
     choice = rng.randrange(9)
     a = np.array(a)
+    if a.dtype.kind not in "biuf":  # a string (MANO's bs_style): numbers instead
+        return np.zeros(3), "numbers for a string"
     if choice == 0 and a.size and a.dtype.kind == "f":
         a.flat[rng.randrange(a.size)] = rng.choice([np.nan, np.inf, 1e30, -1e300])
         return a, "a value NaN/inf/huge"
@@ -529,8 +531,8 @@ def read(target: str, case_root: Path, base: Path) -> dict:
             why = f"faces index {f.min()}..{f.max()} of {len(v)} vertices"
         else:
             cfg = TrainConfig(image_size=IMAGE, encoder="resnet10", channels=(4, 4, 8, 8, 8),
-                              latent_channels=8)
-            net = build_model_from_config(cfg, t).eval()
+                              latent_channels=8, template=str(case_root / "template.npz"))
+            net = build_model_from_config(cfg, t).eval()  # as `train --template` does
             with torch.no_grad():
                 out = net(torch.zeros(1, 3, IMAGE, IMAGE))
             if not torch.isfinite(out["vertices"]).all():
@@ -574,7 +576,10 @@ def run_case(base: Path, scratch: Path, target: str, mutation: str, n: int) -> d
     copy_what, files = target_files(base, target)
     src = base / copy_what
     (shutil.copytree if src.is_dir() else shutil.copy)(src, case_root / copy_what)
-    what, names = mutate(rng, mutation, case_root, files, base, target)
+    try:
+        what, names = mutate(rng, mutation, case_root, files, base, target)
+    except Exception as e:  # noqa: BLE001 - a mutation that does not apply: not a reader's fault
+        return {"outcome": "skipped", "what": f"mutation failed: {type(e).__name__}: {e}"}
     t = time.perf_counter()
     try:
         res = read(target, case_root, base)

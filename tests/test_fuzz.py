@@ -85,9 +85,10 @@ def test_a_damaged_or_implausible_template_file_is_refused_naming_it(tmp_path):
     np.savez(tmp_path / "point.npz", **{**arrays, "vertices": t.vertices * 0})
     cfg = TrainConfig(template=str(tmp_path / "point.npz"), encoder="resnet10",
                       channels=(4, 4, 8, 8, 8), latent_channels=8)
-    with pytest.raises(ValueError, match=r"point\.npz: this template builds no network "
-                                         r"\(RuntimeError: decimation stuck"):
-        build_model_from_config(cfg)
+    for given in (None, resolve_template(cfg.template)):  # `train` passes the resolved one
+        with pytest.raises(ValueError, match=r"point\.npz: this template builds no network "
+                                             r"\(RuntimeError: decimation stuck"):
+            build_model_from_config(cfg, given)
 
 
 def test_a_damaged_hand_template_asset_is_named(tmp_path):
@@ -100,6 +101,27 @@ def test_a_damaged_hand_template_asset_is_named(tmp_path):
     load_template.cache_clear()
     with pytest.raises(ValueError, match=r"hand\.npz: not a readable npz \(BadZipFile"):
         load_template(path)
+
+
+def test_a_flipped_bit_in_a_checkpoint_is_refused_not_loaded(tmp_path):
+    from handmesh_tutorial._untrusted import load_torch_file
+
+    path = tmp_path / "w.pt"
+    torch.save({"w": torch.ones(1000)}, path)
+    assert torch.equal(load_torch_file(path)["w"], torch.ones(1000))
+    member = next(n for n in zipfile.ZipFile(path).namelist() if n.endswith("/data/0"))
+    _flip_member_byte(path, member)  # torch.load alone returns the altered weights
+    with pytest.raises(ValueError, match=r"w\.pt: member '.*data/0' fails its CRC-32 check"):
+        load_torch_file(path)
+    # a local header's extra-field length changed: torch read shifted bytes as the weights
+    torch.save({"w": torch.ones(1000)}, path)
+    raw = bytearray(path.read_bytes())
+    info = zipfile.ZipFile(path).getinfo(member)
+    raw[info.header_offset + 28:info.header_offset + 30] = (len(info.extra) + 64).to_bytes(2,
+                                                                                           "little")
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"w\.pt: (member .* fails its CRC-32|unreadable)"):
+        load_torch_file(path)
 
 
 @pytest.mark.parametrize("config, pattern", [

@@ -138,8 +138,8 @@ def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
         An [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet] on the CPU.
 
     Raises:
-        ValueError: a template file that cannot be read, or whose mesh builds no mesh
-            hierarchy (the message names the file).
+        ValueError: a template file that cannot be read, or a template whose mesh builds no
+            mesh hierarchy or spirals (the message names ``config.template``'s file).
     """
     spec = config.template if template is None else template
     tmpl = resolve_template(spec)
@@ -148,8 +148,10 @@ def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
                            attention=config.attention, template=tmpl, channels=config.channels,
                            latent_channels=config.latent_channels, **config.model_kwargs)
     except (RuntimeError, ValueError, IndexError) as e:
-        if not isinstance(spec, str | os.PathLike):
-            raise
-        # a template file whose mesh cannot be decimated into the network's hierarchy
-        raise ValueError(f"{spec}: this template builds no network ({type(e).__name__}: "
-                         f"{e}); give a closed-up, manifold hand mesh in metres") from e
+        # a template whose mesh cannot be decimated into the network's hierarchy (the file
+        # named: `train` passes the template it resolved from ``config.template``)
+        where = next((str(p) for p in (spec, config.template) if isinstance(p, str | os.PathLike)),
+                     "the template")
+        raise ValueError(f"{where}: this template builds no network ({type(e).__name__}: "
+                         f"{e}); give a manifold, consistently oriented hand mesh in metres") \
+            from e
