@@ -6,8 +6,9 @@ expands a thousand times, and a checkpoint's storage can be such a member. `open
 member's header from the zip directory and refuses object dtypes, a shape whose bytes differ from
 what the member holds, and more than ``max_bytes`` in all, then opens the file with
 ``allow_pickle=False``. `load_torch_file` refuses an archive whose members expand past the
-file's own size (``torch.save`` stores them uncompressed), a member that fails its CRC-32 (torch's
-reader checks none, so a flipped bit would load) or a file over `MAX_CHECKPOINT_BYTES`, loads with ``weights_only=True``, and refuses a tensor that claims more
+file's own size (``torch.save`` stores them uncompressed), a member that fails its CRC-32
+(torch's reader checks none, so a flipped bit would load) or a file over
+`MAX_CHECKPOINT_BYTES`, loads with ``weights_only=True``, and refuses a tensor that claims more
 elements than its storage holds (a zero-stride view that any copy would blow up). Every refusal
 is a `ValueError` naming the file (docs page *Reliability*, "Files are never trusted").
 """
@@ -18,6 +19,7 @@ import contextlib
 import math
 import os
 import zipfile
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -71,7 +73,8 @@ def check_npz(fh, name: str | os.PathLike, max_bytes: int = MAX_NPZ_BYTES) -> di
                             else np.lib.format.read_array_header_2_0)
                     shape, _fortran, dtype = read(f)
                     header = f.tell()
-            except (ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
+            except (ValueError, OSError, EOFError, zipfile.BadZipFile, NotImplementedError,
+                    zlib.error) as e:  # a damaged header, compression method or stream
                 raise ValueError(f"{name}: member '{info.filename}' has no readable .npy header "
                                  f"({type(e).__name__}: {e})") from None
             if dtype.hasobject:
@@ -166,7 +169,7 @@ def check_checkpoint(path: str | os.PathLike, max_bytes: int = MAX_CHECKPOINT_BY
                     "torch.save stores them uncompressed, so this file was crafted or altered; "
                     "refused before reading")
             damaged = zf.testzip()  # torch's reader checks no CRC: a flipped bit loads
-    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError) as e:
+    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, zlib.error) as e:
         raise ValueError(f"{path}: unreadable checkpoint (truncated, or not a zip archive as "
                          f"torch.save writes: {type(e).__name__}: {e})") from None
     if damaged is not None:

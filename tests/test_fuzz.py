@@ -122,6 +122,14 @@ def test_a_flipped_bit_in_a_checkpoint_is_refused_not_loaded(tmp_path):
     path.write_bytes(bytes(raw))
     with pytest.raises(ValueError, match=r"w\.pt: (member .* fails its CRC-32|unreadable)"):
         load_torch_file(path)
+    # the central directory says "deflated" for a stored member: was zlib.error (exit code 1)
+    torch.save({"w": torch.ones(1000)}, path)
+    raw = bytearray(path.read_bytes())
+    central = raw.find(b"PK\x01\x02")
+    raw[central + 10:central + 12] = (8).to_bytes(2, "little")
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"w\.pt: unreadable checkpoint .*error"):
+        load_torch_file(path)
 
 
 @pytest.mark.parametrize("config, pattern", [
@@ -149,6 +157,7 @@ def test_a_checkpoint_with_an_invalid_config_is_refused_naming_it(tmp_path, conf
     ("weights", "scale", r"'weights' holds values in .* expected skinning weights in \[0, 1\]"),
     ("posedirs", "nan", r"'posedirs' holds NaN or infinity"),
     ("J_regressor", "scale", r"'J_regressor' puts a rest joint [\d.]+ m from the origin"),
+    ("hands_components", {"a": 1}, r"'hands_components' must be a numeric array"),  # TypeError
 ])
 def test_implausible_mano_arrays_are_refused_naming_the_file(tmp_path, key, value, pattern):
     params = mano_format_params("right")
@@ -167,11 +176,15 @@ def test_implausible_mano_arrays_are_refused_naming_the_file(tmp_path, key, valu
         ManoModel(good, "right", fingertips=(1, 2, 3, 4, 800))
 
 
-def test_a_freihand_json_nested_too_deeply_is_named(tmp_path):
+def test_a_freihand_json_nested_too_deeply_or_beyond_float_is_named(tmp_path):
     root = write_freihand_root(tmp_path / "fh", 1, image_size=32)
     (root / "training_K.json").write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(ValueError, match=r"training_K\.json: not valid JSON \(nested too deeply"):
         FreiHAND(root, "training").annotation("K")  # was a RecursionError (exit 1)
+    (root / "training_K.json").write_text("[[[1" + "0" * 400 + ", 0, 0], [0, 1, 0], [0, 0, 1]]]")
+    with pytest.raises(ValueError, match=r"training_K\.json: sample 0 has shape "
+                                         r"non-numeric/ragged"):
+        FreiHAND(root, "training").annotation("K")  # was an OverflowError (exit 1)
 
 
 def test_evaluating_a_network_of_another_topology_says_so(tmp_path):

@@ -93,6 +93,15 @@ def _checked_arrays(params: Mapping, source: str) -> dict:
         if a.dtype.kind == "f" and not np.isfinite(a).all():
             raise ValueError(f"{source}: key '{key}' holds NaN or infinity")
         out[key] = a
+    for key in ("hands_components", "hands_mean"):  # optional (PCA poses, the mean pose)
+        if key in params:
+            try:
+                out[key] = np.asarray(params[key], dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise ValueError(f"{source}: key '{key}' must be a numeric array, got "
+                                 f"{type(params[key]).__name__} ({e})") from None
+            if not np.isfinite(out[key]).all():
+                raise ValueError(f"{source}: key '{key}' holds NaN or infinity")
     if out["v_template"].ndim != 2:
         raise ValueError(f"{source}: key 'v_template' has shape {out['v_template'].shape}, "
                          "expected Vx3")
@@ -222,7 +231,11 @@ class ManoModel(torch.nn.Module):
         if not self.flat_hand_mean:
             if "hands_mean" not in params:
                 raise ValueError(f"{source}: flat_hand_mean=False needs key 'hands_mean'")
-            hands_mean = np.asarray(params["hands_mean"], dtype=np.float64).reshape(45)
+            hands_mean = params["hands_mean"]
+            if hands_mean.size != 45:
+                raise ValueError(f"{source}: key 'hands_mean' has shape {hands_mean.shape}, "
+                                 "expected 45 numbers")
+            hands_mean = hands_mean.reshape(45)
         if self.use_pca:
             if comps is None:
                 raise ValueError(f"{source}: use_pca=True needs key 'hands_components'")
