@@ -197,3 +197,28 @@ def test_evaluating_a_network_of_another_topology_says_so(tmp_path):
         evaluate(net, root, kind="freihand", split="training", image_size=32, baseline=False,
                  progress=False)
     assert json.dumps(F.OUTCOMES)  # the benchmark's classes are importable from the tests
+
+
+def test_nan_weights_are_refused_on_load_and_evaluate_never_reports_nan_scores(tmp_path):
+    import functools
+
+    from handmesh_tutorial.data import generate_dataset
+    from handmesh_tutorial.testing import toy_sample
+    from handmesh_tutorial.train import save_checkpoint
+
+    cfg = TrainConfig(image_size=32, encoder="resnet10", channels=(4, 4, 8, 8, 8),
+                      latent_channels=8)
+    torch.manual_seed(0)
+    net = build_model_from_config(cfg).eval()
+    name = "encoder.conv1.weight"
+    with torch.no_grad():
+        net.state_dict()[name].view(-1)[0] = float("nan")
+    save_checkpoint(tmp_path / "nan.pt", model=net, config=cfg, template_id=template_hash(None),
+                    durable=False)
+    with pytest.raises(ValueError, match=r"nan\.pt: weight 'encoder\.conv1\.weight' holds NaN"):
+        load_checkpoint(tmp_path / "nan.pt")  # was loaded: every prediction NaN
+    root = tmp_path / "data"
+    generate_dataset(root, functools.partial(toy_sample, image_size=32), num=2, seed=1,
+                     kind="hand-hand", progress=False, durable=False)
+    with pytest.raises(ValueError, match=r"predicts NaN or infinity for 2 of 2 items"):
+        evaluate(net, root, image_size=32, baseline=False, progress=False)  # was NaN mm, exit 0

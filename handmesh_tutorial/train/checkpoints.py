@@ -180,9 +180,9 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
 
     Raises:
         FileNotFoundError: no such file (or template file).
-        ValueError: not a checkpoint, an invalid config, a different template, or weights
-            that do not fit the architecture (the message names the file and the mismatching
-            keys).
+        ValueError: not a checkpoint, an invalid config, a different template, weights that
+            do not fit the architecture or hold NaN or infinity (the message names the file
+            and the mismatching keys).
     """
     device = _resolve_device(device)
     ck = _read_checkpoint(path, map_location=device)
@@ -203,6 +203,12 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
     except (ValueError, TypeError, IndexError) as e:
         raise ValueError(f"{path}: its config {cfg.architecture()} builds no network "
                          f"({type(e).__name__}: {e})") from None
+    state = ck["model"] if isinstance(ck["model"], dict) else {}
+    bad = next((k for k, v in state.items() if isinstance(v, torch.Tensor)
+                and v.is_floating_point() and not torch.isfinite(v).all()), None)
+    if bad is not None:  # a diverged run or an altered file: every prediction would be NaN
+        raise ValueError(f"{path}: weight '{bad}' holds NaN or infinity (a diverged run or an "
+                         "altered file); use an earlier checkpoint")
     try:
         net.load_state_dict(ck["model"], strict=True)
     except RuntimeError as e:
