@@ -737,6 +737,7 @@ def main(argv=None) -> int:
         with tempfile.TemporaryDirectory() as scratch:
             rng = random.Random(int(n))
             case_root = Path(scratch) / "case"
+            case_root.mkdir()
             copy_what, files = target_files(base, t)
             src = base / copy_what
             (shutil.copytree if src.is_dir() else shutil.copy)(src, case_root / copy_what)

@@ -222,3 +222,22 @@ def test_nan_weights_are_refused_on_load_and_evaluate_never_reports_nan_scores(t
                      kind="hand-hand", progress=False, durable=False)
     with pytest.raises(ValueError, match=r"predicts NaN or infinity for 2 of 2 items"):
         evaluate(net, root, image_size=32, baseline=False, progress=False)  # was NaN mm, exit 0
+
+
+@pytest.mark.parametrize("field, value", [("indices", 10**6), ("indptr", 10**6)])
+def test_a_mano_sparse_matrix_with_indices_beyond_its_shape_is_refused_not_a_crash(
+        tmp_path, field, value):
+    import subprocess
+
+    params = mano_format_params("right")
+    getattr(params["J_regressor"], field)[3] = value  # one flipped bit in the official file
+    path = tmp_path / "MANO_RIGHT.pkl"
+    path.write_bytes(pickle.dumps(params, protocol=2))
+    code = ("import sys\nfrom handmesh_tutorial.hand.mano import load_mano\ntry:\n"
+            "    load_mano(sys.argv[1])\nexcept ValueError as e:\n    print(e)\n")
+    # in a child: scipy's toarray wrote out of bounds and the interpreter died (SIGSEGV)
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, (out.returncode, out.stderr[-300:])
+    assert re.search(r"MANO_RIGHT\.pkl: sparse matrix .*csc_matrix: inconsistent arrays",
+                     out.stdout), out.stdout
