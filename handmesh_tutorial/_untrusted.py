@@ -6,7 +6,8 @@ expands a thousand times, and a checkpoint's storage can be such a member. `open
 member's header from the zip directory and refuses object dtypes, a shape whose bytes differ from
 what the member holds, and more than ``max_bytes`` in all, then opens the file with
 ``allow_pickle=False``. `load_torch_file` refuses an archive whose members expand past the
-file's own size (``torch.save`` stores them uncompressed) or a file over
+file's own size (``torch.save`` stores them uncompressed), a member that fails its CRC-32
+(torch's reader checks none, so a flipped bit would load) or a file over
 `MAX_CHECKPOINT_BYTES`, loads with ``weights_only=True``, and refuses a tensor that claims more
 elements than its storage holds (a zero-stride view that any copy would blow up). Every refusal
 is a `ValueError` naming the file (docs page *Reliability*, "Files are never trusted").
@@ -18,6 +19,7 @@ import contextlib
 import math
 import os
 import zipfile
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -71,7 +73,8 @@ def check_npz(fh, name: str | os.PathLike, max_bytes: int = MAX_NPZ_BYTES) -> di
                             else np.lib.format.read_array_header_2_0)
                     shape, _fortran, dtype = read(f)
                     header = f.tell()
-            except (ValueError, OSError, EOFError, zipfile.BadZipFile) as e:
+            except (ValueError, OSError, EOFError, zipfile.BadZipFile, NotImplementedError,
+                    zlib.error) as e:  # a damaged header, compression method or stream
                 raise ValueError(f"{name}: member '{info.filename}' has no readable .npy header "
                                  f"({type(e).__name__}: {e})") from None
             if dtype.hasobject:
@@ -145,8 +148,9 @@ def check_checkpoint(path: str | os.PathLike, max_bytes: int = MAX_CHECKPOINT_BY
     Raises:
         FileNotFoundError: no such file.
         ValueError: larger than ``max_bytes``; not a zip archive (truncated, foreign, or the
-            pre-1.6 format, whose loader allocates the sizes it declares); or members that expand
-            past the file's size (a compressed archive, which ``torch.save`` never writes).
+            pre-1.6 format, whose loader allocates the sizes it declares); members that expand
+            past the file's size (a compressed archive, which ``torch.save`` never writes); or
+            a member whose CRC-32 does not match its bytes (every member is read once).
     """
     path = Path(path)
     size = path.stat().st_size
@@ -156,16 +160,21 @@ def check_checkpoint(path: str | os.PathLike, max_bytes: int = MAX_CHECKPOINT_BY
     try:
         with zipfile.ZipFile(path) as zf:
             infos = zf.infolist()
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
+            expanded = sum(i.file_size for i in infos)
+            if expanded > size:
+                big = max(infos, key=lambda i: i.file_size - i.compress_size)
+                raise ValueError(
+                    f"{path}: its members expand to {expanded:,} bytes from a {size:,}-byte file "
+                    f"(member '{big.filename}': {big.compress_size:,} -> {big.file_size:,}); "
+                    "torch.save stores them uncompressed, so this file was crafted or altered; "
+                    "refused before reading")
+            damaged = zf.testzip()  # torch's reader checks no CRC: a flipped bit loads
+    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, zlib.error) as e:
         raise ValueError(f"{path}: unreadable checkpoint (truncated, or not a zip archive as "
-                         f"torch.save writes: {e})") from None
-    expanded = sum(i.file_size for i in infos)
-    if expanded > size:
-        big = max(infos, key=lambda i: i.file_size - i.compress_size)
-        raise ValueError(f"{path}: its members expand to {expanded:,} bytes from a "
-                         f"{size:,}-byte file (member '{big.filename}': {big.compress_size:,} "
-                         f"-> {big.file_size:,}); torch.save stores them uncompressed, so this "
-                         "file was crafted or altered; refused before reading")
+                         f"torch.save writes: {type(e).__name__}: {e})") from None
+    if damaged is not None:
+        raise ValueError(f"{path}: member '{damaged}' fails its CRC-32 check: the file is "
+                         "damaged (a flipped bit, a bad copy); refused")
 
 
 def load_torch_file(path: str | os.PathLike, map_location="cpu",

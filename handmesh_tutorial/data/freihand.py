@@ -84,6 +84,8 @@ def _read_json(path: Path):
         raise FileNotFoundError(f"FreiHAND file not found: {path}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"{path}: not valid JSON (truncated or corrupt?): {err}") from None
+    except RecursionError:  # '[[[[...' deeper than the interpreter's stack
+        raise ValueError(f"{path}: not valid JSON (nested too deeply)") from None
 
 
 def _stack(data, path: Path, shape: tuple, what: str) -> np.ndarray:
@@ -92,7 +94,7 @@ def _stack(data, path: Path, shape: tuple, what: str) -> np.ndarray:
         raise ValueError(f"{path}: expected a JSON list of {what}, got {type(data).__name__}")
     try:
         arr = np.asarray(data, dtype=np.float64)
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, OverflowError):  # OverflowError: an integer beyond float
         arr = None
     if arr is not None and arr.ndim >= 1:
         n = arr.shape[0]
@@ -140,7 +142,7 @@ def _shape_of(item) -> tuple | None:
     """Shape of a nested numeric list, ``None`` when ragged or not numeric."""
     try:
         return np.asarray(item, dtype=np.float64).shape
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, OverflowError):
         return None
 
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import atomic_savez
-from .._untrusted import open_npz
+from .._untrusted import read_npz
 from .joints import MIRROR_AXIS
 
 __all__ = [
@@ -156,12 +156,12 @@ def load_template(path: str | os.PathLike | None = None) -> HandTemplate:
     if not path.exists():
         raise FileNotFoundError(f"hand template asset not found: {path} (rebuild it with "
                                 "python tools/makehuman_hand.py)")
-    with open_npz(path) as data:
-        names = [fl.name for fl in fields(HandTemplate) if fl.name != "side"]
-        missing = [n for n in names if n not in data]
-        if missing:
-            raise ValueError(f"{path}: missing keys {missing}")
-        return HandTemplate(**{n: data[n] for n in names}, side="right")
+    names = [fl.name for fl in fields(HandTemplate) if fl.name != "side"]
+    data = read_npz(path, names)
+    missing = [n for n in names if n not in data]
+    if missing:
+        raise ValueError(f"{path}: missing keys {missing}")
+    return HandTemplate(**data, side="right")
 
 
 

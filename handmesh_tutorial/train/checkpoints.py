@@ -178,12 +178,17 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
 
     Raises:
         FileNotFoundError: no such file (or template file).
-        ValueError: not a checkpoint, a different template, or weights that do not fit the
-            architecture (the message names the mismatching keys).
+        ValueError: not a checkpoint, an invalid config, a different template, weights that
+            do not fit the architecture or hold NaN or infinity (the message names the file
+            and the mismatching keys).
     """
     device = _resolve_device(device)
     ck = _read_checkpoint(path, map_location=device)
-    cfg = TrainConfig.from_dict(ck["config"])
+    try:
+        cfg = TrainConfig.from_dict(ck["config"])
+    except (ValueError, TypeError) as e:  # TrainConfig's checks name no file
+        raise ValueError(f"{path}: its 'config' is not a valid TrainConfig ({e}); the file was "
+                         "altered or damaged") from None
     tmpl = resolve_template(cfg.template if template is None else template)
     got = template_hash(tmpl)
     if got != ck["template_hash"]:
@@ -191,7 +196,17 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
             f"{path}: trained with template {ck['template_hash']} "
             f"({ck.get('num_vertices')} vertices), but the template given has hash {got} "
             f"({len(tmpl.vertices)} vertices); pass template= the training template")
-    net = build_model_from_config(cfg, tmpl)
+    try:
+        net = build_model_from_config(cfg, tmpl)
+    except (ValueError, TypeError, IndexError) as e:
+        raise ValueError(f"{path}: its config {cfg.architecture()} builds no network "
+                         f"({type(e).__name__}: {e})") from None
+    state = ck["model"] if isinstance(ck["model"], dict) else {}
+    bad = next((k for k, v in state.items() if isinstance(v, torch.Tensor)
+                and v.is_floating_point() and not torch.isfinite(v).all()), None)
+    if bad is not None:  # a diverged run or an altered file: every prediction would be NaN
+        raise ValueError(f"{path}: weight '{bad}' holds NaN or infinity (a diverged run or an "
+                         "altered file); use an earlier checkpoint")
     try:
         net.load_state_dict(ck["model"], strict=True)
     except RuntimeError as e:

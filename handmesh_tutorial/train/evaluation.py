@@ -314,6 +314,19 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         raise ValueError("the evaluation set is empty")
 
     r = _run_dataset(net, dataset, batch_size, dev, progress=progress, desc="evaluate")
+    finite = torch.isfinite(r["pred_vertices"]).flatten(1).all(1) & \
+        torch.isfinite(r["pred_joints"]).flatten(1).all(1)
+    if not finite.all():  # scores would be NaN: say why instead of printing them
+        first = int(r["index"][int(torch.nonzero(~finite)[0])])
+        raise ValueError(f"{source or 'the network'} predicts NaN or infinity for "
+                         f"{int((~finite).sum())} of {len(finite)} items (first: sample index "
+                         f"{first}): its weights are damaged or overflow")
+    if r["pred_vertices"].shape[1] != r["vertices"].shape[1]:
+        raise ValueError(
+            f"{source or 'the network'} predicts {r['pred_vertices'].shape[1]} vertices, but "
+            f"the meshes of {data or 'the dataset'} have {r['vertices'].shape[1]}: evaluate a "
+            "network trained on a template of the data's topology (FreiHAND: MANO's 778 "
+            "vertices, train with --template MANO_RIGHT.pkl)")
     faces = getattr(net, "faces", None)
     kinds = _item_kinds(dataset, r["index"].numpy())
     vr = r["vr"].double().numpy()

@@ -21,11 +21,16 @@ import numpy as np
 from torch import nn
 
 from .._io import atomic_savez
-from .._untrusted import open_npz
+from .._untrusted import read_npz
 from ..nn.model import as_template, build_model
 from .config import TrainConfig
 
 __all__ = ["resolve_template", "save_template", "build_model_from_config"]
+
+
+MAX_TEMPLATE_EXTENT_M = 1.0
+"""Largest distance of a template file's vertex from the origin, metres (a hand is about 0.2 m
+long)."""
 
 
 def resolve_template(spec=None):
@@ -45,9 +50,11 @@ def resolve_template(spec=None):
 
     Raises:
         FileNotFoundError: the file does not exist.
-        ValueError: the file is neither a ``.npz`` nor a ``.pkl``; the ``.npz`` lacks a key or
-            has bad shapes; the ``.pkl`` is not a MANO-format file or is a left hand (the
-            network predicts right hands, left ones mirrored: give ``MANO_RIGHT.pkl``).
+        ValueError: the file is neither a ``.npz`` nor a ``.pkl``; the ``.npz`` is damaged,
+            lacks a key, has bad shapes or face ids, NaN, or vertices beyond
+            `MAX_TEMPLATE_EXTENT_M` (the message names the file); the
+            ``.pkl`` is not a MANO-format file or is a left hand (the network predicts right
+            hands, left ones mirrored: give ``MANO_RIGHT.pkl``).
         UnsafePickleError: the ``.pkl`` names a class outside the MANO loader's whitelist.
     """
     if isinstance(spec, str | os.PathLike):
@@ -60,11 +67,23 @@ def resolve_template(spec=None):
             raise ValueError(f"{path}: not a template file: give a .npz written by "
                              "train.save_template (vertices, faces, joint_regressor) or a "
                              "MANO_RIGHT.pkl")
-        with open_npz(path) as z:
-            missing = {"vertices", "faces", "joint_regressor"} - set(z.files)
-            if missing:
-                raise ValueError(f"{path}: template lacks keys {sorted(missing)}")
-            spec = {k: z[k] for k in ("vertices", "faces", "joint_regressor")}
+        spec = read_npz(path, ("vertices", "faces", "joint_regressor"))
+        missing = {"vertices", "faces", "joint_regressor"} - set(spec)
+        if missing:
+            raise ValueError(f"{path}: template lacks keys {sorted(missing)}")
+        try:
+            t = as_template(spec)
+        except ValueError as e:  # the checks name no file
+            raise ValueError(f"{path}: {e}") from None
+        v, r = np.asarray(t.vertices, np.float64), np.asarray(t.joint_regressor, np.float64)
+        if not (np.isfinite(v).all() and np.isfinite(r).all()):
+            raise ValueError(f"{path}: template vertices or joint_regressor hold NaN or infinity")
+        far = float(np.abs(v).max(initial=0.0))
+        if far > MAX_TEMPLATE_EXTENT_M:
+            raise ValueError(f"{path}: a template vertex lies {far:.3g} m from the origin, beyond "
+                             f"{MAX_TEMPLATE_EXTENT_M:g} m: templates are in metres (a file in "
+                             "millimetres?)")
+        return t
     return as_template(spec)
 
 
@@ -117,8 +136,22 @@ def build_model_from_config(config: TrainConfig, template=None) -> nn.Module:
 
     Returns:
         An [`MSMRNet`][handmesh_tutorial.nn.model.MSMRNet] on the CPU.
+
+    Raises:
+        ValueError: a template file that cannot be read, or a template whose mesh builds no
+            mesh hierarchy or spirals (the message names ``config.template``'s file).
     """
-    tmpl = resolve_template(config.template if template is None else template)
-    return build_model(encoder=config.encoder, decoder=config.decoder,
-                       attention=config.attention, template=tmpl, channels=config.channels,
-                       latent_channels=config.latent_channels, **config.model_kwargs)
+    spec = config.template if template is None else template
+    tmpl = resolve_template(spec)
+    try:
+        return build_model(encoder=config.encoder, decoder=config.decoder,
+                           attention=config.attention, template=tmpl, channels=config.channels,
+                           latent_channels=config.latent_channels, **config.model_kwargs)
+    except (RuntimeError, ValueError, IndexError) as e:
+        # a template whose mesh cannot be decimated into the network's hierarchy (the file
+        # named: `train` passes the template it resolved from ``config.template``)
+        where = next((str(p) for p in (spec, config.template) if isinstance(p, str | os.PathLike)),
+                     "the template")
+        raise ValueError(f"{where}: this template builds no network ({type(e).__name__}: "
+                         f"{e}); give a manifold, consistently oriented hand mesh in metres") \
+            from e

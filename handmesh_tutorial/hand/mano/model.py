@@ -71,6 +71,63 @@ def _check_shape(key: str, arr, expected: tuple, source: str) -> None:
         raise ValueError(f"{source}: key '{key}' has shape {shape}, expected {want}")
 
 
+MAX_EXTENT_M = 1.0
+"""Largest coordinate of a MANO file's rest hand, and largest shape or pose displacement per
+unit parameter, metres: a hand is about 0.2 m long (a file in millimetres is refused)."""
+
+
+def _checked_arrays(params: Mapping, source: str) -> dict:
+    """The `MANO_KEYS` arrays of ``params`` as numeric numpy arrays (``J_regressor`` dense),
+    refused by name unless their shapes fit, floats are finite and values plausible: the rest
+    hand and the shape and pose displacements within `MAX_EXTENT_M`, skinning weights in
+    [0, 1], faces indexing the vertices."""
+    out = dict(params)
+    for key in MANO_KEYS:
+        if key not in params:
+            raise ValueError(f"{source}: missing key '{key}' (keys: {sorted(params)})")
+        a = params[key]
+        a = a.toarray() if sp.issparse(a) else np.asarray(a)
+        if a.dtype.kind not in "fiu":
+            raise ValueError(f"{source}: key '{key}' must be a numeric array, got "
+                             f"{type(params[key]).__name__} of dtype {a.dtype}")
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            raise ValueError(f"{source}: key '{key}' holds NaN or infinity")
+        out[key] = a
+    for key in ("hands_components", "hands_mean"):  # optional (PCA poses, the mean pose)
+        if key in params:
+            try:
+                out[key] = np.asarray(params[key], dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise ValueError(f"{source}: key '{key}' must be a numeric array, got "
+                                 f"{type(params[key]).__name__} ({e})") from None
+            if not np.isfinite(out[key]).all():
+                raise ValueError(f"{source}: key '{key}' holds NaN or infinity")
+    if out["v_template"].ndim != 2:
+        raise ValueError(f"{source}: key 'v_template' has shape {out['v_template'].shape}, "
+                         "expected Vx3")
+    nv = len(out["v_template"])
+    for key, shape in MANO_KEYS.items():
+        _check_shape(key, out[key], tuple(nv if e == "V" else e for e in shape), source)
+    for key in ("v_template", "shapedirs", "posedirs"):
+        big = float(np.abs(out[key]).max(initial=0.0))
+        if big > MAX_EXTENT_M:
+            raise ValueError(f"{source}: key '{key}' holds {big:.3g}, beyond +-{MAX_EXTENT_M:g} m "
+                             "(MAX_EXTENT_M): MANO files store metres; a damaged or foreign file")
+    w = out["weights"]
+    if w.size and (w.min() < -1e-6 or w.max() > 1 + 1e-6):
+        raise ValueError(f"{source}: key 'weights' holds values in [{w.min():.3g}, "
+                         f"{w.max():.3g}], expected skinning weights in [0, 1]")
+    rest = np.abs(out["J_regressor"] @ out["v_template"]).max(initial=0.0)
+    if not rest <= MAX_EXTENT_M:
+        raise ValueError(f"{source}: key 'J_regressor' puts a rest joint {rest:.3g} m from the "
+                         f"origin, beyond {MAX_EXTENT_M:g} m (MAX_EXTENT_M)")
+    f = out["f"]
+    if f.dtype.kind not in "iu" or (f.size and (f.min() < 0 or f.max() >= nv)):
+        raise ValueError(f"{source}: key 'f' must hold vertex ids in [0, {nv}), got dtype "
+                         f"{f.dtype}, values {f.min(initial=0)}..{f.max(initial=0)}")
+    return out
+
+
 def _infer_side(path: Path) -> str | None:
     name = path.name.lower()
     if re.search(r"left", name):
@@ -128,12 +185,7 @@ class ManoModel(torch.nn.Module):
                  source: str = "<MANO params>"):
         super().__init__()
         _check_side(side)
-        for key in MANO_KEYS:
-            if key not in params:
-                raise ValueError(f"{source}: missing key '{key}' (keys: {sorted(params)})")
-        nv = np.shape(params["v_template"])[0]
-        for key, shape in MANO_KEYS.items():
-            _check_shape(key, params[key], tuple(nv if e == "V" else e for e in shape), source)
+        params = _checked_arrays(params, source)
         self.side = side
         self.source = source
         self.use_pca = bool(use_pca)
@@ -165,6 +217,10 @@ class ManoModel(torch.nn.Module):
             tips = tuple(int(t) for t in fingertips)
             if len(tips) != 5:
                 raise ValueError(f"fingertips needs 5 vertex ids, got {len(tips)}")
+        nv = len(params["v_template"])
+        if not all(0 <= t < nv for t in tips):
+            raise ValueError(f"{source}: fingertip vertex ids {tips} are not all vertices of its "
+                             f"{nv}-vertex mesh (fingertips={fingertips!r})")
         self.fingertip_convention = fingertips if isinstance(fingertips, str) else "custom"
 
         hands_mean = np.zeros(45)
@@ -175,7 +231,11 @@ class ManoModel(torch.nn.Module):
         if not self.flat_hand_mean:
             if "hands_mean" not in params:
                 raise ValueError(f"{source}: flat_hand_mean=False needs key 'hands_mean'")
-            hands_mean = np.asarray(params["hands_mean"], dtype=np.float64).reshape(45)
+            hands_mean = params["hands_mean"]
+            if hands_mean.size != 45:
+                raise ValueError(f"{source}: key 'hands_mean' has shape {hands_mean.shape}, "
+                                 "expected 45 numbers")
+            hands_mean = hands_mean.reshape(45)
         if self.use_pca:
             if comps is None:
                 raise ValueError(f"{source}: use_pca=True needs key 'hands_components'")

@@ -105,7 +105,12 @@ class _SparseStandIn(_StandIn):
             col = np.asarray(s.get("col", s.get("coords", (None, None))[1]))
             return sp.coo_matrix((data, (row, col)), shape=shape)
         cls = sp.csc_matrix if self.fmt == "csc" else sp.csr_matrix
-        return cls((data, np.asarray(s["indices"]), np.asarray(s["indptr"])), shape=shape)
+        m = cls((data, np.asarray(s["indices"]), np.asarray(s["indptr"])), shape=shape)
+        try:  # indices beyond the shape made scipy's toarray write out of bounds (SIGSEGV)
+            m.check_format(full_check=True)
+        except ValueError as e:
+            raise ValueError(f"sparse matrix {self.qualname}: inconsistent arrays ({e})") from None
+        return m
 
 
 def _make_chumpy(name: str, kind: str) -> type:
