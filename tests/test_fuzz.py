@@ -192,10 +192,11 @@ def test_evaluating_a_network_of_another_topology_says_so(tmp_path):
     cfg = TrainConfig(image_size=32, encoder="resnet10", channels=(4, 4, 8, 8, 8),
                       latent_channels=8)
     net = build_model_from_config(cfg)  # the library's 779-vertex hand; FreiHAND has 778
-    with pytest.raises(ValueError, match=r"the network predicts 779 vertices, but the meshes of "
-                                         r".*fh have 778: .*--template MANO_RIGHT\.pkl"):
-        evaluate(net, root, kind="freihand", split="training", image_size=32, baseline=False,
-                 progress=False)
+    res = evaluate(net, root, kind="freihand", split="training", image_size=32, baseline=False,
+                   progress=False)  # was: a bare shape-mismatch error
+    assert "mpvpe" not in res["scores"] and np.isfinite(res["scores"]["pa_mpjpe"])
+    assert any("the network predicts 779 vertices, the ground truth has 778" in n
+               and "--template MANO_RIGHT.pkl" in n for n in res["notes"]), res["notes"]
     assert json.dumps(F.OUTCOMES)  # the benchmark's classes are importable from the tests
 
 

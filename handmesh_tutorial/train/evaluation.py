@@ -321,12 +321,6 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         raise ValueError(f"{source or 'the network'} predicts NaN or infinity for "
                          f"{int((~finite).sum())} of {len(finite)} items (first: sample index "
                          f"{first}): its weights are damaged or overflow")
-    if r["pred_vertices"].shape[1] != r["vertices"].shape[1]:
-        raise ValueError(
-            f"{source or 'the network'} predicts {r['pred_vertices'].shape[1]} vertices, but "
-            f"the meshes of {data or 'the dataset'} have {r['vertices'].shape[1]}: evaluate a "
-            "network trained on a template of the data's topology (FreiHAND: MANO's 778 "
-            "vertices, train with --template MANO_RIGHT.pkl)")
     faces = getattr(net, "faces", None)
     kinds = _item_kinds(dataset, r["index"].numpy())
     vr = r["vr"].double().numpy()
