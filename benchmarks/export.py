@@ -27,23 +27,11 @@ import time
 from pathlib import Path
 
 import torch
+from model import timeit  # benchmarks/model.py: round-robin, fastest of the repeats
 
 import handmesh_tutorial as hmt
 from handmesh_tutorial.nn import model as M
 from handmesh_tutorial.nn.blocks import SparseVertexMap
-
-
-def timeit(fns: dict, repeats: int) -> dict:
-    """Fastest of ``repeats`` round-robin calls of each function (seconds), after a warm-up."""
-    for fn in fns.values():
-        fn()
-    best = {k: float("inf") for k in fns}
-    for _ in range(repeats):
-        for k, fn in fns.items():
-            t = time.perf_counter()
-            fn()
-            best[k] = min(best[k], time.perf_counter() - t)
-    return best
 
 
 def set_method(net: torch.nn.Module, method: str) -> None:
