@@ -13,6 +13,10 @@ box of its projected mesh (what the evaluation crops use) and its side the annot
 * ``box_scale 1.0``: a tight crop instead of the training crops' 1.5 margin;
 * ``160-px crop``: a crop of another size than the network's 128 px (refused for checkpoints).
 
+Baselines on the same samples: the rest hand and the mean training hand (the Procrustes mean of
+48 scenes of seed ``--seed + 1``, ``train.mean_hand``), each predicted for every image; PA-MPJPE
+with a 95 % interval over the samples and the network's paired difference to each baseline.
+
 Columns: MPJPE (root-relative, as ``handmesh evaluate``), PA-MPJPE, and, for the ``correct`` row,
 the camera-frame error of the placed hand (MPJPE with ``K``) and its root error split into the
 image plane (x, y) and depth (z), medians and means, mm.
@@ -44,6 +48,12 @@ def _raw(net, images: list[torch.Tensor], mirrored: list[bool]) -> list[np.ndarr
     with torch.no_grad():
         j = net(torch.stack(images))["joints"].double().numpy()
     return [unmirror(x, m) for x, m in zip(j, mirrored, strict=True)]
+
+
+def _interval(x) -> str:
+    x = np.asarray(x, dtype=float)
+    h = 1.96 * x.std(ddof=1) / np.sqrt(len(x))
+    return f"{x.mean():.2f} ({x.mean() - h:.2f}, {x.mean() + h:.2f})"
 
 
 def main() -> None:
@@ -87,6 +97,28 @@ def main() -> None:
                                                   image_size=160).joints)
         c = q.crop.image
         rows["float in [0, 1]"] += _raw(net, [(c + 0.5) / 255.0 - 0.5], [q.crop.mirrored])
+    train_root = Path(f"{args.data}_mean_hand")
+    if not (train_root / "meta.json").is_file():
+        from handmesh_tutorial.apps.cli import main as cli
+
+        cli(["generate", "--kind", "mixed", "--num", "48", "--seed", str(args.seed + 1),
+             "--out", str(train_root), "--no-progress"])
+    tmpl = hmt.train.resolve_template(None)
+    consts = {"rest hand (no network)": hmt.train.baselines._rest_template(tmpl),
+              "mean training hand (no network)": hmt.train.mean_hand(
+                  hmt.data.InterSHTorchDataset(train_root, train=False))}
+    pa = {"correct": rows["correct"]}
+    for name, verts in consts.items():
+        _, joints = hmt.train.constant_hand_predictions(verts, tmpl.joint_regressor, len(gt))
+        pa[name] = list(joints.double().numpy())
+    per = {k: 1000 * hmt.metrics.per_sample_scores(
+        pred_joints=np.stack(v), gt_joints=np.stack(gt))["joint_err_pa"].mean(1)
+        for k, v in pa.items()}
+    print("PA-MPJPE per sample, mean (95 % interval), mm:")
+    for k, v in per.items():
+        print(f"  {k}: {_interval(v)}")
+    for k in consts:
+        print(f"  correct minus {k}: {_interval(per['correct'] - per[k])}")
     print(f"{len(gt)} samples of {args.data}; mm")
     print("| input | MPJPE | PA-MPJPE |\n|---|---|---|")
     for name, pred in rows.items():
