@@ -22,16 +22,16 @@ BOXES = {
     "lcs": (1, 0, "lcs/", "local frames, limits"),
     "col": (2, 0, "collision/", "cylinders, capsules"),
     "obj": (3, 0, "objects/", "objects, chain"),
-    "inter": (4, 0, "interact/", "6-step algorithm"),
+    "inter": (4, 0, "scenes/", "6-step algorithm"),
     "render": (5, 0, "render/", "RGB + label masks"),
     "vis": (6, 0, "visibility.py", "VR metric"),
-    "data": (7, 0, "dataset/", "INTER-SH on disk"),
-    "samp": (0, 1, "sampling/", "mesh hierarchy"),
-    "spiral": (1, 1, "spiral.py", "SpiralConv"),
-    "blocks": (2, 1, "blocks.py", "residual, fusion"),
-    "dec": (3, 1, "decoder.py", "single / multi-path"),
-    "model": (5, 1, "model.py", "MSMRNet"),
-    "enc": (5, 2, "encoder.py", "ResNet, HRNet"),
+    "data": (7, 0, "data/", "INTER-SH on disk"),
+    "samp": (0, 1, "nn/hierarchy/", "mesh hierarchy"),
+    "spiral": (1, 1, "nn/spiral.py", "SpiralConv"),
+    "blocks": (2, 1, "nn/blocks.py", "residual, fusion"),
+    "dec": (3, 1, "nn/decoder.py", "single / multi-path"),
+    "model": (5, 1, "nn/model.py", "MSMRNet"),
+    "enc": (5, 2, "nn/encoder.py", "ResNet, HRNet"),
     "train": (7, 1, "train/", "loop, checkpoints"),
     "metrics": (7, 2, "metrics/", "FreiHAND-exact, VR bins"),
 }
@@ -47,7 +47,7 @@ GROUPS = [
     ("MSMR-Net (model)", 0, 5, 1, 2, "#fff3e0"),
     ("training, evaluation", 7, 7, 1, 2, "#e8f5e9"),
 ]
-LABEL_AT_BOTTOM = {"training, evaluation"}  # the arrow from dataset.py comes in at the top
+LABEL_AT_BOTTOM = {"training, evaluation"}  # the arrow from data/ comes in at the top
 DX, DY = 2.0, 1.25  # grid pitch
 W, H = 1.72, 0.78  # box size
 
