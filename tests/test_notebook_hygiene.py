@@ -33,6 +33,23 @@ def test_every_notebook_is_in_the_docs_nav():
     assert not missing, f"notebooks missing from mkdocs.yml nav: {missing}"
 
 
+def test_notebook_nav_titles_are_named_one_way():
+    """Each notebook's nav entry is titled "NN · Title", NN its file's number (one naming)."""
+    nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    for nb in NOTEBOOKS:
+        entry = re.search(rf'^\s*- "(.+)": notebooks/{re.escape(nb.name)}$', nav, re.M)
+        assert entry, f"mkdocs.yml: notebooks/{nb.name} wants a title, '- \"NN · Title\": ...'"
+        assert re.fullmatch(rf"{nb.name[:2]} · [A-Z].+", entry.group(1)), (
+            f"mkdocs.yml: {nb.name} is titled {entry.group(1)!r}; want '{nb.name[:2]} · Title'")
+
+
+def test_notebook_titles_carry_no_number():
+    """The number lives in the file name and the nav, not in the notebook's own title."""
+    for nb in NOTEBOOKS:
+        title = _source(_cells(nb)[0]).lstrip().splitlines()[0]
+        assert not re.match(r"#\s*\d", title), f"{nb.name}: title {title!r} starts with a number"
+
+
 def test_docs_reach_the_notebooks():
     link = ROOT / "docs" / "notebooks"
     assert link.resolve() == (ROOT / "notebooks").resolve(), "docs/notebooks must link notebooks/"
