@@ -16,6 +16,7 @@ Used by every notebook (``hmt.budget()``); notebook 00 ("Quick start") introduce
 from __future__ import annotations
 
 import os
+import textwrap
 from dataclasses import asdict, dataclass
 
 __all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE"]
@@ -82,6 +83,12 @@ class Budget:
     def as_dict(self) -> dict:
         """The sizes as a plain dict (for logs and reports)."""
         return asdict(self)
+
+    def __str__(self) -> str:
+        """The sizes on lines of at most 96 characters (``repr`` keeps the one-line form)."""
+        fields = ", ".join(f"{k}={v}" for k, v in asdict(self).items() if k != "name")
+        return textwrap.fill(fields, 96, initial_indent=f"Budget {self.name!r}: ",
+                             subsequent_indent="  ", break_long_words=False)
 
 
 _TIERS = {

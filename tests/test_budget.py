@@ -35,3 +35,26 @@ def test_tiers_grow_from_smoke_to_full():
 def test_budget_is_immutable():
     with pytest.raises(AttributeError):
         hmt.budget("smoke").epochs = 5
+
+
+@pytest.mark.parametrize("tier", ["smoke", "default", "full"])
+def test_printed_budget_fits_a_page_and_keeps_every_size(tier):
+    b = hmt.budget(tier)
+    text = str(b)
+    assert max(len(line) for line in text.splitlines()) <= 96
+    assert text.startswith(f"Budget {tier!r}: ")
+    for key, value in b.as_dict().items():
+        if key != "name":
+            assert f"{key}={value}" in text.replace("\n  ", " ")
+    assert "\n" not in repr(b)  # repr stays the one-line dataclass form
+
+
+def test_printed_train_config_fits_a_page_and_keeps_every_field():
+    cfg = hmt.train.TrainConfig(model_kwargs={"keypoints": True, "output": "skinned"},
+                                out_dir="runs/a/rather/long/path/to/show/wrapping")
+    text = str(cfg)
+    assert max(len(line) for line in text.splitlines()) <= 96
+    joined = text.replace("\n  ", " ")
+    for key in cfg.to_dict():
+        assert f"{key}={getattr(cfg, key)!r}" in joined, key
+    assert "\n" not in repr(cfg)

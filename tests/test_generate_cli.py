@@ -372,3 +372,19 @@ def test_a_pool_closes_when_a_worker_died_idle(tmp_path):
     except subprocess.TimeoutExpired:
         raise AssertionError("closing a pool with a dead idle worker hung") from None
     assert out.returncode == 0 and "closed 8 pools" in out.stdout, out.stderr
+
+
+def test_generation_summary_prints_lines_that_fit_a_page():
+    from handmesh_tutorial.data.generate import GenerationSummary
+
+    summary = GenerationSummary(
+        root="runs/intersh_default/train", indices=[[0, 3000]], written=3000, skipped=0,
+        attempts=3016, stale_removed=0, seconds=161.4,
+        vr_bins=[(0.4, 0.6), (0.6, 0.8), (0.8, 0.95), (0.95, 1.0)],
+        vr_histogram=[251, 452, 778, 1367], vr_outside=152,
+        vr_probe={"min_hits": 2, "candidates": 64, "filled": [0, 1, 2, 3]}, off_bin=0)
+    text = str(summary)
+    assert max(len(line) for line in text.splitlines()) <= 100, text
+    for part in ("wrote 3000", "3016 make_sample calls", "18.59 samples/s", "[0.95, 1.00]: 1367",
+                 "outside bins: 152", "bins left out", "outside their bin: 0"):
+        assert part in text, part

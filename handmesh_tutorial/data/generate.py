@@ -101,15 +101,16 @@ class GenerationSummary:
     def __str__(self) -> str:
         hist = ", ".join(f"[{lo:.2f}, {hi:.2f}{']' if hi >= 1 else ')'}: {n}" for (lo, hi), n
                          in zip(self.vr_bins, self.vr_histogram, strict=True))
+        # lines of at most about 100 characters: they are printed in notebooks and logs
         text = (f"{self.root}: wrote {self.written}, skipped {self.skipped} already present "
-                f"(indices {self.indices}), {self.attempts} make_sample calls, "
+                f"(indices {self.indices})\n  {self.attempts} make_sample calls, "
                 f"{self.samples_per_second:.2f} samples/s, {self.stale_removed} stale temp "
-                f"removed\ntarget VR histogram: {hist}; outside bins: {self.vr_outside}")
+                f"removed\ntarget VR histogram: {hist}\n  outside bins: {self.vr_outside}")
         if self.vr_probe:
             gone = ", ".join(_fmt_bin(b) for b in self.vr_unreachable) or "none"
             text += (f"\nVR balancing: bins left out (reached by fewer than "
                      f"{self.vr_probe['min_hits']} of {self.vr_probe['candidates']} probe "
-                     f"candidates): {gone}; samples written outside their bin: {self.off_bin}")
+                     f"candidates): {gone}\n  samples written outside their bin: {self.off_bin}")
         return text
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import os
+import textwrap
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 
@@ -311,6 +312,12 @@ class TrainConfig:
             sized["lr_step"] = max(1, round(overrides["epochs"] / 4))
         sized.update(overrides)
         return cls(**sized)
+
+    def __str__(self) -> str:
+        """Every field as ``name=value`` on lines of at most 96 characters (``repr``: one line)."""
+        fields_text = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self))
+        return textwrap.fill(fields_text, 96, initial_indent="TrainConfig: ",
+                             subsequent_indent="  ", break_long_words=False)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (tuples become lists)."""
