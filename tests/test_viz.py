@@ -138,4 +138,11 @@ def test_plot_cylinders_light_shades_outward_faces_in_one_artist(capsule):
     assert len(flat) == 2 and np.allclose(flat[0].get_facecolor()[:, :3], [1, 0, 0])
     with pytest.raises(ValueError, match="non-zero"):
         viz.plot_cylinders(ax, body, light=(0, 0, 0))
+    # one opacity per cylinder, in both modes
+    see = viz.plot_cylinders(ax, body, alpha=[0.25, 1.0], light=(-1.0, 0.0, 0.0))[0]
+    assert sorted(set(np.round(np.asarray(see._facecolor3d)[:, 3], 6))) == [0.25, 1.0]
+    assert [a.get_facecolor()[0, 3] for a in viz.plot_cylinders(ax, body, alpha=[0.25, 1])] \
+        == [0.25, 1.0]
+    with pytest.raises(ValueError, match="2 values"):
+        viz.plot_cylinders(ax, body, alpha=[0.2, 0.3, 0.4])
     plt.close(fig)

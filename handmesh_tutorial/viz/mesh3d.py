@@ -363,7 +363,7 @@ def _polygon_normals(polygons: list) -> np.ndarray:
     return n / (np.linalg.norm(n, axis=1, keepdims=True) + 1e-300)
 
 
-def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: int = 24,
+def plot_cylinders(ax, cylinders, colors=None, alpha=0.35, segments: int = 24,
                    edgecolor=None, axes: bool = True, labels: bool = False,
                    capsule: bool = False, light=None):
     """Draw a [`Cylinders`][handmesh_tutorial.collision.Cylinders] body on a 3D axes.
@@ -379,7 +379,7 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
         ax: a matplotlib ``Axes3D``.
         cylinders: the body (or any object with ``p0``, ``p1`` (N,3) and ``radius`` (N,), metres).
         colors: one colour for all, or N colours; default: by ``parts`` (finger colours).
-        alpha: face transparency.
+        alpha: face opacity, one for all or N values (e.g. a see-through palm).
         segments: polygons around each cylinder.
         edgecolor: polygon edge colour (None: no edges).
         axes: also draw each axis segment as a line.
@@ -393,7 +393,7 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
         ``light``.
 
     Raises:
-        ValueError: ``light`` of zero length.
+        ValueError: ``light`` of zero length; ``alpha`` neither one value nor N.
     """
     to_rgba = require("matplotlib.colors", "hmt.viz figures").to_rgba
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -407,6 +407,10 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
         colors = [palette[int(k) % len(palette)] for k in parts]
     elif isinstance(colors, str) or np.ndim(colors) == 1 and len(colors) in (3, 4) and n != 3:
         colors = [colors] * n
+    alphas = np.broadcast_to(np.asarray(alpha, dtype=float), (n,)) if np.ndim(alpha) == 0 \
+        else np.asarray(alpha, dtype=float)
+    if alphas.shape != (n,):
+        raise ValueError(f"alpha must be one value or {n} values, got {np.shape(alpha)}")
     if light is not None:
         light_dir = -np.asarray(light, dtype=float).reshape(3)
         if not np.linalg.norm(light_dir) > 0:
@@ -437,12 +441,12 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
             outward = np.stack([np.asarray(q).mean(0) for q in polys]) - centre
             normals *= np.where((normals * outward).sum(1) < 0, -1.0, 1.0)[:, None]
             lambert = np.clip(normals @ light_dir, 0.0, 1.0)
-            rgba = np.tile(to_rgba(colors[k], alpha), (len(polys), 1))
+            rgba = np.tile(to_rgba(colors[k], alphas[k]), (len(polys), 1))
             rgba[:, :3] *= 0.35 + 0.65 * lambert[:, None]
             shaded_polys += polys
             shaded_rgba.append(rgba)
         else:
-            col = Poly3DCollection(_same_length(polys), facecolor=to_rgba(colors[k], alpha),
+            col = Poly3DCollection(_same_length(polys), facecolor=to_rgba(colors[k], alphas[k]),
                                    edgecolor=edgecolor or "none", linewidth=0.3)
             ax.add_collection3d(col)
             artists.append(col)
