@@ -98,3 +98,51 @@ def test_hand_figures_use_the_shared_camera_by_default():
     got = [(a.elev, a.azim) for a in (ax, ax2)]
     plt.close(fig)
     assert got == [(viz.HAND_VIEW["elev"], viz.HAND_VIEW["azim"])] * 2
+
+
+@pytest.mark.parametrize("capsule", [False, True])
+def test_plot_cylinders_light_shades_outward_faces_in_one_artist(capsule):
+    # one cylinder along z, one along x; light travelling towards -x: the faces whose outward
+    # normal is +x are lit fully, those facing -x keep the 0.35 ambient share of their colour
+    body = collision.Cylinders([[0, 0, 0], [0.02, 0, 0]], [[0, 0, 0.03], [0.05, 0, 0]],
+                               [0.008, 0.006])
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d")
+    artists = viz.plot_cylinders(ax, body, colors=["#ff0000", "#00ff00"], alpha=1.0,
+                                 light=(-1.0, 0.0, 0.0), capsule=capsule)
+    assert len(artists) == 1            # one artist: polygons depth-sorted across cylinders
+    # polygons and their colours in drawing order as matplotlib holds them (private names,
+    # matplotlib 3.11; get_facecolor() is the depth-sorted 2D order): (P, k, 3), each polygon
+    # padded with copies of its last vertex (their means stay on the polygon's side)
+    rgba = np.asarray(artists[0]._facecolor3d)
+    centres = np.asarray(artists[0]._faces).mean(axis=1)
+    plt.close(fig)
+    assert len(centres) == len(rgba) and np.allclose(rgba[:, 3], 1.0)
+    brightness = rgba[:, :3].max(1)
+    z_cyl = rgba[:, 1] == 0              # the z cylinder's faces (red: green channel 0)
+    assert np.isclose(brightness[z_cyl].max(), 1.0, atol=0.02)
+    assert np.isclose(brightness.min(), 0.35, atol=1e-6)
+    # lit faces sit on the +x side of their cylinder, faces in shadow on the -x side
+    axis_x = np.where(z_cyl, 0.0, np.clip(centres[:, 0], 0.02, 0.05))
+    lit, dark = brightness > 0.9, brightness < 0.36
+    assert (centres[lit & z_cyl, 0] > 0.005).all() and (centres[dark & z_cyl, 0] < 1e-9).all()
+    assert (centres[lit, 0] >= axis_x[lit] - 1e-9).all()
+    beyond = ~z_cyl & (centres[:, 0] > 0.05 - 1e-9)     # the +x end: flat cap or half ball
+    assert beyond.any() and brightness[beyond].min() > 0.4 and brightness[beyond].max() > 0.9
+    behind = ~z_cyl & (centres[:, 0] < 0.02 + 1e-9)     # the -x end faces away from the light
+    assert behind.any() and np.allclose(brightness[behind], 0.35)
+    # flat colours stay the default, one artist per cylinder
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d")
+    flat = viz.plot_cylinders(ax, body, colors=["#ff0000", "#00ff00"], alpha=1.0)
+    assert len(flat) == 2 and np.allclose(flat[0].get_facecolor()[:, :3], [1, 0, 0])
+    with pytest.raises(ValueError, match="non-zero"):
+        viz.plot_cylinders(ax, body, light=(0, 0, 0))
+    # one opacity per cylinder, in both modes
+    see = viz.plot_cylinders(ax, body, alpha=[0.25, 1.0], light=(-1.0, 0.0, 0.0))[0]
+    assert sorted(set(np.round(np.asarray(see._facecolor3d)[:, 3], 6))) == [0.25, 1.0]
+    assert [a.get_facecolor()[0, 3] for a in viz.plot_cylinders(ax, body, alpha=[0.25, 1])] \
+        == [0.25, 1.0]
+    with pytest.raises(ValueError, match="2 values"):
+        viz.plot_cylinders(ax, body, alpha=[0.2, 0.3, 0.4])
+    plt.close(fig)

@@ -357,24 +357,43 @@ def _same_length(polygons: list) -> np.ma.MaskedArray:
     return np.ma.MaskedArray(data, mask=np.broadcast_to(pad, data.shape))
 
 
-def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: int = 24,
+def _polygon_normals(polygons: list) -> np.ndarray:
+    """Unit normals (P, 3) of planar polygons by Newell's method (robust to repeated vertices)."""
+    n = np.stack([np.cross(q, np.roll(q, -1, axis=0)).sum(0) for q in map(np.asarray, polygons)])
+    return n / (np.linalg.norm(n, axis=1, keepdims=True) + 1e-300)
+
+
+def plot_cylinders(ax, cylinders, colors=None, alpha=0.35, segments: int = 24,
                    edgecolor=None, axes: bool = True, labels: bool = False,
-                   capsule: bool = False):
+                   capsule: bool = False, light=None):
     """Draw a [`Cylinders`][handmesh_tutorial.collision.Cylinders] body on a 3D axes.
+
+    Flat colours by default (one artist per cylinder). With ``light`` the polygons are shaded
+    like [`shade_faces`][handmesh_tutorial.viz.mesh3d.shade_faces] (Lambert, outward normals,
+    ambient 0.35) and all cylinders go into *one* artist, so matplotlib depth-sorts their
+    polygons against each other (separate artists are sorted whole, which draws a cylinder
+    behind another over it); that is what makes overlapping opaque cylinders, e.g. a hand,
+    readable.
 
     Args:
         ax: a matplotlib ``Axes3D``.
         cylinders: the body (or any object with ``p0``, ``p1`` (N,3) and ``radius`` (N,), metres).
         colors: one colour for all, or N colours; default: by ``parts`` (finger colours).
-        alpha: face transparency.
+        alpha: face opacity, one for all or N values (e.g. a see-through palm).
         segments: polygons around each cylinder.
         edgecolor: polygon edge colour (None: no edges).
         axes: also draw each axis segment as a line.
         labels: write each cylinder's name at its middle.
         capsule: draw capsules (hemispherical ends) instead of flat end caps.
+        light: direction *towards* which the light travels, any length (e.g.
+            [`HAND_LIGHT`][handmesh_tutorial.viz.mesh3d.HAND_LIGHT]); ``None``: flat colours.
 
     Returns:
-        The list of added ``Poly3DCollection`` artists.
+        The list of added ``Poly3DCollection`` artists: one per cylinder, or one in all with
+        ``light``.
+
+    Raises:
+        ValueError: ``light`` of zero length; ``alpha`` neither one value nor N.
     """
     to_rgba = require("matplotlib.colors", "hmt.viz figures").to_rgba
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -388,6 +407,16 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
         colors = [palette[int(k) % len(palette)] for k in parts]
     elif isinstance(colors, str) or np.ndim(colors) == 1 and len(colors) in (3, 4) and n != 3:
         colors = [colors] * n
+    alphas = np.broadcast_to(np.asarray(alpha, dtype=float), (n,)) if np.ndim(alpha) == 0 \
+        else np.asarray(alpha, dtype=float)
+    if alphas.shape != (n,):
+        raise ValueError(f"alpha must be one value or {n} values, got {np.shape(alpha)}")
+    if light is not None:
+        light_dir = -np.asarray(light, dtype=float).reshape(3)
+        if not np.linalg.norm(light_dir) > 0:
+            raise ValueError(f"light must be a non-zero direction, got {light!r}")
+        light_dir /= np.linalg.norm(light_dir)
+        shaded_polys, shaded_rgba = [], []
     artists = []
     for k in range(n):
         quads, caps = _cylinder_polygons(p0[k], p1[k], radius[k], segments)
@@ -406,14 +435,30 @@ def plot_cylinders(ax, cylinders, colors=None, alpha: float = 0.35, segments: in
                                      for i in range(m)]
         else:
             polys = polys + caps
-        col = Poly3DCollection(_same_length(polys), facecolor=to_rgba(colors[k], alpha),
-                               edgecolor=edgecolor or "none", linewidth=0.3)
-        ax.add_collection3d(col)
-        artists.append(col)
+        if light is not None:
+            normals = _polygon_normals(polys)
+            centre = 0.5 * (p0[k] + p1[k])
+            outward = np.stack([np.asarray(q).mean(0) for q in polys]) - centre
+            normals *= np.where((normals * outward).sum(1) < 0, -1.0, 1.0)[:, None]
+            lambert = np.clip(normals @ light_dir, 0.0, 1.0)
+            rgba = np.tile(to_rgba(colors[k], alphas[k]), (len(polys), 1))
+            rgba[:, :3] *= 0.35 + 0.65 * lambert[:, None]
+            shaded_polys += polys
+            shaded_rgba.append(rgba)
+        else:
+            col = Poly3DCollection(_same_length(polys), facecolor=to_rgba(colors[k], alphas[k]),
+                                   edgecolor=edgecolor or "none", linewidth=0.3)
+            ax.add_collection3d(col)
+            artists.append(col)
         if axes:
             ax.plot(*np.stack([p0[k], p1[k]]).T, color=colors[k], linewidth=1.0)
         if labels:
             names = getattr(cylinders, "names", None)
             if names:
                 ax.text(*(0.5 * (p0[k] + p1[k])), names[k], fontsize="x-small")
+    if light is not None and shaded_polys:
+        col = Poly3DCollection(_same_length(shaded_polys), facecolors=np.concatenate(shaded_rgba),
+                               edgecolor=edgecolor or "none", linewidth=0.3)
+        ax.add_collection3d(col)
+        artists.append(col)
     return artists
