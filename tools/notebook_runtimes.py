@@ -57,6 +57,9 @@ LEARN = {
                      "PCK/AUC) and the per-VR-bin table of a trained model",
     "10_ablation": "the paper's Table 3 ablation at equal depth: single path, multi-path, "
                    "multi-path + attention",
+    "11_your_own_data": "the shipped network on a photo file (hand box, crop, left-hand "
+                        "mirroring), a FreiHAND-format folder read, scored and written back as "
+                        "pred.json, and a MANO-format file as the template",
 }
 #: Notebooks to read first (the concepts each one builds on).
 PREREQS = {
@@ -71,6 +74,7 @@ PREREQS = {
     "08_training": ["05_rendering_and_visibility", "07_multi_path_decoder"],
     "09_evaluation": ["08_training"],
     "10_ablation": ["08_training"],
+    "11_your_own_data": ["09_evaluation"],
 }
 #: Whether a notebook needs a trained model, and where it gets it.
 TRAINED = {
@@ -79,6 +83,8 @@ TRAINED = {
     "09_evaluation": "yes: notebook 08's checkpoint (`runs/train08_<budget>/`; trains it if "
                      "absent), and the shipped pretrained network",
     "10_ablation": "trains three variants with three seeds each from the pretrained encoder",
+    "11_your_own_data": "the shipped pretrained network; trains a tiny one on a MANO-format "
+                        "template",
 }
 
 #: Where the committed ``default`` run picked up what an earlier run had left in ``notebooks/runs/``
@@ -102,6 +108,7 @@ TRAINED_SHORT = {
     "08_training": "trains it",
     "09_evaluation": "08's checkpoint; the pretrained one",
     "10_ablation": "trains 9",
+    "11_your_own_data": "the pretrained one; trains a tiny one",
 }
 
 
