@@ -49,8 +49,9 @@ LEARN = {
                                    "visibility ratio (VR) with its four bins",
     "06_mesh_hierarchy_and_spiral_conv": "the QSlim mesh hierarchy (vertex subsets, barycentric "
                                          "up-sampling) and SpiralConv",
-    "07_multi_path_decoder": "single- vs multi-path spiral decoders, multi-resolution fusion, and "
-                             "the fit test of the mesh decoder",
+    "07_multi_path_decoder": "single- vs multi-path spiral decoders, multi-resolution fusion, "
+                             "the encoder's 2D joints and the coarse-mesh attention of the "
+                             "pretrained network, and the fit test of the mesh decoder",
     "08_training": "a full MSMR-Net training run on the CPU with the paper's protocol (pretrained "
                    "encoder, decoder from scratch): loss curves, checkpoints, predictions",
     "09_evaluation": "FreiHAND-exact metrics (Procrustes with and without reflection, F-scores, "
@@ -79,6 +80,7 @@ PREREQS = {
 #: Whether a notebook needs a trained model, and where it gets it.
 TRAINED = {
     "00_quickstart": "trains a small one itself, and loads the shipped pretrained network",
+    "07_multi_path_decoder": "loads the shipped pretrained network (section 4, one image)",
     "08_training": "trains it (this is the training notebook)",
     "09_evaluation": "yes: notebook 08's checkpoint (`runs/train08_<budget>/`; trains it if "
                      "absent), and the shipped pretrained network",
@@ -105,6 +107,7 @@ REUSED = {
 #: The same, in a few words, for the Learning path table.
 TRAINED_SHORT = {
     "00_quickstart": "trains a small one; the pretrained one",
+    "07_multi_path_decoder": "the pretrained one",
     "08_training": "trains it",
     "09_evaluation": "08's checkpoint; the pretrained one",
     "10_ablation": "trains 9",

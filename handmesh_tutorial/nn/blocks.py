@@ -22,7 +22,8 @@ Fixed sparse maps ([`SparseVertexMap`][handmesh_tutorial.nn.blocks.SparseVertexM
 products on vertex-major features, with a gather-and-sum reference path that graph capture uses;
 why and how fast: docs page "The network".
 
-Taught in notebook 07 ("The multi-path decoder").
+Taught in notebook 07 ("The multi-path decoder"); its section 4 writes the coarse-mesh
+transformer from scratch and draws the shipped network's attention weights.
 
 """
 

@@ -21,7 +21,8 @@ so there are no torchvision weights for it) is the CPU choice: without pretraine
 leaves the "mean hand" plateau of from-scratch training in fewer steps than ResNet-18 and each
 step costs less (docs page "Why the paper starts from pretrained weights", ``benchmarks/model.py``).
 
-Taught in notebook 08 ("Training").
+Taught in notebook 08 ("Training"); notebook 07 (section 4) prints the stage shapes of the
+shipped network's ResNet-10.
 
 """
 

@@ -27,7 +27,8 @@ centres at integers, as [`crop_transform`][handmesh_tutorial.data.augment.crop_t
 ``(2 u + 1) / S - 1``
 ([`normalised_keypoints`][handmesh_tutorial.nn.keypoints.normalised_keypoints]).
 
-Taught in notebook 08 ("Training").
+Taught in notebook 08 ("Training"); notebook 07 ("Multi-path mesh decoder", section 4) opens it
+on one image of the shipped network: the shapes of every step, its 2D joints and a heat-map.
 """
 
 from __future__ import annotations
