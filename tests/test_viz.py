@@ -145,4 +145,25 @@ def test_plot_cylinders_light_shades_outward_faces_in_one_artist(capsule):
         == [0.25, 1.0]
     with pytest.raises(ValueError, match="2 values"):
         viz.plot_cylinders(ax, body, alpha=[0.2, 0.3, 0.4])
+
+def test_overlay_titles_stay_clear_of_the_row_above():
+    # notebook 09's best/worst figure: the prediction panels' two-line titles ran into the images
+    # of the row above under tight_layout
+    rng = np.random.default_rng(0)
+    K = np.array([[100.0, 0, 32], [0, 100.0, 32], [0, 0, 1]])
+    verts = rng.normal(0, 0.02, (30, 3)) + [0, 0, 0.5]
+    faces = np.array([[0, 1, 2], [2, 3, 4]])
+    sample = {"image": np.zeros((64, 64, 3), np.uint8), "K": K, "meshes": {1: (verts, faces)},
+              "target": 1, "kind": "hand-hand", "vr": {1: 0.5}}
+    n = 6
+    fig = viz.plot_overlays([sample] * n, np.stack([verts] * n), faces,
+                            [f"worst hand-hand: {i + 17.4:.1f} mm" for i in range(n)])
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    axes = np.array(fig.axes).reshape(-1, 6)
+    for r in range(1, len(axes)):
+        for c in range(6):
+            title = axes[r, c].title.get_window_extent(renderer)
+            above = axes[r - 1, c].get_window_extent(renderer)
+            assert title.y1 > title.y0 and title.y1 <= above.y0 + 0.5, (r, c)
     plt.close(fig)

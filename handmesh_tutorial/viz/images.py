@@ -116,7 +116,9 @@ def plot_overlays(samples: list, pred_vertices, faces, titles: list | None = Non
     if len(pred_vertices) != n:
         raise ValueError(f"{n} samples but {len(pred_vertices)} predictions")
     rows = math.ceil(n / 2)
-    fig, axes = plt.subplots(rows, 6, figsize=(12, 2.2 * rows), squeeze=False)
+    # constrained layout keeps the two-line titles of the prediction panels clear of the row above
+    fig, axes = plt.subplots(rows, 6, figsize=(12, 2.2 * rows), squeeze=False,
+                             layout="constrained")
     for ax in axes.ravel():
         ax.axis("off")
     for i, s in enumerate(samples):
@@ -139,5 +141,4 @@ def plot_overlays(samples: list, pred_vertices, faces, titles: list | None = Non
             ax.axis("on")
             ax.set_xticks([])
             ax.set_yticks([])
-    fig.tight_layout()
     return fig
