@@ -94,7 +94,7 @@ TRAINED = {
 REUSED = {
     "00_quickstart": "the committed run generated its scenes and trained its ten steps "
                      "itself; a rerun reuses them from `notebooks/runs/`",
-    "08_training": "the committed run generated its INTER-SH set too (about 3 min of the "
+    "08_training": "the committed run generated its INTER-SH set too (about 4 min of the "
                    "total); a later run reuses it from `notebooks/runs/` and only trains",
     "09_evaluation": "reuses notebook 08's data set and checkpoint; it made section 5's 300 "
                      "test scenes and 600 training-set scenes itself",
@@ -157,10 +157,14 @@ def runtimes(nb) -> dict:
 
 def busy(rt: dict) -> str:
     m = rt.get("smoke_machine") or {}
+    text = ""
     if m and m["load"] > m["cores"]:
-        return (f"; the smoke run shared the machine (load {m['load']} on {m['cores']} cores), so "
+        text = (f"; the smoke run shared the machine (load {m['load']} on {m['cores']} cores), so "
                 "that number is an upper bound")
-    return ""
+    # a note recorded by hand in the metadata when the committed default run shared the machine
+    if rt.get("default_note"):
+        text += f"; {rt['default_note']}"
+    return text
 
 
 def header_cell_text(stem: str, rt: dict) -> str:
