@@ -36,6 +36,8 @@ def test_every_notebook_is_in_the_docs_nav():
 def test_notebook_nav_titles_are_named_one_way():
     """Each notebook's nav entry is titled "NN · Title", NN its file's number (one naming)."""
     nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    # mkdocs-jupyter would put each notebook's own H1 in the navigation instead
+    assert re.search(r"^\s*ignore_h1_titles: true$", nav, re.M), "mkdocs.yml: ignore_h1_titles"
     for nb in NOTEBOOKS:
         entry = re.search(rf'^\s*- "(.+)": notebooks/{re.escape(nb.name)}$', nav, re.M)
         assert entry, f"mkdocs.yml: notebooks/{nb.name} wants a title, '- \"NN · Title\": ...'"
