@@ -49,6 +49,13 @@ def set_axes_equal(ax, points: np.ndarray | None = None, pad: float = 0.05) -> N
     ax.set_box_aspect((1, 1, 1))
 
 
+def _lambert_factor(normals: np.ndarray, light) -> np.ndarray:
+    """Brightness (P,) 0.35 + 0.65 * max(0, n . -light) of unit normals (P, 3)."""
+    light_dir = -np.asarray(light, dtype=float).reshape(3)
+    light_dir /= np.linalg.norm(light_dir)
+    return 0.35 + 0.65 * np.clip(normals @ light_dir, 0.0, 1.0)
+
+
 def shade_faces(vertices: np.ndarray, faces: np.ndarray, base_colors: np.ndarray | None = None,
                 light: tuple[float, float, float] = (0.3, -0.5, -1.0)) -> np.ndarray:
     """Per-face RGBA colours with simple Lambert shading, for ``Poly3DCollection``.
@@ -70,9 +77,6 @@ def shade_faces(vertices: np.ndarray, faces: np.ndarray, base_colors: np.ndarray
     tri = v[f]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True) + 1e-12
-    light_dir = -np.asarray(light, dtype=float)
-    light_dir /= np.linalg.norm(light_dir)
-    lambert = np.clip(normals @ light_dir, 0.0, 1.0)
     if base_colors is None:
         rgb = np.tile([0.85, 0.68, 0.58], (len(f), 1))
     else:
@@ -80,7 +84,7 @@ def shade_faces(vertices: np.ndarray, faces: np.ndarray, base_colors: np.ndarray
         if c.max() > 1.0:
             c = c / 255.0
         rgb = c[f].mean(axis=1) if len(c) == len(v) and len(c) != len(f) else c
-    shaded = rgb * (0.35 + 0.65 * lambert[:, None])
+    shaded = rgb * _lambert_factor(normals, light)[:, None]
     return np.concatenate([np.clip(shaded, 0, 1), np.ones((len(f), 1))], axis=1)
 
 
@@ -412,10 +416,8 @@ def plot_cylinders(ax, cylinders, colors=None, alpha=0.35, segments: int = 24,
     if alphas.shape != (n,):
         raise ValueError(f"alpha must be one value or {n} values, got {np.shape(alpha)}")
     if light is not None:
-        light_dir = -np.asarray(light, dtype=float).reshape(3)
-        if not np.linalg.norm(light_dir) > 0:
+        if not np.linalg.norm(np.asarray(light, dtype=float)) > 0:
             raise ValueError(f"light must be a non-zero direction, got {light!r}")
-        light_dir /= np.linalg.norm(light_dir)
         shaded_polys, shaded_rgba = [], []
     artists = []
     for k in range(n):
@@ -440,9 +442,8 @@ def plot_cylinders(ax, cylinders, colors=None, alpha=0.35, segments: int = 24,
             centre = 0.5 * (p0[k] + p1[k])
             outward = np.stack([np.asarray(q).mean(0) for q in polys]) - centre
             normals *= np.where((normals * outward).sum(1) < 0, -1.0, 1.0)[:, None]
-            lambert = np.clip(normals @ light_dir, 0.0, 1.0)
             rgba = np.tile(to_rgba(colors[k], alphas[k]), (len(polys), 1))
-            rgba[:, :3] *= 0.35 + 0.65 * lambert[:, None]
+            rgba[:, :3] *= _lambert_factor(normals, light)[:, None]
             shaded_polys += polys
             shaded_rgba.append(rgba)
         else:
