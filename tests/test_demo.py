@@ -241,6 +241,7 @@ def test_recipes_reach_the_training_config(smoke_run, tmp_path):
     assert (cfg["keypoint_weight"], cfg["aligned_weight"]) == (0.5, 1.0)
     assert "recipe `cpu`" in (smoke_run / "report.md").read_text()
     paper = demo.train_config(demo.DemoConfig(recipe="paper"), tmp_path, tmp_path / "t")
-    assert paper.model_kwargs == {} and paper.keypoint_weight == 0 and paper.aligned_weight == 0
+    assert paper.model_kwargs == {"output": "xyz", "smoothing_length": 0.0}
+    assert paper.keypoint_weight == 0 and paper.aligned_weight == 0
     with pytest.raises(ValueError, match=r"recipe must be one of \['cpu', 'paper'\], got 'x'"):
         demo.train_config(demo.DemoConfig(recipe="x"), tmp_path, tmp_path / "t")

@@ -33,7 +33,7 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
     from .pose_pretraining import PosePretrainConfig, build_pretrained_encoder
 
     fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "backbone", "batch_size",
-              "lr", "max_steps", "seed", "device", "workers")
+              "lr", "max_steps", "seed", "device", "workers", "precision")
     kw = {k: getattr(args, k) for k in fields if getattr(args, k) is not None}
     if args.image_sizes:
         kw["image_sizes"] = tuple(int(s) for s in args.image_sizes.split(","))
@@ -115,6 +115,8 @@ def add_pretrain_commands(sub) -> None:
                     "encoder of the shipped MSMR-Net) or a pose-encoder file")
     pe.add_argument("--seed", type=int, help="initialisation / order / augmentation seed")
     pe.add_argument("--device", help="auto | cpu | cuda (default: auto)")
+    pe.add_argument("--precision", choices=("float32", "bfloat16"),
+                    help="autocast precision (default: bfloat16)")
     pe.add_argument("--workers", type=int, help="generator processes (default: one per CPU)")
     pe.add_argument("--max-generate-seconds", type=float, default=None,
                     help="stop generating training scenes when the next shard would end past "

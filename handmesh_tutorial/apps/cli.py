@@ -73,6 +73,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
           "meshes, each predicted for every image: the bars to clear after alignment")
     print(demo.headline(res.scores, res.baseline_scores, res.mean_hand_scores,
                         res.pretrained_scores))
+    for name, d in (res.differences or {}).items():
+        print(f"PA-MPJPE minus {name}: {d['difference']:+.2f} mm (95 % interval {d['low']:+.2f} "
+              f"to {d['high']:+.2f}; better on {100 * d['a_better']:.0f} % of the scenes)")
     print(res.comparison or res.table)
     for name in ("overlays", "loss", "pck", "vr", "json"):
         if name in res.files:
@@ -271,12 +274,15 @@ def build_parser() -> argparse.ArgumentParser:
                       help="size tier (default: HANDMESH_BUDGET, else default)")
     demo.add_argument("--recipe", choices=("cpu", "paper"), default="cpu",
                       help="training recipe: 'cpu' (default: 2D keypoint head, global-rotation "
-                      "head, keypoint and aligned-joint losses beside L1) or 'paper' (L1 vertex "
-                      "loss only)")
-    demo.add_argument("--init-encoder", default="pretrained", metavar="pretrained|none|FILE",
+                      "head, skinned output, keypoint and aligned-joint losses beside L1) or "
+                      "'paper' (the paper's network and loss: the decoder regresses the vertex "
+                      "coordinates, one L1 loss on them)")
+    demo.add_argument("--init-encoder", default="pretrained",
+                      metavar="pretrained|neutral|none|FILE",
                       help="where the encoder starts: the shipped pretrained hand encoder "
-                      "(default, the paper's protocol), none (random weights) or a "
-                      "pose-encoder file; the rest of the network starts from random weights")
+                      "(default, the paper's protocol), the shipped decoder-neutral one, none "
+                      "(random weights) or a pose-encoder file; the rest of the network starts "
+                      "from random weights")
     demo.add_argument("--no-progress", action="store_true", help="no progress bars")
     demo.set_defaults(func=_cmd_demo)
 

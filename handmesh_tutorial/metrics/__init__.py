@@ -33,6 +33,9 @@ notebook 09, "Evaluation"):
 * `scores`: `per_sample_scores`, `freihand_scores`, `scores_from_errors`, `ROOT_INDEX`.
 * `surface` (imported on first use): `roughness_deg`, `flipped_face_fraction`, the signed
   dihedral angles behind them.
+* `intervals` (imported on first use): `paired_difference`, `seed_difference`,
+  `detectable_difference`: two methods compared on the same scenes or over seeds, with 95 %
+  intervals and the smallest difference a design can detect.
 * `tables`: `scores_by_vr_bin`, `scores_by_group`, `comparison_table`, `format_table`,
   `VR_BIN_LABELS`, `SURFACE_KEYS`; the VR bins (`VR_BINS`, `vr_bin_index`) are re-exported from
   [`visibility`][handmesh_tutorial.visibility].
@@ -83,8 +86,9 @@ __all__ = [
 
 
 def __getattr__(name: str):
-    # surface quality (roughness, flipped faces) is a submodule: ``hmt.metrics.surface``
-    if name == "surface":
+    # submodules imported on first use: surface quality (roughness, flipped faces) and the
+    # intervals of differences (scipy.stats)
+    if name in ("surface", "intervals"):
         import importlib
 
         return importlib.import_module(f"{__name__}.surface")

@@ -43,9 +43,14 @@ from .quantize import dequantize_state_dict, quantize_state_dict
 
 __all__ = ["PoseNet", "pose_loss", "build_pose_net", "pretrained_encoder",
            "pretrained_encoder_info", "pretrained_encoder_path", "load_pretrained_encoder",
-           "export_pose_encoder", "read_pose_encoder"]
+           "export_pose_encoder", "read_pose_encoder", "encoder_lineage"]
 
 ENCODER_FILE = "hand_encoder_pretrained.pt"
+NEUTRAL_ENCODER_FILE = "hand_encoder_neutral.pt"
+"""The decoder-neutral encoder (``make pretrained-encoder``): trained from random weights on 2D
+keypoints and 3D joints only, so that it favours none of the decoders Table 3 compares."""
+SHIPPED_ENCODERS = {"pretrained": ENCODER_FILE, "neutral": NEUTRAL_ENCODER_FILE}
+"""Names accepted wherever an encoder source is (``init_encoder="neutral"``...)."""
 """Name of the shipped file in ``handmesh_tutorial/assets/``."""
 FORMAT = "handmesh-pose-encoder-1"
 """``format`` entry of the file (checked when reading)."""
@@ -199,13 +204,27 @@ def read_pose_encoder(path: str | os.PathLike) -> tuple[PoseNet, dict]:
     return net, meta
 
 
-def pretrained_encoder_path() -> Path:
-    """Path of the shipped pretrained encoder.
+def pretrained_encoder_path(name: str = "pretrained") -> Path:
+    """Path of a shipped pretrained encoder.
+
+    Args:
+        name: ``"pretrained"`` (the demo's encoder, `ENCODER_FILE`) or ``"neutral"`` (the
+            decoder-neutral one, `NEUTRAL_ENCODER_FILE`: from random weights, never trained with
+            a mesh decoder; the Table 3 ablation starts from it).
 
     Raises:
         FileNotFoundError: this installation has none (make it with ``make pretrained-encoder``).
+        ValueError: another name.
     """
-    return shipped_file(ENCODER_FILE, "make pretrained-encoder")
+    if name not in SHIPPED_ENCODERS:
+        raise ValueError(f"shipped encoders are {sorted(SHIPPED_ENCODERS)}, got {name!r}")
+    return shipped_file(SHIPPED_ENCODERS[name], "make pretrained-encoder")
+
+
+def encoder_source_path(source: str | os.PathLike) -> Path:
+    """``"pretrained"`` / ``"neutral"`` -> the shipped file's path; anything else is a path."""
+    return pretrained_encoder_path(str(source)) if str(source) in SHIPPED_ENCODERS \
+        else Path(source)
 
 
 def pretrained_encoder(device: str = "cpu") -> KeypointEncoder:
@@ -227,6 +246,49 @@ def pretrained_encoder_info() -> dict:
     return read_pose_encoder(pretrained_encoder_path())[1]
 
 
+def encoder_lineage(meta: dict) -> dict:
+    """Where a pose-encoder file's weights come from, walked back through its recorded runs.
+
+    Args:
+        meta: the file's metadata (``read_pose_encoder(path)[1]`` or
+            [`pretrained_encoder_info`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder_info]).
+
+    Returns:
+        ``{"runs", "origin", "decoder_neutral", "sentence"}``: ``runs`` one dict per training run,
+        oldest first (``data_seed``, ``train_scenes``, ``steps`` when recorded, ``lr``);
+        ``origin`` ``"random weights"``, ``"the shipped MSMR-Net's encoder"`` (a network trained
+        with the multi-path decoder with attention) or ``"unknown"``; ``decoder_neutral`` True
+        only when the chain starts from random weights, so that no mesh decoder ever trained
+        these weights; ``sentence`` the same in words.
+    """
+    runs, node, origin = [], (meta or {}).get("pretrained") or {}, "unknown"
+    for _ in range(32):  # a recorded chain, never a cycle; bounded all the same
+        recipe = node.get("recipe") or node.get("config") or {}
+        data = node.get("data") or {}
+        runs.append({"data_seed": data.get("train_seed", recipe.get("data_seed")),
+                     "train_scenes": data.get("train_scenes"), "steps": node.get("steps"),
+                     "lr": recipe.get("lr")})
+        init = recipe.get("init", "unknown")
+        parent = node.get("init_from")
+        if init is None:
+            origin = "random weights"
+            break
+        if init == "network" or (isinstance(parent, dict) and "made_by" in parent):
+            origin = "the shipped MSMR-Net's encoder"
+            break
+        if not isinstance(parent, dict):
+            break
+        node = parent
+    runs.reverse()
+    neutral = origin == "random weights"
+    sentence = (f"{len(runs)} run(s) of keypoint and 3D-joint training (no mesh decoder), the "
+                f"first from {origin}"
+                + ("" if neutral or origin == "unknown" else
+                   ", which was trained end to end with the multi-path decoder with attention")
+                + "; scene seeds " + ", ".join(str(r["data_seed"]) for r in runs))
+    return {"runs": runs, "origin": origin, "decoder_neutral": neutral, "sentence": sentence}
+
+
 def load_pretrained_encoder(model: nn.Module, source: str | os.PathLike = "pretrained") -> dict:
     """Copy pretrained encoder weights into ``model.encoder``.
 
@@ -236,7 +298,7 @@ def load_pretrained_encoder(model: nn.Module, source: str | os.PathLike = "pretr
 
     Args:
         model: the network whose ``encoder`` (or itself, for a bare encoder) receives the weights.
-        source: ``"pretrained"`` (the shipped file) or the path of an
+        source: ``"pretrained"`` or ``"neutral"`` (the shipped files) or the path of an
             [`export_pose_encoder`][handmesh_tutorial.nn.pose_encoder.export_pose_encoder] file.
 
     Returns:
@@ -248,7 +310,7 @@ def load_pretrained_encoder(model: nn.Module, source: str | os.PathLike = "pretr
     """
     from .encoder import ResNet
 
-    path = pretrained_encoder_path() if str(source) == "pretrained" else Path(source)
+    path = encoder_source_path(source)
     net, meta = read_pose_encoder(path)
     target = model if isinstance(model, KeypointEncoder | ResNet) else getattr(model, "encoder",
                                                                                None)

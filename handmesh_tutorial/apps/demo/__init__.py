@@ -72,6 +72,9 @@ The submodules (every name is importable from ``handmesh_tutorial.apps.demo`` it
 `DemoResult`.
 * [`report`][handmesh_tutorial.apps.demo.report]: the headline table, ``report.md``,
 `parse_headline`.
+* [`ablation`][handmesh_tutorial.apps.demo.ablation]: the paper's Table 3 at laptop scale;
+  [`table3`][handmesh_tutorial.apps.demo.table3]: the same in two configurations, with intervals,
+  power and VR bins.
 
 The figures (`plot_overlays`, `plot_loss_curves`) live in
 [`handmesh_tutorial.viz`][handmesh_tutorial.viz] and are re-exported here. Taught in notebook 00
@@ -81,7 +84,7 @@ The figures (`plot_overlays`, `plot_loss_curves`) live in
 from __future__ import annotations
 
 from ...viz import plot_loss_curves, plot_overlays
-from . import ablation
+from . import ablation, table3
 from .config import RECIPES, DemoConfig, train_config
 from .report import (
     BASELINE_ROW,
@@ -98,4 +101,4 @@ from .run import DemoResult, generate_data, generate_scenes, run_demo
 __all__ = ["DemoConfig", "DemoResult", "run_demo", "generate_data", "generate_scenes",
            "train_config", "plot_overlays", "plot_loss_curves", "write_report", "headline",
            "parse_headline", "HEADLINE", "PRETRAINED_ROW",
-           "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES", "ablation"]
+           "MODEL_ROW", "BASELINE_ROW", "MEAN_ROW", "RECIPES", "ablation", "table3"]

@@ -38,7 +38,8 @@ def _t95(df: float) -> float:
 
 def run_ablation(config: DemoConfig, data: dict, out: str | os.PathLike, *,
                  seeds=(0, 1, 2), epochs: int | None = None, variants: dict | None = None,
-                 init_encoder: str | None = "config", log=print) -> dict:
+                 init_encoder: str | None = "config", train_overrides: dict | None = None,
+                 log=print) -> dict:
     """Train and evaluate every variant with every seed (resumable: finished runs are read back).
 
     Args:
@@ -49,16 +50,19 @@ def run_ablation(config: DemoConfig, data: dict, out: str | os.PathLike, *,
         seeds: training seeds (initial weights of the trained parts, data order, validation split).
         epochs: epochs per run (default ``config.epochs``); the rate is halved after three
             quarters of them.
-            variants: ``{name: overrides}`` (default
+        variants: ``{name: overrides}`` (default
             [`VARIANTS`][handmesh_tutorial.apps.demo.ablation.VARIANTS]).
         init_encoder: ``"config"`` (the config's), ``None`` (random weights), ``"pretrained"`` or a
             pose-encoder file.
+        train_overrides: further [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig]
+            fields for every run (e.g. ``device="cuda"``).
         log: one line per run (``None``: silent).
 
     Returns:
         ``{"runs": {(variant, seed): {...}}, "baselines": {...}, "val_baselines": {seed: {...}}}``:
         per run the test ``scores``, ``per_sample`` PA-MPJPE (mm), ``history``, ``predictions``,
-        ``index``, ``seconds`` (median per epoch), ``params``; the constant hands' test scores
+        ``index``, ``vr`` (the target's visibility ratio per test scene), ``seconds`` (median
+        per epoch), ``params``; the constant hands' test scores
         and, per seed, their scores on that seed's validation scenes.
     """
     from ... import train as T
@@ -72,6 +76,7 @@ def run_ablation(config: DemoConfig, data: dict, out: str | os.PathLike, *,
         extra["init_encoder"] = init_encoder
         if init_encoder is None:
             extra.update(freeze_encoder=0, encoder_lr_scale=1.0)
+    extra.update(train_overrides or {})
     out = Path(out)
     runs, val_base, mean = {}, {}, None
     for seed in seeds:
@@ -92,6 +97,7 @@ def run_ablation(config: DemoConfig, data: dict, out: str | os.PathLike, *,
             runs[name, seed] = {
                 "scores": ev["scores"], "history": res.history,
                 "per_sample": np.asarray(ev["per_sample"]["pa_mpjpe"], dtype=float),
+                "vr": np.asarray(ev["per_sample"]["vr"], dtype=float),
                 "predictions": ev["predictions"]["vertices"], "index": ev["per_sample"]["index"],
                 "seconds": float(np.median([r["seconds"] for r in res.history])),
                 "params": parameter_counts(res.model)["total"], "faces": res.model.faces}

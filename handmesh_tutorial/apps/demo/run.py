@@ -17,6 +17,7 @@ import numpy as np
 
 from ..._io import write_json
 from ..._optional import require
+from ...metrics.intervals import paired_difference
 from ...viz import plot_loss_curves, plot_overlays, save_figure
 from .config import DemoConfig, train_config
 from .report import BASELINE_ROW, MEAN_ROW, PRETRAINED_ROW, write_report
@@ -44,6 +45,9 @@ class DemoResult:
         mean_hand_scores: scores of the mean training hand on the same test scenes.
         pretrained_scores: scores of the shipped pretrained network on the same test scenes
             (``None`` when this installation has none).
+        differences: the network's PA-MPJPE minus each other row's, paired per test scene: row
+            name -> [`paired_difference`][handmesh_tutorial.metrics.intervals.paired_difference]
+            (mm, 95 % interval, share of scenes where the network is better).
     """
 
     out_dir: Path
@@ -59,6 +63,20 @@ class DemoResult:
     comparison: str = ""
     mean_hand_scores: dict | None = None
     pretrained_scores: dict | None = None
+    differences: dict | None = None
+
+
+def _encoder_lineage(init_encoder) -> str:
+    """One sentence on where the encoder's weights came from, read from the file's metadata."""
+    if init_encoder is None:
+        return "random weights (the whole network trained from scratch)"
+    from ...nn.pose_encoder import encoder_lineage, encoder_source_path, read_pose_encoder
+
+    info = read_pose_encoder(encoder_source_path(init_encoder))[1]
+    what = {"pretrained": "the shipped hand encoder",
+            "neutral": "the shipped decoder-neutral encoder"}.get(
+        str(init_encoder), f"the pose-encoder file {Path(init_encoder).name}")
+    return f"{what}, frozen: {encoder_lineage(info)['sentence']}"
 
 
 def generate_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
@@ -187,14 +205,21 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
     mean = T.mean_hand(train_ds)  # the data's average articulation: the second constant bar
     ev = T.evaluate(ckpt, str(out / "data" / "test"), out_dir=out / "eval", device="cpu",
                     threads=cfg.threads, progress=progress, mean_hand=mean)
-    pre = None
+    pre = ev_pre = None
     try:  # the shipped network on the same scenes, at its own crop size (one read of the file)
         net_pre, ck_pre = T.load_checkpoint("pretrained")
-        pre = T.evaluate(net_pre, str(out / "data" / "test"), device="cpu",
-                         image_size=ck_pre["config"]["image_size"],
-                         threads=cfg.threads, progress=False, baseline=False)["scores"]
+        ev_pre = T.evaluate(net_pre, str(out / "data" / "test"), device="cpu",
+                            image_size=ck_pre["config"]["image_size"],
+                            threads=cfg.threads, progress=False, baseline=False)
+        pre = ev_pre["scores"]
     except FileNotFoundError:
         say("      (no pretrained network in this installation: its row is left out)")
+    # each held-out scene scored by both: the differences, not the scores, carry the comparison
+    mine = ev["per_sample"]["pa_mpjpe"]
+    intervals = {name: paired_difference(mine, other["per_sample"]["pa_mpjpe"])
+                 for name, other in ((BASELINE_ROW, ev["baseline"]),
+                                     (MEAN_ROW, ev["mean_hand_baseline"]),
+                                     (PRETRAINED_ROW, ev_pre)) if other is not None}
     val_baselines = None if val_ds is None or not len(val_ds) else {
         "rest hand": T.constant_hand_scores(val_ds),
         "mean hand": T.constant_hand_scores(val_ds, mean)}
@@ -245,11 +270,13 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
                                    config=cfg, seconds=seconds, figures=figures, counts=counts,
                                    train_info=train_info, baseline=baseline,
                                    comparison=ev["comparison"], mean=mean_scores,
-                                   pretrained=pre)
+                                   pretrained=pre, intervals=intervals,
+                                   encoder=_encoder_lineage(cfg.init_encoder))
     summary = {"config": asdict(cfg), "seed": seed, "scores": ev["scores"],
                "baseline_scores": baseline, "baseline": BASELINE_ROW,
                "mean_hand_scores": mean_scores, "mean_hand": MEAN_ROW,
                "pretrained_scores": pre, "pretrained": PRETRAINED_ROW,
+               "pa_mpjpe_differences": intervals,
                "vr_table": ev["vr_table"], "kind_table": ev["kind_table"],
                "baseline_vr_table": ev["baseline"]["vr_table"],
                "baseline_kind_table": ev["baseline"]["kind_table"],
@@ -263,4 +290,4 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
                       vr_table=ev["vr_table"], table=ev["table"], files=files, seconds=seconds,
                       config=cfg, train_epochs=res.epochs, baseline_scores=baseline,
                       comparison=ev["comparison"], mean_hand_scores=mean_scores,
-                      pretrained_scores=pre)
+                      pretrained_scores=pre, differences=intervals)
