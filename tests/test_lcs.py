@@ -501,3 +501,32 @@ def test_re_based_left_hand_is_the_mirror_of_the_right(hand):
     a = L.natural_hand_angles(11)
     np.testing.assert_allclose(hand.mirror_axis_angle(right_art.to_pose(a)),
                                left_art.to_pose(L.mirror_angles(a)), atol=1e-6)
+
+
+def test_the_module_functions_round_trip_with_the_articulation_s_zero_rotations(right, left):
+    # issue 43 item 14: pose_to_lcs_angles(art.frames, art.to_pose(a)) was 0.41 rad off at the
+    # thumb's CMC (the module functions knew nothing of its re-based zero)
+    for _, art in (right, left):
+        assert art.zero_rotations is not None
+        z = art.zero_rotations
+        for limits in ("anatomical", "paper"):
+            a = art.with_limits(limits).random_angles(11, n=400)
+            pose = L.lcs_angles_to_pose(art.frames, a, z)
+            np.testing.assert_array_equal(pose.astype(np.float32), art.to_pose(a))
+            back = L.pose_to_lcs_angles(art.frames, pose, z)
+            np.testing.assert_allclose(back, a, atol=1e-9)
+            np.testing.assert_allclose(L.pose_to_lcs_angles(art.frames, art.to_pose(a), z), a,
+                                       atol=1e-5)  # through float32, as art.from_pose
+            np.testing.assert_allclose(art.from_pose(pose), a, atol=1e-9)
+            np.testing.assert_allclose(L.rotation_from_lcs_angles(art.frames, a, z),
+                                       Rotation.from_rotvec(pose.reshape(-1, 3)).as_matrix()
+                                       .reshape(*a.shape, 3), atol=1e-12)
+        # without zero_rotations the thumb's CMC is read from the rest pose: documented, so test
+        off = np.abs(L.pose_to_lcs_angles(art.frames, art.to_pose(a)) - a).max(axis=0)
+        assert off[12].max() > 0.1 and off[np.arange(15) != 12].max() < 1e-5
+    with pytest.raises(ValueError, match=r"zero_rotations must be \(15, 3, 3\)"):
+        L.lcs_angles_to_pose(art.frames, a, np.eye(3))
+    bad = np.tile(np.eye(3), (15, 1, 1))
+    bad[4] *= 2
+    with pytest.raises(ValueError, match=r"zero_rotations\[4\] is not a rotation"):
+        L.pose_to_lcs_angles(art.frames, pose, bad)
