@@ -30,6 +30,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from .budget import check_image_size
 from .data.augment import (
     IMAGE_MEAN,
     IMAGE_STD,
@@ -137,7 +138,9 @@ def check_image(image) -> np.ndarray:
     Raises:
         FileNotFoundError: no such file.
         ValueError: a grey ``(H, W)`` or ``(H, W, 1)`` array, 4 channels (drop alpha),
-            channels first ``(3, H, W)``, another dtype than uint8 or float, float values in
+            channels first ``(3, H, W)``, another dtype than uint8 or float (the message says
+            how to convert it: ``(image // 257).astype(np.uint8)`` for 16-bit values,
+            ``image.astype(np.uint8)`` for integers already in 0-255), float values in
             ``[0, 1]`` (multiply by 255), negative or above 255 (already normalised?), NaN,
             an image smaller than 2 x 2, an unreadable file or a 16-bit/float file.
     """
@@ -165,7 +168,7 @@ def check_image(image) -> np.ndarray:
         return arr
     if not np.issubdtype(arr.dtype, np.floating):
         raise ValueError(f"image dtype {arr.dtype}: give uint8 RGB (0-255) or float in "
-                         "[0, 255]; convert 16-bit images to 8 bits first (image // 257)")
+                         f"[0, 255]; {_integer_advice(arr)}")
     if not np.isfinite(arr).all():
         raise ValueError("image has NaN or infinite values")
     lo, hi = float(arr.min()), float(arr.max())
@@ -180,6 +183,30 @@ def check_image(image) -> np.ndarray:
     return arr.astype(np.float32, copy=False)
 
 
+def _integer_advice(arr: np.ndarray) -> str:
+    """What to do with an image of another dtype than uint8 or float, from its values."""
+    if not np.issubdtype(arr.dtype, np.integer):
+        return "convert it with image.astype(np.float32) if its values are 0-255 RGB"
+    lo, hi = int(arr.min()), int(arr.max())
+    if lo >= 0 and hi <= 255:
+        return f"its values are {lo}-{hi}, already 8-bit: image.astype(np.uint8)"
+    if lo >= 0 and hi <= 65535:
+        return (f"its values go up to {hi}, a 16-bit image (0-65535): "
+                "(image // 257).astype(np.uint8)")
+    return f"its values are {lo}-{hi}, outside 0-65535: not an RGB image"
+
+
+# Share of a hand box's area that must lie inside the image (a box mostly outside it gives a
+# crop of black pixels; a box far larger than the image has almost none of its area inside).
+_MIN_BOX_INSIDE = 0.25
+# Accepted box_scale (crop side / box side): below 1 the crop cuts the hand, above 4 the hand
+# shrinks to a few pixels of the crop.
+_BOX_SCALE_RANGE = (1.0, 4.0)
+# Accepted focal lengths of K as multiples of the image's longer side: a field of view of about
+# 169 to 0.6 degrees across it (fisheye to long telephoto).
+_FOCAL_RANGE = (0.05, 100.0)
+
+
 def _check_box(box, width: int, height: int) -> np.ndarray:
     b = np.asarray(box, dtype=np.float64)
     if b.shape != (4,) or not np.isfinite(b).all():
@@ -189,10 +216,41 @@ def _check_box(box, width: int, height: int) -> np.ndarray:
     if x1 <= x0 or y1 <= y0:
         raise ValueError(f"box {b.tolist()} has a non-positive size ({x1 - x0:g} x {y1 - y0:g}); "
                          "give (x0, y0, x1, y1) with x1 > x0 and y1 > y0 (corners, not a size)")
-    if x1 < -0.5 or y1 < -0.5 or x0 > width - 0.5 or y0 > height - 0.5:
+    # the image covers [-0.5, W - 0.5] x [-0.5, H - 0.5] (pixel centres at integers)
+    ix = max(0.0, min(x1, width - 0.5) - max(x0, -0.5))
+    iy = max(0.0, min(y1, height - 0.5) - max(y0, -0.5))
+    inside = (ix / (x1 - x0)) * (iy / (y1 - y0))
+    if not inside >= _MIN_BOX_INSIDE:
         raise ValueError(f"box {b.tolist()} lies outside the {width} x {height} image "
-                         "(pixel coordinates: x = column, y = row, from the top left)")
+                         f"({100 * inside:.3g} % of its area inside, at least "
+                         f"{100 * _MIN_BOX_INSIDE:g} % must be; pixel coordinates: x = column, "
+                         "y = row, from the top left)")
     return b
+
+
+def _check_box_scale(box_scale) -> float:
+    lo, hi = _BOX_SCALE_RANGE
+    if isinstance(box_scale, bool) or not isinstance(box_scale, int | float | np.number) \
+            or not lo <= float(box_scale) <= hi:
+        raise ValueError(f"box_scale must be a number in [{lo:g}, {hi:g}] (crop side / box "
+                         f"side; the training crops use 1.5), got {box_scale!r}")
+    return float(box_scale)
+
+
+def _check_camera(K, width: int, height: int) -> np.ndarray:
+    """``K`` checked as a pinhole matrix whose focal lengths fit an image of this size."""
+    k = check_intrinsics(K)
+    side = max(width, height)
+    lo, hi = _FOCAL_RANGE
+    for name, f in (("fx", k[0, 0]), ("fy", k[1, 1])):
+        if not (np.isfinite(f) and lo * side <= f <= hi * side):
+            raise ValueError(f"K's {name} = {f:.6g} px does not fit the {width} x {height} image "
+                             f"(accepted: {lo:g} to {hi:g} times its longer side, "
+                             f"{lo * side:g}-{hi * side:g} px); is K the intrinsics of this "
+                             "image, in pixels (not millimetres, not of a resized copy)?")
+    if not np.isfinite(k).all():
+        raise ValueError(f"K must be finite, got {k.tolist()}")
+    return k
 
 
 def _check_side(side) -> str:
@@ -216,24 +274,32 @@ def crop_hand(image, box, side: str, *, image_size: int = 128, box_scale: float 
         box: ``(x0, y0, x1, y1)`` the hand's box in pixels (x = column, y = row, pixel
             centres at integers).
         side: ``"left"`` or ``"right"``.
-        image_size: crop side ``S``, pixels (the network's training crops).
-        box_scale: margin of the crop around the box (the training crops' 1.5).
-        K: ``(3, 3)`` intrinsics of ``image`` (optional: gives the crop's).
+        image_size: crop side ``S``, pixels (the network's training crops), an integer in
+            [``budget.MIN_IMAGE_SIZE``, ``budget.MAX_IMAGE_SIZE``] = [32, 4096].
+        box_scale: margin of the crop around the box (the training crops' 1.5), a number in
+            [1, 4].
+        K: ``(3, 3)`` intrinsics of ``image`` (optional: gives the crop's); ``fx`` and ``fy``
+            within 0.05 to 100 times the image's longer side (a field of
+            view of about 169 to 0.6 degrees).
 
     Returns:
         The [`HandCrop`][handmesh_tutorial.inference.HandCrop].
 
     Raises:
         ValueError: an image [`check_image`][handmesh_tutorial.inference.check_image]
-            refuses, a box that is not 4 numbers, has a non-positive size or lies outside
-            the image, a side other than ``"left"``/``"right"``, a ``K`` that is not a pinhole
-            matrix.
+            refuses, a box that is not 4 numbers, has a non-positive size or lies mostly
+            outside the image (less than a quarter of
+            its area inside: also a box far larger than the image), a side other than
+            ``"left"``/``"right"``, an ``image_size`` or ``box_scale`` outside its range, a
+            ``K`` that is not a pinhole matrix or whose focal lengths do not fit the image.
     """
     img = check_image(image)
     h, w = img.shape[:2]
     x0, y0, x1, y1 = _check_box(box, w, h)
     mirrored = _check_side(side) == "left"
-    k = None if K is None else check_intrinsics(K)
+    image_size = check_image_size(image_size)
+    box_scale = _check_box_scale(box_scale)
+    k = None if K is None else _check_camera(K, w, h)
     pix = torch.from_numpy(np.array(img)).permute(2, 0, 1).float() / 255.0
     flip = np.eye(3)
     if mirrored:  # u' = W - 1 - u, as the training crops
@@ -306,10 +372,11 @@ def _network(model, image_size, box_scale, device) -> tuple[nn.Module, int, floa
             net, ck = load_checkpoint(model, device=device)
             cfg = ck["config"]
         size = int(cfg["image_size"])
-        if image_size is not None and int(image_size) != size:
+        if image_size is not None and check_image_size(image_size) != size:
             raise ValueError(f"image_size={image_size}, but the network was trained on "
                              f"{size}-px crops; leave image_size out")
-        return net, size, float(box_scale or cfg.get("box_scale", 1.5))
+        return net, size, _check_box_scale(cfg.get("box_scale", 1.5) if box_scale is None
+                                           else box_scale)
     if not isinstance(model, nn.Module):
         raise ValueError(f"model must be None, 'pretrained', a checkpoint path or a network, "
                          f"got {type(model).__name__}")
@@ -317,8 +384,8 @@ def _network(model, image_size, box_scale, device) -> tuple[nn.Module, int, floa
         raise ValueError("give image_size, the crop side this network was trained on (a "
                          "checkpoint's config['image_size']); a wrong size runs but predicts "
                          "worse")
-    return (model if device is None else model.to(device)), int(image_size), \
-        float(box_scale or 1.5)
+    return (model if device is None else model.to(device)), check_image_size(image_size), \
+        _check_box_scale(1.5 if box_scale is None else box_scale)
 
 
 def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | None = None,
@@ -335,11 +402,12 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
             root-relative outputs.
         model: ``None`` or ``"pretrained"`` (the shipped network, loaded once per device), a
             checkpoint path, or a network (then give ``image_size``).
-        image_size: crop side; default: the checkpoint's.
-        box_scale: crop margin; default: the checkpoint's (1.5).
+        image_size: crop side, an integer in [32, 4096]; default: the checkpoint's.
+        box_scale: crop margin, a number in [1, 4] (``None``: the checkpoint's, 1.5; 0 is
+            refused, not read as the default).
         device: where the network runs (``None``: a network object stays where it is, a
             loaded one goes to the CPU).
-        batch_size: crops per forward pass.
+        batch_size: crops per forward pass, an integer >= 1.
 
     Returns:
         One [`HandPrediction`][handmesh_tutorial.inference.HandPrediction] per box, in order.
@@ -347,9 +415,14 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
     Raises:
         ValueError: see [`crop_hand`][handmesh_tutorial.inference.crop_hand]; also ``K`` with a
             network that has no 2D keypoint head (it cannot place the hand), a root that comes
-            out behind the camera (a ``K`` of another image?), a missing ``image_size``.
+            out behind the camera (a ``K`` of another image?), a missing ``image_size``, a
+            ``batch_size`` below 1.
     """
     img = check_image(image)
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) \
+            or batch_size < 1:
+        raise ValueError(f"batch_size must be an integer >= 1 (crops per forward pass), got "
+                         f"{batch_size!r}")
     net, size, scale = _network(model, image_size, box_scale, device)
     b = np.asarray(boxes, dtype=np.float64) if len(boxes) else np.zeros((0, 4))
     if b.ndim != 2 or b.shape[1] != 4:

@@ -20,6 +20,7 @@ Taught in notebook 05 ("Rendering and the visibility ratio").
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -44,6 +45,15 @@ except the last, ``[0.95, 1.00]``, which is closed. A VR below 0.40 is in no bin
 _ON_OUTSIDE = ("raise", "warn", "ignore")
 
 
+def _check_label(label) -> int:
+    """``label`` as an int >= 1, or a ValueError (0 is the background of a label mask)."""
+    if isinstance(label, bool | np.bool_) or not isinstance(label, int | np.integer) \
+            or int(label) < 1:
+        raise ValueError(f"label must be an integer >= 1 (a body's label; 0 is the background "
+                         f"of a label mask), got {label!r}")
+    return int(label)
+
+
 def _indicator(mask: Any, label: int, name: str) -> np.ndarray:
     m = np.asarray(mask)
     if m.ndim != 2:
@@ -53,7 +63,15 @@ def _indicator(mask: Any, label: int, name: str) -> np.ndarray:
     if not np.issubdtype(m.dtype, np.integer):
         raise ValueError(f"{name} must be a bool mask or an integer label mask, "
                          f"got dtype {m.dtype}")
-    return m == label
+    ind = m == label
+    if not ind.any() and m.any():
+        values = np.unique(m)
+        shown = ", ".join(str(int(v)) for v in values[:6]) + (", ..." if len(values) > 6 else "")
+        raise ValueError(f"{name} has no pixel equal to label {label}, but holds the values "
+                         f"[{shown}]: an integer mask is read as a label mask; for a 0/255 or "
+                         f"0/1 image mask pass it as bool ({name} > 0), else give the label its "
+                         "pixels carry")
+    return ind
 
 
 def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
@@ -64,8 +82,9 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
         scene_mask: (H, W) integer label mask of the complete scene (0 = background, each body
             its label), e.g. ``RenderResult.labels``.
         alone_mask: (H, W) mask of the body rendered alone: either a bool mask (``True`` = the
-            body) or an integer label mask, whose pixels equal to ``label`` count.
-        label: the body's label (int >= 1).
+            body) or an integer label mask, whose pixels equal to ``label`` count (a 0/255
+            image mask is not a label mask: pass ``mask > 0``).
+        label: the body's label, an integer ``>= 1`` (0 is the background).
         on_outside: what to do when some pixels labelled ``label`` in the scene lie outside the
             alone mask (impossible for masks from the same camera and rasteriser, so it means a
             rendering or bookkeeping bug): ``"raise"`` (default) a ValueError, ``"warn"`` a
@@ -82,8 +101,11 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
 
     Raises:
         ValueError: a mask is not 2-D, the shapes differ, ``scene_mask`` is not an integer label
-            mask, the alone mask of ``label`` is empty (VR undefined), or visible pixels lie
-            outside the alone mask with ``on_outside="raise"``.
+            mask, ``label`` is not an integer >= 1, ``stray`` is outside [0, 1], an integer
+            ``alone_mask`` has pixels but none equal to ``label`` (a 0/255 image mask: the
+            message says to pass ``mask > 0``), the alone mask of ``label`` is empty (VR
+            undefined), or visible pixels lie outside the alone mask with
+            ``on_outside="raise"``.
 
     Examples:
         >>> import numpy as np
@@ -97,6 +119,9 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
     """
     if on_outside not in _ON_OUTSIDE:
         raise ValueError(f"on_outside must be one of {_ON_OUTSIDE}, got {on_outside!r}")
+    label = _check_label(label)
+    if not 0.0 <= stray <= 1.0:
+        raise ValueError(f"stray must be a share in [0, 1], got {stray!r}")
     scene = np.asarray(scene_mask)
     if scene.ndim != 2 or not np.issubdtype(scene.dtype, np.integer) or scene.dtype == np.bool_:
         raise ValueError(f"scene_mask must be a 2-D integer label mask, got dtype {scene.dtype} "
@@ -123,20 +148,40 @@ def visibility_ratio(scene_mask: Any, alone_mask: Any, label: int,
 
 
 def visibility_ratios(scene_mask: Any, alone_masks: Mapping[int, Any],
-                      on_outside: str = "raise", stray: float = 0.0) -> dict[int, float]:
+                      on_outside: str = "raise", stray: float = 0.0,
+                      on_empty: str = "nan") -> dict[int, float]:
     """Visibility ratios of several bodies of one scene.
 
     Args:
         scene_mask: (H, W) integer label mask of the scene.
         alone_masks: ``{label: (H, W) mask}`` of each body alone (bool or label masks), e.g.
-            ``RenderResult.alone_masks``.
+            ``RenderResult.alone_masks``; labels are integers >= 1.
         on_outside: as in `visibility_ratio`.
         stray: as in `visibility_ratio`.
+        on_empty: a body whose alone mask is empty (out of view: its VR is undefined):
+            ``"nan"`` (default) gives it NaN with a RuntimeWarning that names it, and the other
+            bodies keep their ratios (NaN falls in no VR bin); ``"raise"``: a ValueError that
+            names every such body.
 
     Returns:
         ``{label: VR}`` with the same keys as ``alone_masks``.
+
+    Raises:
+        ValueError: as `visibility_ratio`; an unknown ``on_empty``; empty alone masks with
+            ``on_empty="raise"``.
     """
-    return {int(lab): visibility_ratio(scene_mask, m, int(lab), on_outside, stray)
+    if on_empty not in ("nan", "raise"):
+        raise ValueError(f"on_empty must be 'nan' or 'raise', got {on_empty!r}")
+    empty = [int(_check_label(lab)) for lab, m in alone_masks.items()
+             if np.asarray(m).ndim == 2 and not np.asarray(m).any()]
+    if empty:
+        msg = (f"alone mask of label(s) {empty} is empty: those bodies are not in view, their "
+               "visibility ratio is undefined")
+        if on_empty == "raise":
+            raise ValueError(msg)
+        warnings.warn(msg + " (NaN)", RuntimeWarning, stacklevel=2)
+    return {int(lab): (math.nan if int(lab) in empty else
+                       visibility_ratio(scene_mask, m, int(lab), on_outside, stray))
             for lab, m in alone_masks.items()}
 
 

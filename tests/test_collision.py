@@ -767,3 +767,17 @@ def test_backend_is_read_from_the_package(monkeypatch):
     if "numba" in BACKENDS:
         monkeypatch.setattr(hmt.collision, "BACKEND", "numba")
         assert _common._kernels(None) is _common._kernels("numba") is not None
+
+
+def test_project_to_cylinder_refuses_what_point_cylinder_distance_refuses():
+    # issue 43 item 10: a zero-length axis gave NaN, a negative radius was used as given
+    x, p0, p1 = np.zeros((2, 3)), np.zeros((2, 3)), np.array([[0, 0, 0.1], [0, 0, 0.0]])
+    for f in (C.project_to_cylinder, C.point_cylinder_distance):
+        with pytest.raises(ValueError, match=r"zero length at flat index 1 \(1 such"):
+            f(x, p0, p1, 0.01)
+        with pytest.raises(ValueError, match="radius must be non-negative, got min -0.01"):
+            f(x[:1], p0[:1], p1[:1], -0.01)
+        with pytest.raises(ValueError, match="points contains NaN"):
+            f([[np.nan, 0, 0]], p0[:1], p1[:1], 0.01)
+        with pytest.raises(ValueError, match=r"p1 must have shape \(\.\.\., 3\)"):
+            f(x, p0, [0.0, 0.1], 0.01)

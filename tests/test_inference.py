@@ -226,3 +226,36 @@ def test_several_hands_in_one_pass_equal_one_at_a_time(samples):
         one = I.predict_hand(s["image"], b, side, K=s["K"])
         np.testing.assert_allclose(p.vertices, one.vertices, atol=1e-9)
         assert p.side == side
+
+
+def test_the_integer_image_advice_works_when_followed():
+    # issue 43 item 12: "image // 257" is still uint16 and was refused again
+    deep = _image(dtype=np.uint16, value=40000)
+    with pytest.raises(ValueError, match=r"16-bit image .*\(image // 257\)\.astype\(np\.uint8\)"):
+        I.check_image(deep)
+    assert I.check_image((deep // 257).astype(np.uint8)).dtype == np.uint8
+    small = _image(dtype=np.int64, value=200)  # np.array of Python ints: int64 in 0-255
+    with pytest.raises(ValueError, match=r"already 8-bit: image\.astype\(np\.uint8\)"):
+        I.check_image(small)
+    assert I.check_image(small.astype(np.uint8)).dtype == np.uint8
+
+
+@pytest.mark.parametrize(("kwargs", "says"), [
+    ({"image_size": 3}, r"image_size must be an integer in \[32, 4096\] pixels, got 3"),
+    ({"box_scale": 0}, r"box_scale must be a number in \[1, 4\] .* got 0"),
+    ({"box_scale": float("inf")}, r"box_scale must be a number in \[1, 4\] .* got inf"),
+    ({"box": (0, 0, 1e15, 1e15)}, r"lies outside the 50 x 40 image \(.* % of its area inside"),
+    ({"box": (-100, -100, -0.4, -0.4)}, r"lies outside the 50 x 40 image"),
+    ({"K": intrinsics(1e12, 1e12, 25.0, 20.0)}, r"K's fx = 1e\+12 px does not fit the 50 x 40"),
+    ({"K": intrinsics(60.0, 0.5, 25.0, 20.0)}, r"K's fy = 0.5 px does not fit"),
+])
+def test_out_of_range_arguments_are_refused_before_the_network_runs(net, kwargs, says):
+    # issue 43 item 10: each of these ran (a 3-px crop, box_scale 0 read as 1.5, a hand
+    # placed 3.5e9 m away...) or failed deep inside
+    args = {"box": (10, 10, 30, 30), "image_size": SIZE, **kwargs}
+    box = args.pop("box")
+    with pytest.raises(ValueError, match=says):
+        I.predict_hand(_image(), box, "right", model=net, **args)
+    with pytest.raises(ValueError, match="batch_size must be an integer >= 1"):
+        I.predict_hands(_image(), [(10, 10, 30, 30)], "right", model=net, image_size=SIZE,
+                        batch_size=0)

@@ -207,7 +207,7 @@ def test_paper_and_named_limits():
     np.testing.assert_allclose(np.rad2deg(lower), -60.0)
     lo, hi = L.hand_joint_limits("anatomical")
     assert lo.shape == hi.shape == (15, 3) and np.all(lo <= 0) and np.all(hi >= 0)
-    np.testing.assert_allclose(np.rad2deg(hi[1]), [0, 110, 0])  # index PIP
+    np.testing.assert_allclose(np.rad2deg(hi[1]), [10, 110, 10])  # index PIP: a hinge, +-10 play
     np.testing.assert_allclose(np.rad2deg(lo[:, [0, 2]]), -np.rad2deg(hi[:, [0, 2]]))
     paper = make_articulation().with_limits("paper")
     assert paper.limits_name == "paper"
@@ -344,8 +344,10 @@ def test_within_limits_default_tolerance_accepts_float32_round_trips(right, left
                     assert not L.within_limits(bad, lim.lower, lim.upper).any()
             assert L.within_limits(angles, lim.lower, lim.upper).all()
     art = right[1]
-    exact = art.from_pose(art.random_pose(3, n=50))
+    at_limits = np.where(np.random.default_rng(3).random((50, 15, 3)) < 0.5, art.lower, art.upper)
+    exact = art.from_pose(art.to_pose(at_limits))
     assert not art.within_limits(exact, atol=0.0).all()  # the float32 error is there
+    assert art.within_limits(exact).all()
 
 
 def test_left_frames_mirror_right(hand, right, left):
@@ -501,3 +503,50 @@ def test_re_based_left_hand_is_the_mirror_of_the_right(hand):
     a = L.natural_hand_angles(11)
     np.testing.assert_allclose(hand.mirror_axis_angle(right_art.to_pose(a)),
                                left_art.to_pose(L.mirror_angles(a)), atol=1e-6)
+
+
+def test_the_module_functions_round_trip_with_the_articulation_s_zero_rotations(right, left):
+    # issue 43 item 14: pose_to_lcs_angles(art.frames, art.to_pose(a)) was 0.41 rad off at the
+    # thumb's CMC (the module functions knew nothing of its re-based zero)
+    for _, art in (right, left):
+        assert art.zero_rotations is not None
+        z = art.zero_rotations
+        for limits in ("anatomical", "paper"):
+            a = art.with_limits(limits).random_angles(11, n=400)
+            pose = L.lcs_angles_to_pose(art.frames, a, z)
+            np.testing.assert_array_equal(pose.astype(np.float32), art.to_pose(a))
+            back = L.pose_to_lcs_angles(art.frames, pose, z)
+            np.testing.assert_allclose(back, a, atol=1e-9)
+            np.testing.assert_allclose(L.pose_to_lcs_angles(art.frames, art.to_pose(a), z), a,
+                                       atol=1e-5)  # through float32, as art.from_pose
+            np.testing.assert_allclose(art.from_pose(pose), a, atol=1e-9)
+            np.testing.assert_allclose(L.rotation_from_lcs_angles(art.frames, a, z),
+                                       Rotation.from_rotvec(pose.reshape(-1, 3)).as_matrix()
+                                       .reshape(*a.shape, 3), atol=1e-12)
+        # without zero_rotations the thumb's CMC is read from the rest pose: documented, so test
+        off = np.abs(L.pose_to_lcs_angles(art.frames, art.to_pose(a)) - a).max(axis=0)
+        assert off[12].max() > 0.1 and off[np.arange(15) != 12].max() < 1e-5
+    with pytest.raises(ValueError, match=r"zero_rotations must be \(15, 3, 3\)"):
+        L.lcs_angles_to_pose(art.frames, a, np.eye(3))
+    bad = np.tile(np.eye(3), (15, 1, 1))
+    bad[4] *= 2
+    with pytest.raises(ValueError, match=r"zero_rotations\[4\] is not a rotation"):
+        L.pose_to_lcs_angles(art.frames, pose, bad)
+
+
+def test_the_library_s_own_poses_are_within_the_anatomical_limits(hand):
+    # issue 43 item 13: example_pose("point"/"pinch"/"fist"/"spread") and every
+    # hand.random_pose(max_flexion_deg=30, max_spread_deg=0) were refused: the hinges' sideways
+    # and twist ranges were exactly 0 while a flexion about an axis a few degrees off the
+    # vertex-defined LCS y reads as 0.5-7 degrees there
+    for side in ("right", "left"):
+        art = L.hand_lcs(hand.HandModel(side))
+        for name in ("flat", "fist", "point", "pinch", "spread"):
+            assert art.within_limits(art.from_pose(hand.example_pose(name, side))), (side, name)
+        for spread in (0.0, 5.0, 10.0):
+            poses = hand.random_pose(0, 500, side=side, max_flexion_deg=30,
+                                     max_spread_deg=spread)
+            assert art.within_limits(art.from_pose(poses)).all(), (side, spread)
+        natural = np.stack([L.natural_hand_angles(s, side=side) for s in range(100)])
+        assert art.within_limits(art.from_pose(art.to_pose(natural))).all()
+        assert art.within_limits(art.from_pose(L.random_pose(art, 1, 200))).all()

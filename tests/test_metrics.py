@@ -416,3 +416,29 @@ def test_viz_pck_curves_and_vr_bars():
     bars = viz.plot_vr_table(b, rows, "auc")
     assert [p.get_height() for p in bars][0] == 0.5 and len(bars) == 2
     plt.close(fig)
+
+
+def test_bad_thresholds_errors_samples_and_vr_are_refused_with_the_value():
+    # issue 43 item 10: each of these gave a number (0, a curve, NaN) or dropped samples silently
+    rng = np.random.default_rng(3)
+    gj, gv = hand_like(rng, 3)
+    for th in (float("nan"), float("inf"), (0.005, float("nan")), ()):
+        with pytest.raises(ValueError, match="thresholds must be one or more finite positive"):
+            M.f_score(gv, gv, th)
+    with pytest.raises(ValueError, match=r"errors must be distances >= 0 .*got min -0.001"):
+        M.pck_curve(np.array([0.002, -0.001]))
+    for th in ([0.0, np.nan], [0.02, 0.01], [-0.01, 0.0]):
+        with pytest.raises(ValueError, match="strictly increasing distances"):
+            M.pck_curve(np.array([0.002]), th)
+    with pytest.raises(ValueError, match=r"pck values must be fractions in \[0, 1\].*nan"):
+        M.auc([0.5, np.nan], [0.0, 0.05])
+    with pytest.raises(ValueError, match="pred_joints has 0 samples"):
+        M.freihand_scores(pred_joints=gj[:0], gt_joints=gj[:0], pred_verts=gv[:0],
+                          gt_verts=gv[:0])
+    ps = M.per_sample_scores(pred_joints=gj, gt_joints=gj)
+    for bad in (np.nan, 2.0, -1.0):
+        with pytest.raises(ValueError, match=rf"vr must be visibility ratios in \[0, 1\], got "
+                                             rf"{bad!r} at sample 1"):
+            M.scores_by_vr_bin(ps, np.array([0.5, bad, 0.7]))
+    # a VR below the first bin is a valid ratio, in no bin (as before)
+    assert [r["count"] for r in M.scores_by_vr_bin(ps, [0.1, 0.5, 0.7])] == [1, 1, 0, 0]

@@ -131,3 +131,27 @@ def test_vr_on_rendered_scene():
     assert vrs[1] == 1.0
     assert vrs[2] == pytest.approx(_count(a2 & ~a1) / _count(a2))
     assert 0.2 < vrs[2] < 0.95
+
+
+def test_vr_image_masks_labels_and_an_empty_body_among_others():
+    # issue 43 item 15: a 0/255 mask read as "not in view", label 0 unchecked, one empty mask
+    # failing every body of visibility_ratios
+    scene = np.zeros((4, 6), np.int32)
+    scene[:, :3] = 1
+    alone255 = np.zeros((4, 6), np.uint8)
+    alone255[:, :4] = 255
+    with pytest.raises(ValueError, match=r"no pixel equal to label 1, but holds the values "
+                                         r"\[0, 255\].*pass it as bool \(alone_mask > 0\)"):
+        V.visibility_ratio(scene, alone255, 1)
+    assert V.visibility_ratio(scene, alone255 > 0, 1) == 0.75
+    for bad in (0, -1, 1.5, True, "1"):
+        with pytest.raises(ValueError, match=r"label must be an integer >= 1 .* got"):
+            V.visibility_ratio(scene, alone255 > 0, bad)
+    with pytest.raises(ValueError, match="stray must be a share in"):
+        V.visibility_ratio(scene, alone255 > 0, 1, stray=float("nan"))
+    masks = {1: alone255 > 0, 2: np.zeros((4, 6), bool)}
+    with pytest.warns(RuntimeWarning, match=r"label\(s\) \[2\] is empty"):
+        vrs = V.visibility_ratios(scene, masks)
+    assert vrs[1] == 0.75 and np.isnan(vrs[2])
+    with pytest.raises(ValueError, match=r"label\(s\) \[2\] is empty"):
+        V.visibility_ratios(scene, masks, on_empty="raise")

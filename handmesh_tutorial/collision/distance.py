@@ -17,6 +17,23 @@ from .exact import ATOL
 __all__ = ["point_cylinder_distance", "project_to_cylinder", "sphere_cylinder_intersect"]
 
 
+def _check_cylinder(points, p0, p1, radius):
+    """Validated float64 ``points, p0, p1, radius`` and the axis lengths of one call.
+
+    Raises:
+        ValueError: a point array that is not ``(..., 3)``, NaN or inf anywhere, a negative
+            radius, or an axis of zero length (the message gives its flat index and count).
+    """
+    x, p0, p1 = (_check_points(a, n) for a, n in ((points, "points"), (p0, "p0"), (p1, "p1")))
+    r = _check_radius(radius, "radius")
+    length = np.linalg.norm(p1 - p0, axis=-1)
+    if not (length > 0).all():
+        bad = np.flatnonzero(~(length > 0))
+        raise ValueError(f"axis p0->p1 has zero length at flat index {int(bad[0])} "
+                         f"({bad.size} such entries); a cylinder needs two distinct end points")
+    return x, p0, p1, r, length
+
+
 def point_cylinder_distance(points, p0, p1, radius) -> np.ndarray:
     """Euclidean distance from points to solid cylinders (0 inside), broadcast.
 
@@ -28,21 +45,20 @@ def point_cylinder_distance(points, p0, p1, radius) -> np.ndarray:
         points: (..., 3) query points, metres.
         p0: (..., 3) axis end points, metres.
         p1: (..., 3) axis end points, metres.
-        radius: (...,) radii, metres.
+        radius: (...,) radii, metres, finite and ``>= 0``.
 
     Returns:
         (...,) distances, metres.
 
     Shapes:
         ``points, p0, p1 (..., 3)``, ``radius (...)`` (broadcast) -> ``(...)`` metres.
+
+    Raises:
+        ValueError: a point array that is not ``(..., 3)``, NaN or inf anywhere, a negative
+            radius, or an axis of zero length (``p0 == p1``).
     """
-    x, p0, p1 = (_check_points(a, n) for a, n in ((points, "points"), (p0, "p0"), (p1, "p1")))
-    r = _check_radius(radius, "radius")
-    d = p1 - p0
-    length = np.linalg.norm(d, axis=-1)
-    if not (length > 0).all():
-        raise ValueError("axis p0->p1 has zero length")
-    u = d / length[..., None]
+    x, p0, p1, r, length = _check_cylinder(points, p0, p1, radius)
+    u = (p1 - p0) / length[..., None]
     w = x - p0
     tau = np.sum(w * u, axis=-1)
     rho = np.linalg.norm(w - tau[..., None] * u, axis=-1)
@@ -58,16 +74,27 @@ def project_to_cylinder(points, p0, p1, radius) -> np.ndarray:
 
     Args:
         points: (..., 3) points, metres.
-        p0: (..., 3) axis end points.
-        p1: (..., 3) axis end points.
-        radius: (...,) radii.
+        p0: (..., 3) axis end points, metres, finite.
+        p1: (..., 3) axis end points, metres, finite, each different from its ``p0``.
+        radius: (...,) radii, metres, finite and ``>= 0``.
 
     Returns:
         (..., 3) projected points, metres.
 
     Shapes:
         ``points, p0, p1 (..., 3)``, ``radius (...)`` (broadcast) -> ``(..., 3)`` metres.
+
+    Raises:
+        ValueError: as ``point_cylinder_distance``: a point array that is not ``(..., 3)``,
+            NaN or inf, a negative radius, or an axis of zero length (``p0 == p1``: no
+            direction to project along).
     """
+    points, p0, p1, radius, _ = _check_cylinder(points, p0, p1, radius)
+    return _project(points, p0, p1, radius)
+
+
+def _project(points, p0, p1, radius) -> np.ndarray:
+    """`project_to_cylinder` without the checks (callers that already validated, in loops)."""
     d = p1 - p0
     length = np.linalg.norm(d, axis=-1)
     u = d / length[..., None]

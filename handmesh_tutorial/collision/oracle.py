@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import _prepare
-from .distance import cylinder_support, point_cylinder_distance, project_to_cylinder
+from .distance import _project, cylinder_support, point_cylinder_distance
 
 __all__ = ["distance_bounds"]
 
@@ -76,8 +76,8 @@ def distance_bounds(a0, a1, ra, b0, b1, rb, *, iters: int = 2000, tol: float = 1
     act = everyone
     y = 0.5 * (b0 + b1)
     for _ in range(iters):
-        x = project_to_cylinder(y, a0[act], a1[act], ra[act])
-        y = project_to_cylinder(x, b0[act], b1[act], rb[act])
+        x = _project(y, a0[act], a1[act], ra[act])
+        y = _project(x, b0[act], b1[act], rb[act])
         d = y - x
         dn = np.linalg.norm(d, axis=1)
         better = dn <= upper[act]

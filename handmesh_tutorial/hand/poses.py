@@ -49,6 +49,11 @@ def flexion_axes(side: str = "right") -> np.ndarray:
     return axes if side == "right" else mirror_axis_angle(axes)
 
 
+# The thumb of the fist and point poses (CMC, MCP, IP flexion, degrees from the template's rest
+# thumb, which already stands ~26 degrees flexed in the LCS sense): inside the anatomical limits.
+_THUMB_CLOSED = (30, 25, 40)
+
+
 def example_pose(name: str, side: str = "right") -> np.ndarray:
     """A few named poses for figures and tests.
 
@@ -58,7 +63,8 @@ def example_pose(name: str, side: str = "right") -> np.ndarray:
         side: ``"right"`` or ``"left"``.
 
     Returns:
-        (15,3) float32 axis-angle pose, MANO order.
+        (15,3) float32 axis-angle pose, MANO order; its LCS angles lie inside the anatomical
+        limits ([`lcs.ANATOMICAL_LIMITS_DEG`][handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG]).
 
     Raises:
         ValueError: unknown name or side.
@@ -73,19 +79,19 @@ def example_pose(name: str, side: str = "right") -> np.ndarray:
     elif name == "fist":
         for f in ("index", "middle", "ring", "pinky"):
             flex[fing[f]] = np.deg2rad([80, 95, 60])
-        flex[fing["thumb"]] = np.deg2rad([45, 35, 40])
+        flex[fing["thumb"]] = np.deg2rad(_THUMB_CLOSED)
     elif name == "point":
         for f in ("middle", "ring", "pinky"):
             flex[fing[f]] = np.deg2rad([80, 95, 60])
         flex[fing["index"]] = np.deg2rad([5, 5, 5])
-        flex[fing["thumb"]] = np.deg2rad([45, 35, 40])
+        flex[fing["thumb"]] = np.deg2rad(_THUMB_CLOSED)
     elif name == "pinch":
         flex[fing["index"]] = np.deg2rad([35, 40, 20])
         for f in ("middle", "ring", "pinky"):
             flex[fing[f]] = np.deg2rad([20, 25, 15])
         flex[fing["thumb"]] = np.deg2rad([25, 20, 15])
     elif name == "spread":
-        for f, ang in zip(("index", "middle", "ring", "pinky"), (-12, -3, 8, 18), strict=True):
+        for f, ang in zip(("index", "middle", "ring", "pinky"), (-12, -3, 8, 14), strict=True):
             pose[fing[f][0]] = np.deg2rad(ang) * np.array([0.0, -1.0, 0.0])  # +: towards pinky
         pose[fing["thumb"][0]] = np.deg2rad(-15) * _unit([0.0, -1.0, 1.2])
     else:
@@ -106,7 +112,10 @@ def random_pose(rng: np.random.Generator | int | None = None, batch: int = 1,
     here each joint only curls about its fixed flexion axis
     ([`flexion_axes`][handmesh_tutorial.hand.poses.flexion_axes]) by a uniform angle in
     [0, ``max_flexion_deg``], the MCPs also turn sideways by at most ``max_spread_deg``, and no
-    hand model or LCS is needed.
+    hand model or LCS is needed. With ``max_flexion_deg <= 30`` and ``max_spread_deg <= 10``
+    every pose lies inside the anatomical limits
+    ([`lcs.ANATOMICAL_LIMITS_DEG`][handmesh_tutorial.lcs.ANATOMICAL_LIMITS_DEG], tested);
+    larger flexions can leave them (the thumb's CMC first).
 
     Args:
         rng: generator or seed.

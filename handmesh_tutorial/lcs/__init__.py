@@ -40,7 +40,9 @@ projected off ``z_i``. The ids are stored in ``Articulation.flexion_vertex_ids``
 [`ANATOMICAL_LIMITS_DEG`][handmesh_tutorial.lcs.limits.ANATOMICAL_LIMITS_DEG] and
 [`PAPER_LIMIT_DEG`][handmesh_tutorial.lcs.limits.PAPER_LIMIT_DEG]. The paper's generator uses ±60°
 on every axis (``limits="paper"``); ``limits="anatomical"`` uses one-sided flexion, small abduction
-and (except at the thumb's CMC) almost no twist, rounded from commonly cited ranges of motion
+and (except at the thumb's CMC) little twist (the hinges' ±10° of sideways and twist play
+absorbs the few degrees by which the vertex-defined LCS misses a joint's true axis), rounded
+from commonly cited ranges of motion
 (finger MCP 0–90° flexion and ±15° abduction, PIP 0–110°, DIP 0–90° as in Lin, Wu & Huang 2000,
 "Modeling the constraints of human hand motion"; MCP hyperextension and thumb ranges rounded from
 clinical range-of-motion tables such as the AAOS values). They are plausible defaults for sampling,

@@ -29,20 +29,49 @@ def _check_angles(frames: np.ndarray, angles) -> np.ndarray:
     return angles
 
 
+def _check_zero_rotations(frames: np.ndarray, zero_rotations) -> tuple[np.ndarray | None,
+                                                                         np.ndarray]:
+    """``(zero rotations (J,3,3) or None, indices of the joints whose entry is not identity)``.
+
+    Raises:
+        ValueError: another shape than (J,3,3), NaN or inf, or an entry that is not a rotation
+            (orthonormal, det +1, to 1e-6).
+    """
+    if zero_rotations is None:
+        return None, np.zeros(0, int)
+    z = np.asarray(zero_rotations, dtype=np.float64)
+    n = frames.shape[0]
+    if z.shape != (n, 3, 3) or not np.isfinite(z).all():
+        raise ValueError(f"zero_rotations must be ({n}, 3, 3) finite rotation matrices (an "
+                         f"Articulation's zero_rotations), got shape {z.shape}")
+    err = np.abs(z @ np.swapaxes(z, -1, -2) - np.eye(3)).max(axis=(1, 2))
+    bad = np.flatnonzero((err > 1e-6) | (np.linalg.det(z) < 0))
+    if bad.size:
+        raise ValueError(f"zero_rotations[{int(bad[0])}] is not a rotation matrix "
+                         "(orthonormal, det +1)")
+    off = np.abs(z - np.eye(3)).max(axis=(1, 2))
+    return z, np.flatnonzero(off > 0.0)
+
+
 def _euler_rotation(angles: np.ndarray) -> Rotation:
     """scipy Rotation of R_y(a_y) R_x(a_x) R_z(a_z) for angles (N,3) ordered (a_x, a_y, a_z)."""
     return Rotation.from_euler(_EULER, angles[:, [1, 0, 2]])
 
 
-def rotation_from_lcs_angles(frames, angles) -> np.ndarray:
+def rotation_from_lcs_angles(frames, angles, zero_rotations=None) -> np.ndarray:
     """Rotation matrices of joints turned by LCS angles, in rest-pose (parent) axes.
 
     Args:
         frames: (J,3,3) rest LCS, columns ``x, y, z``.
         angles: (..., J, 3) radians about ``(x, y, z)``, composed ``R_y R_x R_z``.
+        zero_rotations: optional (J,3,3) rotations that zero angles mean (an
+            [`Articulation`][handmesh_tutorial.lcs.articulation.Articulation]'s
+            ``zero_rotations``: the hand's re-based thumb); ``None``: zero angles are the rest
+            pose. Pass it whenever the articulation has one, or use its methods: without it
+            the thumb's angles are read from the wrong zero.
 
     Returns:
-        (..., J, 3, 3) ``F_k R(a) F_k^T``.
+        (..., J, 3, 3) ``O_k F_k R(a) F_k^T`` (``O_k`` = identity without ``zero_rotations``).
 
     Examples:
         >>> import numpy as np
@@ -54,39 +83,66 @@ def rotation_from_lcs_angles(frames, angles) -> np.ndarray:
     """
     frames = np.asarray(frames, dtype=np.float64)
     angles = _check_angles(frames, angles)
+    zero, k = _check_zero_rotations(frames, zero_rotations)
     local = _euler_rotation(angles.reshape(-1, 3)).as_matrix().reshape(*angles.shape, 3)
-    return frames @ local @ np.swapaxes(frames, -1, -2)
+    rot = frames @ local @ np.swapaxes(frames, -1, -2)
+    if len(k):
+        rot[..., k, :, :] = zero[k] @ rot[..., k, :, :]
+    return rot
 
 
-def lcs_angles_to_pose(frames, angles) -> np.ndarray:
+def lcs_angles_to_pose(frames, angles, zero_rotations=None) -> np.ndarray:
     """Axis-angle pose vectors (MANO convention) of LCS angles.
 
     Args:
         frames: (J,3,3) rest LCS.
         angles: (..., J, 3) radians.
+        zero_rotations: optional (J,3,3), as in
+            [`rotation_from_lcs_angles`][handmesh_tutorial.lcs.angles.rotation_from_lcs_angles]
+            (``art.zero_rotations``; ``art.to_pose`` passes it).
 
     Returns:
-        (..., J, 3) float64 axis-angle of ``F_k R(a) F_k^T`` (= ``F_k @ rotvec(R(a))``).
+        (..., J, 3) float64 axis-angle of ``O_k F_k R(a) F_k^T`` (= ``F_k @ rotvec(R(a))``
+        where ``O_k`` is the identity).
     """
     frames = np.asarray(frames, dtype=np.float64)
     angles = _check_angles(frames, angles)
+    zero, k = _check_zero_rotations(frames, zero_rotations)
     rotvec = _euler_rotation(angles.reshape(-1, 3)).as_rotvec().reshape(angles.shape)
-    return np.einsum("jab,...jb->...ja", frames, rotvec)
+    pose = np.einsum("jab,...jb->...ja", frames, rotvec)
+    if len(k):   # only the offset joints go through matrices (the others keep their bytes)
+        sel = rotation_from_lcs_angles(frames[k], angles[..., k, :], zero[k])
+        pose[..., k, :] = Rotation.from_matrix(sel.reshape(-1, 3, 3)).as_rotvec().reshape(
+            sel.shape[:-1])
+    return pose
 
 
-def pose_to_lcs_angles(frames, pose) -> np.ndarray:
+def pose_to_lcs_angles(frames, pose, zero_rotations=None) -> np.ndarray:
     """Inverse of [`lcs_angles_to_pose`][handmesh_tutorial.lcs.angles.lcs_angles_to_pose] (exact
-    while ``|a_x| < 90°``).
+    while ``|a_x| < 90°``), with the same ``zero_rotations``.
+
+    ``pose_to_lcs_angles(art.frames, art.to_pose(a), art.zero_rotations)`` gives back ``a``
+    (as ``art.from_pose`` does); without ``zero_rotations`` a hand's thumb CMC is read from its
+    rest pose instead of its re-based zero (0.4 rad off).
 
     Args:
         frames: (J,3,3) rest LCS.
         pose: (..., J, 3) axis-angle in rest-pose (parent) axes.
+        zero_rotations: optional (J,3,3), as in
+            [`rotation_from_lcs_angles`][handmesh_tutorial.lcs.angles.rotation_from_lcs_angles].
 
     Returns:
         (..., J, 3) radians ``(a_x, a_y, a_z)``; ``a_y`` and ``a_z`` in (-π, π].
     """
     frames = np.asarray(frames, dtype=np.float64)
-    pose = _check_angles(frames, pose)
+    pose = np.array(_check_angles(frames, pose), dtype=np.float64)
+    zero, k = _check_zero_rotations(frames, zero_rotations)
+    if len(k):   # undo the zero rotation: F R(a) F^T = O^T L
+        sel = pose[..., k, :]
+        local = Rotation.from_rotvec(sel.reshape(-1, 3)).as_matrix().reshape(*sel.shape, 3)
+        rel = np.swapaxes(zero[k], -1, -2) @ local
+        pose[..., k, :] = Rotation.from_matrix(rel.reshape(-1, 3, 3)).as_rotvec().reshape(
+            sel.shape)
     local = np.einsum("jba,...jb->...ja", frames, pose)  # F^T rotvec
     eul = Rotation.from_rotvec(local.reshape(-1, 3)).as_euler(_EULER)
     return eul[:, [1, 0, 2]].reshape(pose.shape)

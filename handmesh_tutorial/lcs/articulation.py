@@ -14,7 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .angles import (
     _LIMITS_ATOL,
@@ -64,13 +63,6 @@ class Articulation:
     limits_name: str = "custom"
     zero_rotations: np.ndarray | None = None
 
-    def _offset_joints(self) -> np.ndarray:
-        """Indices of the joints whose zero rotation is not the identity."""
-        if self.zero_rotations is None:
-            return np.zeros(0, int)
-        off = np.abs(np.asarray(self.zero_rotations) - np.eye(3)).max(axis=(1, 2))
-        return np.flatnonzero(off > 0.0)
-
     @property
     def num_joints(self) -> int:
         """Number of articulated joints J."""
@@ -78,35 +70,19 @@ class Articulation:
 
     def rotations(self, angles) -> np.ndarray:
         """(..., J, 3, 3) local rotations (rest axes) of LCS angles (..., J, 3) radians."""
-        rot = rotation_from_lcs_angles(self.frames, angles)
-        k = self._offset_joints()
-        if len(k):
-            rot[..., k, :, :] = self.zero_rotations[k] @ rot[..., k, :, :]
-        return rot
+        return rotation_from_lcs_angles(self.frames, angles, self.zero_rotations)
 
     def to_pose(self, angles) -> np.ndarray:
-        """(..., J, 3) float32 axis-angle pose (MANO convention) of LCS angles, radians."""
-        pose = lcs_angles_to_pose(self.frames, angles)
-        k = self._offset_joints()
-        if len(k):   # only the offset joints go through matrices (the others keep their bytes)
-            a = np.asarray(angles, dtype=np.float64)[..., k, :]
-            sel = self.zero_rotations[k] @ rotation_from_lcs_angles(self.frames[k], a)
-            pose[..., k, :] = Rotation.from_matrix(sel.reshape(-1, 3, 3)).as_rotvec().reshape(
-                sel.shape[:-1])
-        return pose.astype(np.float32)
+        """(..., J, 3) float32 axis-angle pose (MANO convention) of LCS angles, radians
+        ([`lcs_angles_to_pose`][handmesh_tutorial.lcs.angles.lcs_angles_to_pose] with this
+        articulation's ``zero_rotations``)."""
+        return lcs_angles_to_pose(self.frames, angles, self.zero_rotations).astype(np.float32)
 
     def from_pose(self, pose) -> np.ndarray:
-        """(..., J, 3) LCS angles (radians) of an axis-angle pose."""
-        pose = np.array(pose, dtype=np.float64)
-        k = self._offset_joints()
-        if len(k):   # undo the zero rotation: F R(a) F^T = O^T L
-            sel = pose[..., k, :]
-            local = Rotation.from_rotvec(sel.reshape(-1, 3)).as_matrix().reshape(
-                *sel.shape, 3)
-            rel = np.swapaxes(self.zero_rotations[k], -1, -2) @ local
-            pose[..., k, :] = Rotation.from_matrix(rel.reshape(-1, 3, 3)).as_rotvec().reshape(
-                sel.shape)
-        return pose_to_lcs_angles(self.frames, pose)
+        """(..., J, 3) LCS angles (radians) of an axis-angle pose
+        ([`pose_to_lcs_angles`][handmesh_tutorial.lcs.angles.pose_to_lcs_angles] with this
+        articulation's ``zero_rotations``)."""
+        return pose_to_lcs_angles(self.frames, pose, self.zero_rotations)
 
     def clip(self, angles) -> np.ndarray:
         """Angles clipped to this articulation's limits."""

@@ -24,16 +24,36 @@ __all__ = [
 PAPER_LIMIT_DEG = 60.0
 """The paper's limit: ±60° about every LCS axis (supplementary, step 4 of the generator)."""
 
+# Sideways and twist range (±, degrees) of the hinge joints (PIP, DIP, thumb IP) in
+# ANATOMICAL_LIMITS_DEG: the few degrees by which a flexion about the joint's true axis reads as
+# abduction and twist in its LCS (up to 10° at full flexion for the hand's own poses).
+_HINGE_PLAY_DEG: float = 10.0
+
 ANATOMICAL_LIMITS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
-    "mcp": ((-15.0, 15.0), (-20.0, 90.0), (-5.0, 5.0)),
-    "pip": ((0.0, 0.0), (0.0, 110.0), (0.0, 0.0)),
-    "dip": ((0.0, 0.0), (0.0, 80.0), (0.0, 0.0)),
-    "thumb_cmc": ((-30.0, 30.0), (-15.0, 45.0), (-30.0, 30.0)),
-    "thumb_mcp": ((-10.0, 10.0), (-10.0, 60.0), (-5.0, 5.0)),
-    "thumb_ip": ((0.0, 0.0), (-15.0, 80.0), (0.0, 0.0)),
+    "mcp": ((-15.0, 15.0), (-20.0, 90.0), (-10.0, 10.0)),
+    "pip": ((-_HINGE_PLAY_DEG, _HINGE_PLAY_DEG), (0.0, 110.0), (-_HINGE_PLAY_DEG, _HINGE_PLAY_DEG)),
+    "dip": ((-_HINGE_PLAY_DEG, _HINGE_PLAY_DEG), (0.0, 80.0), (-_HINGE_PLAY_DEG, _HINGE_PLAY_DEG)),
+    "thumb_cmc": ((-30.0, 30.0), (-15.0, 60.0), (-30.0, 30.0)),
+    "thumb_mcp": ((-15.0, 15.0), (-10.0, 60.0), (-5.0, 5.0)),
+    "thumb_ip": ((-_HINGE_PLAY_DEG, _HINGE_PLAY_DEG), (-15.0, 80.0),
+                 (-_HINGE_PLAY_DEG, _HINGE_PLAY_DEG)),
 }
 """Anatomical limits in degrees, ``(lower, upper)`` per axis ``x`` (abduction), ``y`` (flexion,
 positive towards the palm), ``z`` (twist about the bone).
+
+The hinges (PIP, DIP, thumb IP) flex about one axis, but their sideways and twist ranges are
+±10°, not 0: the LCS ``x`` axis comes from one mesh vertex that only
+"approximately follows the flexion direction" (the paper's words), so a hinge's true axis is
+a few degrees off ``y`` and any pose not made from these angles (the hand's own
+[`example_pose`][handmesh_tutorial.hand.poses.example_pose] and
+[`random_pose`][handmesh_tutorial.hand.poses.random_pose], a MANO fit) reads as a little
+abduction and twist there; a zero-width range refused every such pose. For the same reason the
+finger MCPs twist ±10° (a fist's 80° of flexion reads as up to 8°) and the thumb's MCP moves
+±15° sideways (radial/ulnar deviation, 10-20° in clinical tables). The thumb's CMC flexes
+up to 60°: its LCS flexion direction is the opposition direction (the palmar normal turned 45°
+towards the little finger), which combines CMC flexion and palmar abduction (70° in clinical
+tables). Neither change moves a hand of the default generator (natural poses never reach
+these bounds); ``poses="uniform"`` under anatomical limits draws from the wider ranges.
 """
 
 DIP_PIP_RATIO: float = 2.0 / 3.0

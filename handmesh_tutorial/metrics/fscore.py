@@ -148,15 +148,21 @@ def f_score(pred, gt, thresholds=FSCORE_THRESHOLDS) -> dict:
     Args:
         pred: (N,P,3) predicted points (metres); P may differ from G.
         gt: (N,G,3) ground-truth points (metres).
-        thresholds: distance thresholds in metres, a float or a sequence of T floats.
+        thresholds: distance thresholds in metres, a float or a sequence of T floats, each
+            finite and ``> 0``.
 
     Returns:
         dict with ``f``, ``precision``, ``recall``: (N,T) float64 arrays (T = 1 for a float).
+
+    Raises:
+        ValueError: bad shapes, NaN or inf points, or a threshold that is not a finite
+            positive number (a NaN threshold would make every point "not closer" and F = 0).
     """
     p, g = _pair(pred, gt, "pred", "gt", same_points=False)
     ths = np.atleast_1d(np.asarray(thresholds, dtype=np.float64))
-    if ths.ndim != 1 or np.any(ths <= 0):
-        raise ValueError(f"thresholds must be positive distances in metres, got {thresholds!r}")
+    if ths.ndim != 1 or ths.size == 0 or not np.all(np.isfinite(ths) & (ths > 0)):
+        raise ValueError("thresholds must be one or more finite positive distances in metres "
+                         f"(e.g. 0.005), got {thresholds!r}")
     g2p, p2g, g_norm, p_norm = _min_sq_dist_f32(g, p)
     recall = _fraction_within(g2p, g_norm, g, p, ths)
     precision = _fraction_within(p2g, p_norm, p, g, ths)

@@ -42,16 +42,33 @@ def pck_curve(errors, thresholds=FREIHAND_THRESHOLDS) -> np.ndarray:
     keypoints equal this fraction over all (sample, point) pairs.
 
     Args:
-        errors: errors of any shape (metres), numpy or torch; flattened.
-        thresholds: (T,) increasing thresholds in metres.
+        errors: errors of any shape (metres), numpy or torch; flattened; finite and ``>= 0``.
+        thresholds: (T,) strictly increasing thresholds in metres, finite and ``>= 0``.
 
     Returns:
         (T,) float64 fractions in [0, 1].
+
+    Raises:
+        ValueError: no errors, a NaN, infinite or negative error (a signed difference is not
+            a distance), or thresholds that are not finite, non-negative and increasing.
     """
     e = _as_f64(errors, "errors", last=None, ndim=None).ravel()
     if e.size == 0:
         raise ValueError("errors is empty")
-    return _pck_sorted(np.sort(e), thresholds)
+    if e.min() < 0:
+        raise ValueError(f"errors must be distances >= 0 (metres), got min {e.min():.6g}: pass "
+                         "point_errors(pred, gt), not signed differences")
+    return _pck_sorted(np.sort(e), _check_thresholds(thresholds))
+
+
+def _check_thresholds(thresholds) -> np.ndarray:
+    """(T,) float64 thresholds: finite, >= 0, increasing; else a ValueError that shows them."""
+    t = np.asarray(thresholds, dtype=np.float64)
+    if t.ndim != 1 or t.size == 0 or not np.all(np.isfinite(t)) or t.min() < 0 \
+            or np.any(np.diff(t) <= 0):
+        raise ValueError("thresholds must be a 1-D array of finite, non-negative, strictly "
+                         f"increasing distances in metres, got {np.asarray(thresholds)!r}")
+    return t
 
 
 def _pck_sorted(sorted_errors: np.ndarray, thresholds) -> np.ndarray:
@@ -72,15 +89,26 @@ def auc(pck, thresholds=FREIHAND_THRESHOLDS) -> float:
     the normaliser is 0.05.
 
     Args:
-        pck: (T,) PCK values from [`pck_curve`][handmesh_tutorial.metrics.pck.pck_curve].
-        thresholds: (T,) the thresholds (metres) the curve was computed at.
+        pck: (T,) PCK values from [`pck_curve`][handmesh_tutorial.metrics.pck.pck_curve],
+            each in [0, 1].
+        thresholds: (T,) the thresholds (metres) the curve was computed at: T >= 2, finite,
+            ``>= 0``, strictly increasing.
 
     Returns:
         The AUC, a float in [0, 1].
+
+    Raises:
+        ValueError: shapes that differ, fewer than 2 thresholds, thresholds that are not
+            finite, non-negative and increasing, or a PCK value outside [0, 1] (NaN included).
     """
     y = np.asarray(pck, dtype=np.float64)
     t = np.asarray(thresholds, dtype=np.float64)
     if y.shape != t.shape or t.ndim != 1 or t.size < 2:
         raise ValueError(f"pck {y.shape} and thresholds {t.shape} must be equal 1-D shapes, "
                          "at least 2 thresholds")
+    _check_thresholds(t)
+    bad = np.flatnonzero(~((y >= 0) & (y <= 1)))
+    if bad.size:
+        raise ValueError(f"pck values must be fractions in [0, 1] (pck_curve's output), got "
+                         f"{float(y[bad[0]])!r} at index {int(bad[0])} ({bad.size} such values)")
     return _trapezoid(y, t) / _trapezoid(np.ones_like(t), t)

@@ -21,6 +21,13 @@ ROOT_INDEX = 9
 """Root keypoint (middle-finger MCP, FreiHAND order) for root-relative errors."""
 
 
+def _check_some_samples(x, name: str) -> None:
+    """A ValueError when ``x`` (N, ...) has N = 0: the means of zero samples are NaN."""
+    n = len(x) if hasattr(x, "__len__") else None
+    if n == 0:
+        raise ValueError(f"{name} has 0 samples; the scores are means over samples (N >= 1)")
+
+
 def per_sample_scores(*, pred_joints, gt_joints, pred_verts=None, gt_verts=None,
                       allow_reflection: bool = True, fscore_thresholds=FSCORE_THRESHOLDS,
                       root_index: int = ROOT_INDEX) -> dict:
@@ -96,7 +103,8 @@ def freihand_scores(*, pred_joints, gt_joints, pred_verts=None, gt_verts=None,
 
     Raises:
         ValueError: only one of ``pred_verts`` / ``gt_verts`` given, ``unaligned_fscore``
-            without vertices, or bad shapes (the message names the argument).
+            without vertices, zero samples (every mean would be NaN), or bad shapes (the
+            message names the argument).
 
     Examples:
         >>> import numpy as np
@@ -108,6 +116,7 @@ def freihand_scores(*, pred_joints, gt_joints, pred_verts=None, gt_verts=None,
     """
     if unaligned_fscore and pred_verts is None:
         raise ValueError("unaligned_fscore needs vertices: give pred_verts and gt_verts")
+    _check_some_samples(pred_joints, "pred_joints")
     ps = per_sample_scores(pred_joints=pred_joints, gt_joints=gt_joints, pred_verts=pred_verts,
                            gt_verts=gt_verts, allow_reflection=allow_reflection)
     scores = scores_from_errors(ps)
@@ -129,8 +138,12 @@ def scores_from_errors(ps: dict) -> dict:
     Returns:
         The dict of [`freihand_scores`][handmesh_tutorial.metrics.scores.freihand_scores] without
         the unaligned F-scores; without vertex errors in ``ps``, only its joint keys.
+
+    Raises:
+        ValueError: ``ps`` holds zero samples.
     """
     je, jpa = ps["joint_err"], ps["joint_err_pa"]
+    _check_some_samples(je, "ps['joint_err']")
     ft, pt = FREIHAND_THRESHOLDS, PAPER_THRESHOLDS
     s_je, s_jpa = (np.sort(e, axis=None) for e in (je, jpa))  # sort once
     scores = {

@@ -36,7 +36,8 @@ def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,
     Args:
         per_sample: output of
             [`per_sample_scores`][handmesh_tutorial.metrics.scores.per_sample_scores] for N samples.
-        vr: (N,) visibility ratio of each sample's target hand.
+        vr: (N,) visibility ratio of each sample's target hand, each in [0, 1] (values
+            below the first bin's low end, 0.40 for the paper's, fall in no bin).
         bins: the VR bins; see [`vr_bin_index`][handmesh_tutorial.visibility.vr_bin_index].
         thresholds: PCK thresholds (metres) of the AUC; the paper's 0-20 mm, 20 values.
 
@@ -46,11 +47,22 @@ def scores_by_vr_bin(per_sample: dict, vr, bins=VR_BINS,
         were scored, ``pa_mpvpe`` (mm), ``f_at_5mm``, ``f_at_15mm``; the
         [`SURFACE_KEYS`][handmesh_tutorial.metrics.tables.SURFACE_KEYS] averaged when ``per_sample``
         holds them. Empty bins have ``count`` 0 and NaN scores.
+
+    Raises:
+        ValueError: ``vr`` has another length than the samples, or a value that is not a
+            ratio in [0, 1] (NaN, negative, above 1): such samples were dropped silently
+            before.
     """
     v = np.asarray(vr, dtype=np.float64).ravel()
     n = per_sample["joint_err"].shape[0]
     if v.shape[0] != n:
         raise ValueError(f"vr has {v.shape[0]} values but per_sample has {n} samples")
+    bad = np.flatnonzero(~((v >= 0.0) & (v <= 1.0)))
+    if bad.size:
+        raise ValueError(f"vr must be visibility ratios in [0, 1], got {float(v[bad[0]])!r} "
+                         f"at sample {int(bad[0])} ({bad.size} such values); a VR is visible / "
+                         "alone pixels, so NaN, negative or > 1 values mean a bookkeeping error "
+                         "(score samples without a VR with scores_by_group or freihand_scores)")
     idx = vr_bin_index(v, bins)
     labels = VR_BIN_LABELS if tuple(map(tuple, bins)) == VR_BINS else [
         f"[{lo:.2f}, {hi:.2f}" + ("]" if k == len(bins) - 1 else ")")

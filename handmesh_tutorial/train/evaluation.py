@@ -146,6 +146,21 @@ def _item_kinds(dataset, index: np.ndarray) -> list | None:
     return [source.annotation(int(i)).get("kind") for i in index]
 
 
+def _vr_table(errors: dict, vr: np.ndarray) -> list[dict]:
+    """The per-VR rows over the samples that have a VR (NaN: unknown, e.g. FreiHAND); a
+    warning names how many were left out when only some have one."""
+    known = np.isfinite(vr)
+    if not known.any():
+        return []
+    if not known.all():
+        warnings.warn(f"{int((~known).sum())} of {len(vr)} samples have no visibility ratio "
+                      "(NaN); the per-VR table counts the others only", RuntimeWarning,
+                      stacklevel=3)
+        errors = {k: (v if k == "fscore_thresholds" else np.asarray(v)[known])
+                  for k, v in errors.items()}
+    return M.scores_by_vr_bin(errors, vr[known])
+
+
 def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kinds,
                        faces) -> dict:
     """Scores, per-sample errors and the VR / kind / overall rows of one set of predictions;
@@ -175,7 +190,7 @@ def _score_predictions(pred_joints, pred_vertices, r: dict, vr: np.ndarray, kind
             per_sample[key] = errors[key]
     if kinds is not None:
         per_sample["kind"] = np.array([str(k) for k in kinds])
-    vr_table = M.scores_by_vr_bin(errors, vr) if np.isfinite(vr).any() else []
+    vr_table = _vr_table(errors, vr)
     kind_table = [] if kinds is None else M.scores_by_group(
         errors, kinds, order=[k for k in KINDS if k in set(kinds)])
     overall = {"bin": "all", "count": len(vr), "mpjpe": scores["mpjpe"],
