@@ -203,3 +203,26 @@ def test_config_errors():
         PP.PosePretrainConfig(image_sizes=(16,))
     with pytest.raises(ValueError, match="batch_size"):
         PP.PosePretrainConfig(batch_size=0)
+
+
+def test_stop_after_keeps_the_schedule_and_a_rerun_continues_to_the_same_weights(cache, tmp_path):
+    tr = {k: v[:8] for k, v in cache.items()}
+    va = {k: v[8:] for k, v in cache.items()}
+    cfg = PP.PosePretrainConfig(batch_size=4, max_steps=6, warmup_steps=2, image_sizes=(32, 48),
+                                lr=1e-3)
+    part = PP.pretrain_pose_encoder(tr, va, tmp_path / "a", cfg, stop_after=4, val_every=100,
+                                    progress=False, log=None)
+    assert part["steps"] == 4 and [r["step"] for r in part["history"]] == [4]
+    ck = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=True)
+    assert ck["total_steps"] == 6  # the plan is kept: the rate at step 4 is the plan's
+    again = PP.pretrain_pose_encoder(tr, va, tmp_path / "a", cfg, stop_after=4, progress=False,
+                                     log=None)
+    assert again["steps"] == 4  # asked again: nothing more is done
+    rest = PP.pretrain_pose_encoder(tr, va, tmp_path / "a", cfg, val_every=100, progress=False,
+                                    log=None)
+    whole = PP.pretrain_pose_encoder(tr, va, tmp_path / "b", cfg, val_every=100, progress=False,
+                                     log=None)
+    assert rest["steps"] == whole["steps"] == 6
+    a = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=True)["model"]
+    b = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)["model"]
+    assert all(torch.allclose(a[k].float(), b[k].float(), atol=1e-5) for k in a)

@@ -42,6 +42,7 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
     res = build_pretrained_encoder(args.out, PosePretrainConfig(**kw),
                                    max_generate_seconds=args.max_generate_seconds,
                                    max_train_seconds=args.max_train_seconds,
+                                   stop_after=args.stop_after_steps,
                                    install=args.install, progress=not args.no_progress)
     last = res["history"][-1]
     print(f"handmesh pretrain-encoder: {res['info']['data']['train_scenes']} training scenes, "
@@ -95,9 +96,11 @@ def add_pretrain_commands(sub) -> None:
                         "small int8 file (resumable)")
     pe.add_argument("--out", default="runs/pretrained_encoder",
                     help="output folder (default: runs/pretrained_encoder)")
-    pe.add_argument("--install", action="store_true",
-                    help="copy the result into the package, where "
-                    "hmt.nn.pose_encoder.pretrained_encoder() finds it")
+    pe.add_argument("--install", nargs="?", const="pretrained", default=False,
+                    choices=("pretrained", "neutral"),
+                    help="copy the result into the package: as the demo's encoder "
+                    "(pretrained, the default) or as the decoder-neutral one (neutral), where "
+                    "init_encoder='pretrained' / 'neutral' find it")
     pe.add_argument("--train-scenes", type=int, help="training scenes (default: 40000)")
     pe.add_argument("--val-scenes", type=int, help="validation scenes (default: 400)")
     pe.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 900; "
@@ -124,5 +127,8 @@ def add_pretrain_commands(sub) -> None:
     pe.add_argument("--max-train-seconds", type=float, default=None,
                     help="training budget: the first steps are timed and the steps that fit are "
                     "planned (learning-rate schedule included)")
+    pe.add_argument("--stop-after-steps", type=int, default=None,
+                    help="stop after this many steps of the planned --max-steps schedule (the "
+                    "learning rate where the plan has it); a rerun without it continues")
     pe.add_argument("--no-progress", action="store_true", help="no progress bars")
     pe.set_defaults(func=_cmd_pretrain_encoder)

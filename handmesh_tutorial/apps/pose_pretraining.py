@@ -220,7 +220,8 @@ def _init_weights(net: PoseNet, init: str | None) -> None:
 
 def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.PathLike,
                           config: PosePretrainConfig | None = None, *,
-                          max_train_seconds: float | None = None, info: dict | None = None,
+                          max_train_seconds: float | None = None, stop_after: int | None = None,
+                          info: dict | None = None,
                           checkpoint_seconds: float = 60.0, val_every: int = 1000,
                           progress: bool = True, log=print) -> dict:
     """Train a [`PoseNet`][handmesh_tutorial.nn.pose_encoder.PoseNet] on cached crops; resumable.
@@ -238,6 +239,9 @@ def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.Path
         out: output folder.
         config: the recipe.
         max_train_seconds: training budget of this call (``None``: ``max_steps``).
+        stop_after: stop once this many steps are done (validated, exported, checkpointed),
+            leaving the planned schedule as it is: the learning rate is where the plan has it
+            then, and a later call without it continues to the plan's end. ``None``: the plan.
         info: provenance stored in the exported file.
         checkpoint_seconds: seconds between checkpoints.
         val_every: steps between validations.
@@ -326,7 +330,7 @@ def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.Path
                                 preprocessing=_preprocessing(config))
 
         net.train()
-        while step < total:
+        while step < total and (stop_after is None or step < stop_after):
             epoch, pos = divmod(step, per_epoch)
             perm = np.random.default_rng([config.seed, epoch]).permutation(n)
             idx = torch.as_tensor(perm[pos * config.batch_size:(pos + 1) * config.batch_size],
@@ -377,6 +381,9 @@ def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.Path
                 say(f"      out of time at step {step} of {total}: rerun to resume")
                 break
         bar.close()
+        if stop_after is not None and stop_after <= step < total:
+            say(f"      stopped after step {step} of {total} as asked (--stop-after-steps); "
+                "rerun without it to continue")
         if not history or history[-1]["step"] != step:
             validate()
         checkpoint()
@@ -398,7 +405,8 @@ def _jsonable(d: dict) -> dict:
 def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
                              config: PosePretrainConfig | None = None, *,
                              max_generate_seconds: float | None = None,
-                             max_train_seconds: float | None = None, install: bool = False,
+                             max_train_seconds: float | None = None,
+                             stop_after: int | None = None, install: bool | str = False,
                              progress: bool = True, log=print) -> dict:
     """Make the pretrained encoder: scenes, crops, training, int8 file (``handmesh
     pretrain-encoder``).
@@ -407,7 +415,9 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     as [`build_pretrained`][handmesh_tutorial.apps.pretrain_network.build_pretrained] does
     (time-bounded shards, kept on a rerun); their crops are cached in ``out/crops_*.pt``; training
     runs in
-    ``out`` and resumes there. ``install=True`` copies the file into the package.
+    ``out`` and resumes there. ``install=True`` (or ``"pretrained"``) copies the file into the
+    package as the demo's encoder, ``install="neutral"`` as the decoder-neutral one
+    ([`SHIPPED_ENCODERS`][handmesh_tutorial.nn.pose_encoder.SHIPPED_ENCODERS]).
 
     Returns:
         ``{"file", "history", "info"}``.
@@ -436,6 +446,7 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     dev = "cuda" if config.device == "auto" and torch.cuda.is_available() else config.device
     info = {"command": "handmesh pretrain-encoder", "recipe": _jsonable(asdict(config)),
             "max_generate_seconds": max_generate_seconds, "max_train_seconds": max_train_seconds,
+            "stop_after": stop_after,
             "data": {"train_seed": config.data_seed, "train_scenes": tr["scenes"],
                      "val_seed": config.data_seed + 1, "val_scenes": val["scenes"],
                      "kinds": "mixed (hand-hand, hand-object, hand-chain)",
@@ -455,13 +466,19 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     say(f"[2/3] training ({config.backbone}, batch {config.batch_size}, crops "
         f"{'/'.join(map(str, config.image_sizes))} px, init {config.init or 'random'}) in {out}")
     res = pretrain_pose_encoder(caches["train"], caches["val"], out, config,
-                                max_train_seconds=max_train_seconds, info=info,
+                                max_train_seconds=max_train_seconds, stop_after=stop_after,
+                                info=info,
                                 progress=progress, log=log)
     write_json(out / "history.json", {"history": res["history"], "info": info})
     say(f"[3/3] exported {res['file']} ({res['file'].stat().st_size / 1e6:.1f} MB, int8)")
     if install:
         from .. import _version
+        from ..nn.pose_encoder import SHIPPED_ENCODERS
 
-        atomic_write_bytes(_version.ASSET_DIR / ENCODER_FILE, res["file"].read_bytes(), True)
-        say(f"      installed as {_version.ASSET_DIR / ENCODER_FILE}")
+        name = "pretrained" if install is True else str(install)
+        if name not in SHIPPED_ENCODERS:
+            raise ValueError(f"install must be one of {sorted(SHIPPED_ENCODERS)}, got {name!r}")
+        target = _version.ASSET_DIR / SHIPPED_ENCODERS[name]
+        atomic_write_bytes(target, res["file"].read_bytes(), True)
+        say(f"      installed as {target}")
     return {"file": res["file"], "history": res["history"], "info": info}
