@@ -96,7 +96,7 @@
         : "";
       if (note) {
         note.textContent = (el.querySelector(".hmt-view-picture") ? "Static picture: the" : "The")
-          + " 3D view could not start here (" + err.message + ")." + hint;
+          + " 3D view could not start here (" + String(err.message).replace(/\.$/, "") + ")." + hint;
       }
       console.warn("hmt view:", err);
     }
