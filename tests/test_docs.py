@@ -180,15 +180,15 @@ def test_notebook_pages_share_their_css_and_keep_figures_as_files(tmp_path):
     from types import SimpleNamespace
 
     lighten = _tool("mkdocs_hooks")._lighten
-    png = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8DwHwAFBQIAX8jx0gAAAABJRU5ErkJggg==")
+    png = b"\x89PNG\r\n\x1a\n not decoded, only moved"
     css = ".jupyter-wrapper{color:red}" + " " * 3000
-    page = SimpleNamespace(url="notebooks/x/",
-                           file=SimpleNamespace(abs_dest_path=str(tmp_path / "notebooks/x/index.html")))
+    dest = str(tmp_path / "notebooks/x/index.html")
+    page = SimpleNamespace(url="notebooks/x/", file=SimpleNamespace(abs_dest_path=dest))
     html = (f'<style type="text/css">{css}</style><style>small{{}}</style>'
             f'<img alt="fig" src="data:image/png;base64,{base64.b64encode(png).decode()}">')
     out = lighten(html, page, tmp_path)
-    link = re.search(r'<link rel="stylesheet" href="(\.\./\.\./assets/notebook-css/[0-9a-f]+\.css)">',
-                     out)
+    link = re.search(
+        r'<link rel="stylesheet" href="(\.\./\.\./assets/notebook-css/[0-9a-f]+\.css)">', out)
     assert link and (tmp_path / "notebooks/x" / link.group(1)).resolve().read_text() == css
     assert "<style>small{}</style>" in out                  # small blocks stay inline
     img = re.search(r'<img alt="fig" loading="lazy" src="(figures/[0-9a-f]+\.png)"', out)
