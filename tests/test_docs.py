@@ -154,12 +154,16 @@ def test_notebook_contents_links_point_at_their_headings():
 
     fix_toc = _tool("mkdocs_hooks")._fix_toc
     content = ('<h2 id="intro">Intro</h2><h3 id="predjson-what-freihands-evaluation-expects">'
-               '<code>pred.json</code>: what FreiHAND\'s evaluation expects</h3>'
+               '<code>pred.json</code>: what FreiHAND\'s evaluation expects'
+               '<a class="anchor-link" href="#predjson-what-freihands-evaluation-expects">¶</a>'
+               '</h3>'
                '<h3 id="what-freihands-evaluation-expects-1">again</h3>')
-    inner = Item(id="what-freihands-evaluation-expects", children=[])
-    toc = [Item(id="intro", children=[inner])]
+    inner = Item(id="what-freihands-evaluation-expects",
+                 title=": what FreiHAND's evaluation expects", children=[])
+    toc = [Item(id="intro", title="Intro", children=[inner])]
     assert fix_toc(toc, content) == 1
     assert inner.id == "predjson-what-freihands-evaluation-expects"
+    assert inner.title == "pred.json: what FreiHAND's evaluation expects"
     assert toc[0].id == "intro"
     assert fix_toc(toc, content) == 0                    # already right: nothing changes
 

@@ -295,6 +295,8 @@ def _strip_inline_viewer(output: str) -> str:
     return _INLINE_VIEWER.sub("", output)
 
 
+# nbconvert's permalink inside a heading ("¶")
+_ANCHOR_LINK = re.compile(r'<a class="anchor-link"[^>]*>.*?</a>', re.S)
 # headings of a rendered notebook: level, id, inner HTML
 _HEADING = re.compile(r"<h([1-6])\b[^>]*?\bid=\"([^\"]+)\"[^>]*>(.*?)</h\1>", re.S)
 
@@ -307,7 +309,8 @@ def _fix_toc(toc, content: str) -> int:
     (``predjson-what-...``): such contents links were dead. Each contents entry takes the first
     heading, after the previous entry's, whose id is its id or ends with ``-`` + its id.
     """
-    ids = [m.group(2) for m in _HEADING.finditer(content)]
+    headings = [(m.group(2), m.group(3)) for m in _HEADING.finditer(content)]
+    ids = [h[0] for h in headings]
     fixed, start = 0, 0
 
     def walk(items):
@@ -317,6 +320,9 @@ def _fix_toc(toc, content: str) -> int:
                 if ids[k] == item.id or ids[k].endswith("-" + item.id):
                     if ids[k] != item.id:
                         item.id = ids[k]
+                        # the title lost the code too (": what ..."): the heading's own text
+                        text = _ANCHOR_LINK.sub("", headings[k][1])
+                        item.title = html.unescape(_TAGS.sub("", text)).strip() or item.title
                         fixed += 1
                     start = k + 1
                     break
