@@ -110,3 +110,118 @@ def test_no_run_history_in_docstrings(path):
     assert not found, (
         "measurements and run history go to a docs page (docs/concepts/*.md); leave a pointer "
         "such as 'docs page \"Performance\"':\n" + "\n".join(found))
+
+
+# --- the built site (tools/mkdocs_hooks.py, tools/docs_check.py; issue 44) -------------------
+
+def _tool(name: str):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+
+
+def test_the_link_check_finds_dead_pages_and_anchors(tmp_path):
+    check_links = _tool("docs_check").check_links
+    _write(tmp_path / "index.html", '<a href="a/">a</a><a href="a/#top">ok</a>'
+           '<a href="https://example.org/#x">other host</a><a href="#">top</a>'
+           '<a href="mailto:x@y.z">mail</a><a href="assets/style.css">css</a>')
+    _write(tmp_path / "assets" / "style.css", "")
+    _write(tmp_path / "a" / "index.html",
+           '<h2 id="top">Top</h2><a name="old"></a><a href="#top">ok</a><a href="#old">ok</a>'
+           '<a href="#gone">dead here</a><a href="../b/#x">no page</a>'
+           '<a href="../index.html#nowhere">dead there</a><a href="../a/index.html#top">ok</a>')
+    dead = check_links(tmp_path)
+    assert set(dead) == {"a/index.html"}
+    problems = " | ".join(dead["a/index.html"])
+    assert len(dead["a/index.html"]) == 3, problems
+    assert "#gone -> no id 'gone' in this page" in problems
+    assert "../b/#x -> no such file: b/index.html" in problems
+    assert "../index.html#nowhere -> no id 'nowhere' in index.html" in problems
+
+
+def test_notebook_contents_links_point_at_their_headings():
+    """mkdocs-jupyter's contents drop inline code from an id (``what-...``) while the rendered
+    heading keeps it (``predjson-what-...``): notebook 11's contents link was dead."""
+    from types import SimpleNamespace as Item
+
+    fix_toc = _tool("mkdocs_hooks")._fix_toc
+    content = ('<h2 id="intro">Intro</h2><h3 id="predjson-what-freihands-evaluation-expects">'
+               '<code>pred.json</code>: what FreiHAND\'s evaluation expects'
+               '<a class="anchor-link" href="#predjson-what-freihands-evaluation-expects">¶</a>'
+               '</h3>'
+               '<h3 id="what-freihands-evaluation-expects-1">again</h3>')
+    inner = Item(id="what-freihands-evaluation-expects",
+                 title=": what FreiHAND's evaluation expects", children=[])
+    toc = [Item(id="intro", title="Intro", children=[inner])]
+    assert fix_toc(toc, content) == 1
+    assert inner.id == "predjson-what-freihands-evaluation-expects"
+    assert inner.title == "pred.json: what FreiHAND's evaluation expects"
+    assert toc[0].id == "intro"
+    assert fix_toc(toc, content) == 0                    # already right: nothing changes
+
+
+def test_code_cells_stay_out_of_the_search_index():
+    exclude = _tool("mkdocs_hooks")._exclude_code_from_search
+    cell = ('<div class="jp-InputPrompt jp-InputArea-prompt">In [1]:</div>'
+            '<div class="jp-CodeMirrorEditor jp-Editor jp-InputArea-editor" data-type="inline">'
+            '<span class="notice" hidden="">Copied!</span>x = 1</div>'
+            '<div class="jp-RenderedHTMLCommon jp-RenderedMarkdown">prose</div>')
+    out = exclude(cell)
+    assert out.count("data-search-exclude") == 2
+    assert '<div class="jp-RenderedHTMLCommon jp-RenderedMarkdown">prose' in out
+
+
+def test_notebook_pages_share_their_css_and_keep_figures_as_files(tmp_path):
+    import base64
+    from types import SimpleNamespace
+
+    lighten = _tool("mkdocs_hooks")._lighten
+    png = b"\x89PNG\r\n\x1a\n not decoded, only moved"
+    css = ".jupyter-wrapper{color:red}" + " " * 3000
+    dest = str(tmp_path / "notebooks/x/index.html")
+    page = SimpleNamespace(url="notebooks/x/", file=SimpleNamespace(abs_dest_path=dest))
+    html = (f'<style type="text/css">{css}</style><style>small{{}}</style>'
+            f'<img alt="fig" src="data:image/png;base64,{base64.b64encode(png).decode()}">')
+    out = lighten(html, page, tmp_path)
+    link = re.search(
+        r'<link rel="stylesheet" href="(\.\./\.\./assets/notebook-css/[0-9a-f]+\.css)">', out)
+    assert link and (tmp_path / "notebooks/x" / link.group(1)).resolve().read_text() == css
+    assert "<style>small{}</style>" in out                  # small blocks stay inline
+    img = re.search(r'<img alt="fig" loading="lazy" src="(figures/[0-9a-f]+\.png)"', out)
+    assert img and (tmp_path / "notebooks/x" / img.group(1)).read_bytes() == png
+    assert "base64" not in out
+
+
+def test_the_api_landing_page_links_every_module_page():
+    index = (ROOT / "docs" / "api" / "index.md").read_text(encoding="utf-8")
+    pages = sorted(p.name for p in (ROOT / "docs" / "api").glob("*.md") if p.name != "index.md")
+    missing = [p for p in pages if f"]({p})" not in index]
+    assert not missing, f"docs/api/index.md does not link {missing}"
+
+
+def test_learning_path_rows_carry_their_notebook_numbers():
+    row_link = _tool("notebook_runtimes").path_row_link
+    assert row_link({"stem": "08_training", "title": "Training"}) == \
+        "**[08 · Training](08_training.ipynb)**"
+    page = (ROOT / "notebooks" / "learning_path.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| \*\*\[(.*?)\]\((\d\d)_\w+\.ipynb\)", page, re.M)
+    assert len(rows) >= 12
+    assert all(title.startswith(f"{num} · ") for title, num in rows), rows
+
+
+def test_copy_buttons_leave_doctest_prompts_out():
+    """Material marks a block data-md-copying while it reads its innerText: hidden prompts
+    (``>>> ``, ``... ``: Pygments' .gp) and outputs (.go) stay out of the clipboard."""
+    css = (ROOT / "docs" / "stylesheets" / "site.css").read_text(encoding="utf-8")
+    rule = re.search(r"((?:\[data-md-copying\] \.g[po],?\s*)+)\{\s*display:\s*none", css)
+    assert rule and ".gp" in rule.group(1) and ".go" in rule.group(1)
+    config = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    assert "stylesheets/site.css" in config and "content.code.copy" in config

@@ -1,6 +1,7 @@
 """Browser 3D views and slider explorers of `handmesh_tutorial.viz`, checked without a browser:
-the payload decoded back (meshes, camera), its size, no request to another host in the HTML, the
-static strip of an explorer, and the docs build's treatment of both (tools/mkdocs_hooks.py).
+the payload decoded back (meshes, camera), its size, the static picture each view carries (for
+pages without JavaScript or WebGL), no request to another host in the HTML, the static strip of
+an explorer, and the docs build's treatment of both (tools/mkdocs_hooks.py).
 `make docs-check` runs the views in headless Chromium."""
 
 import base64
@@ -87,12 +88,15 @@ def test_view_html_loads_nothing_from_another_host(right_hand):
     v, f, _ = right_hand
     view = viz.view_prediction(v, v + 0.002, f, pred_joints=np.zeros((21, 3)),
                                gt_joints=np.zeros((21, 3)))
-    inline, with_viewer, saved = view.html(), view.html(viewer=True), view.html(src="v.bin")
+    inline, with_viewer = view.html(), view.html(viewer=True)
+    saved = view.html(src="v.bin", picture_src="v.jpg")
     for page in (inline, with_viewer, saved):
         assert not EXTERNAL.search(page), EXTERNAL.search(page).group(0)
         assert 'class="hmt-view"' in page
     assert 'data-src="v.bin"' in saved and "data-payload" not in saved
-    assert len(saved) < 2_000 and len(inline) < 100_000   # two hands: ~61 kB
+    assert 'class="hmt-view-picture" src="v.jpg"' in saved
+    # two hands: ~61 kB of commands and a ~20 kB picture, both base64
+    assert len(saved) < 2_000 and len(inline) < 130_000
     viewer_b64 = re.search(r'class="hmt-viewer-js">([^<]+)<', with_viewer).group(1)
     assert len(viewer_b64) < 400_000                          # gzip, base64: ~290 kB
     assert viz.viewer_js_path().is_file()
@@ -112,6 +116,59 @@ def test_view_save_writes_the_payload(tmp_path, right_hand):
     view = viz.view_hand(v, f)
     path = view.save(tmp_path / "views" / "hand.bin")
     assert path.read_bytes() == view.payload
+    picture = view.save_picture(tmp_path / "views" / "hand.jpg")
+    assert picture.read_bytes() == view.picture()
+    with pytest.raises(ValueError, match="no picture"):
+        viz.View3D(view.commands, 380, view.camera).save_picture(tmp_path / "x.jpg")
+
+
+def _decode_picture(page: str) -> Image.Image:
+    m = re.search(r'<img class="hmt-view-picture" src="data:image/jpeg;base64,([^"]+)"', page)
+    assert m, "the view's HTML carries no inline picture"
+    return Image.open(io.BytesIO(base64.b64decode(m.group(1))))
+
+
+def test_a_view_carries_a_static_picture_of_its_meshes(right_hand):
+    """Without JavaScript or WebGL (GitHub's notebook view, a browser without WebGL) a view is a
+    picture, not an empty box: inline in its HTML, and as image/jpeg in the notebook output."""
+    v, f, _ = right_hand
+    view = viz.view_hand(v, f, colors="#ff0000", height=300)
+    page = view.html()
+    image = _decode_picture(page)
+    assert image.format == "JPEG" and image.size == (400, 300)
+    rgb = np.asarray(image.convert("RGB")).astype(int)
+    red = (rgb[..., 0] > 120) & (rgb[..., 1] < 80) & (rgb[..., 2] < 80)
+    # the hand (red, shaded) fills a good part of the picture, cropped to it; the rest is the
+    # light background
+    assert 0.15 < red.mean() < 0.8, red.mean()
+    assert (rgb.min(-1) > 230).mean() > 0.1
+    rows, cols = np.nonzero(red)
+    assert rows.min() < 0.2 * 300 or rows.max() > 0.8 * 300 or cols.min() < 0.2 * 400
+    assert len(view.picture()) < 40_000, len(view.picture())   # ~10-20 kB
+    assert view.picture() == viz.view_hand(v, f, colors="#ff0000", height=300).picture()
+    # the note says what the picture is; hmt_views.js removes both once the live view draws
+    assert "Static picture" in page
+    js = (ROOT / "handmesh_tutorial" / "viz" / "hmt_views.js").read_text()
+    assert 'querySelector(".hmt-view-picture")' in js
+    bundle = view._repr_mimebundle_()
+    assert base64.b64decode(bundle["image/jpeg"]) == view.picture()
+    assert _decode_picture(bundle["text/html"]).size == (400, 300)
+
+
+def test_the_picture_draws_every_mesh_and_skeleton(right_hand):
+    v, f, _ = right_hand
+    joints = np.linspace(v.min(0), v.max(0), 21)
+    view = viz.view_prediction(v, v + 0.003, f, pred_joints=joints, gt_joints=joints)
+    rgb = np.asarray(Image.open(io.BytesIO(view.picture())).convert("RGB")).astype(int)
+    blueish = (rgb[..., 2] > rgb[..., 0] + 40).mean()      # the translucent ground truth
+    dark = (rgb.max(-1) < 60).mean()                        # the black true skeleton
+    assert blueish > 0.02 and dark > 0.001, (blueish, dark)
+
+
+def test_view_height_is_checked(right_hand):
+    v, f, _ = right_hand
+    with pytest.raises(ValueError, match="height must be at least 50"):
+        viz.view_hand(v, f, height=10)
 
 
 def _figure(a, b="x"):

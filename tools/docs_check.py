@@ -12,8 +12,13 @@ DevTools Protocol, MathJax is awaited, and the rendered page is checked for
 - console errors, uncaught exceptions, failed requests and requests to other hosts,
 - images that fail to load,
 - 3D views (``div.hmt-view``, ``handmesh_tutorial.viz.web3d``) that do not draw: each is scrolled
-  into view and must show its WebGL canvas (WebGL by SwiftShader, no GPU needed); a screenshot
-  of each view goes to ``--out``.
+  into view and must show its WebGL canvas (WebGL by SwiftShader, no GPU needed) in place of its
+  static picture; a screenshot of each view goes to ``--out``. With ``--no-webgl`` Chromium runs
+  without WebGL and each view must instead keep its static picture, loaded and visible.
+
+Before the browser, every link of every page is read from the HTML files (no browser needed,
+``--links-only`` stops there): a link to a page of the site that does not exist, or to an anchor
+(``#id``) that the target page (the same page for ``#id`` alone) does not hold, is a dead link.
 
 Screenshots (the top of the home page, an API page, a concept page and notebook pages, plus the
 first formula of pages with math) go to ``--out``; ``report.json`` there lists every page checked.
@@ -26,6 +31,7 @@ import argparse
 import base64
 import contextlib
 import functools
+import html.parser
 import http.server
 import json
 import os
@@ -38,7 +44,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from urllib.parse import urlparse
+from urllib.parse import unquote, urljoin, urlparse
 
 CHROMIUM_FLAGS = [
     "--headless",
@@ -96,9 +102,37 @@ VIEWS_PROBE = r"""
 })()
 """
 
+# --no-webgl: each 3D view must fail to start and keep its static picture, loaded and visible.
+VIEWS_PICTURE_PROBE = r"""
+(async () => {
+  const views = [...document.querySelectorAll(".hmt-view")];
+  const problems = [];
+  const boxes = [];
+  for (const [i, el] of views.entries()) {
+    el.scrollIntoView({block: "center"});
+    const t0 = Date.now();
+    while (!["ready", "failed"].includes(el.dataset.state) && Date.now() - t0 < 30000)
+      await new Promise(r => setTimeout(r, 100));
+    const img = el.querySelector("img.hmt-view-picture");
+    if (img) { img.loading = "eager"; await img.decode().catch(() => null); }
+    const r = el.getBoundingClientRect();
+    const ir = img && img.getBoundingClientRect();
+    if (el.dataset.state === "ready")
+      problems.push(`3D view ${i + 1} started although WebGL is off`);
+    else if (!img || !img.complete || img.naturalWidth === 0)
+      problems.push(`3D view ${i + 1} shows no static picture`);
+    else if (ir.width < 0.5 * r.width && ir.height < 0.5 * r.height)
+      problems.push(`3D view ${i + 1}: its picture is ${ir.width}x${ir.height} in a ${r.width}x${r.height} box`);
+    boxes.push({x: r.left, y: r.top + window.scrollY, width: r.width, height: r.height});
+  }
+  window.scrollTo(0, 0);
+  return {problems, boxes};
+})()
+"""
+
 # Runs inside each page once MathJax has finished; returns the problems a reader would see.
 PAGE_PROBE = r"""
-(() => {
+(async () => {
   const problems = [];
   const root = document.querySelector("article") || document.body;
   const SKIP = "pre, code, script, style, textarea, mjx-container, .MathJax, .highlight, svg";
@@ -130,6 +164,9 @@ PAGE_PROBE = r"""
   for (const e of root.querySelectorAll("pre"))
     if (MERMAID.test(e.textContent)) problems.push("raw mermaid source: " + e.textContent.slice(0, 60));
   const images = [...document.querySelectorAll("img")];
+  // lazily loaded figures (tools/mkdocs_hooks.py) are fetched now, as a reader scrolling would
+  for (const img of images) img.loading = "eager";
+  await Promise.all(images.map((img) => img.decode().catch(() => null)));
   for (const img of images)
     if (!img.complete || img.naturalWidth === 0)
       problems.push("image failed to load: " + (img.currentSrc || img.src).slice(0, 120));
@@ -177,11 +214,12 @@ def find_chromium() -> str:
 class Browser:
     """Chromium driven over the DevTools protocol: one tab, events collected per page."""
 
-    def __init__(self, chromium: str, profile: Path):
+    def __init__(self, chromium: str, profile: Path, no_webgl: bool = False):
         import websocket  # websocket-client (a jupyter_server dependency, listed in the docs extra)
 
+        flags = CHROMIUM_FLAGS + (["--disable-webgl", "--disable-3d-apis"] if no_webgl else [])
         self.proc = subprocess.Popen(
-            [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--remote-debugging-port=0",
+            [chromium, *flags, f"--user-data-dir={profile}", "--remote-debugging-port=0",
              "about:blank"],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
@@ -291,12 +329,85 @@ def event_problems(events: list[dict], base: str) -> list[str]:
     return out
 
 
+class _Links(html.parser.HTMLParser):
+    """The ids (``id=``, ``<a name=>``) and the ``<a href>`` targets of one HTML page."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.ids: set[str] = set()
+        self.hrefs: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if a.get("id"):
+            self.ids.add(a["id"])
+        if tag == "a" and a.get("name"):
+            self.ids.add(a["name"])
+        if tag == "a" and a.get("href"):
+            self.hrefs.append(a["href"])
+
+
+def _page_links(path: Path) -> _Links:
+    parser = _Links()
+    parser.feed(path.read_text(encoding="utf-8", errors="replace"))
+    return parser
+
+
+def check_links(site: Path) -> dict[str, list[str]]:
+    """Dead links of a built site, read from its HTML files: ``{page: [problem, ...]}``.
+
+    A link is dead when it points inside the site (relative, or absolute without a host) to a
+    file that does not exist (a folder counts when it holds ``index.html``), or carries an anchor
+    ``#id`` that the target HTML page does not hold (``#id`` alone: the page itself). Links to
+    other hosts, ``mailto:`` and a bare ``#`` are not checked. Pages under ``assets/`` and
+    ``search/`` are skipped; every other ``.html`` file is read.
+
+    Args:
+        site: the built site's folder (``mkdocs build`` writes ``site/``).
+
+    Returns:
+        Only the pages with dead links, each with its problems (``href -> why``).
+    """
+    site = site.resolve()
+    pages = sorted(p for p in site.rglob("*.html")
+                   if p.relative_to(site).parts[0] not in ("assets", "search"))
+    parsed: dict[Path, _Links] = {}
+
+    def links(path: Path) -> _Links:
+        if path not in parsed:
+            parsed[path] = _page_links(path)
+        return parsed[path]
+
+    dead: dict[str, list[str]] = {}
+    for page in pages:
+        rel = page.relative_to(site).as_posix()
+        base = "http://site.invalid/" + rel
+        for href in links(page).hrefs:
+            url = urlparse(urljoin(base, href))
+            if url.scheme not in ("http", "https") or url.netloc != "site.invalid":
+                continue                                 # another host, mailto:, javascript:
+            target = site / unquote(url.path).lstrip("/")
+            if target.is_dir() or url.path.endswith("/"):
+                target = target / "index.html"
+            problem = None
+            if not target.is_file():
+                problem = f"{href} -> no such file: {target.relative_to(site).as_posix()}"
+            elif url.fragment and target.suffix == ".html":
+                if unquote(url.fragment) not in links(target).ids:
+                    where = "this page" if target == page else target.relative_to(site).as_posix()
+                    problem = f"{href} -> no id {unquote(url.fragment)!r} in {where}"
+            if problem and problem not in dead.get(rel, []):
+                dead.setdefault(rel, []).append(problem)
+    return dead
+
+
 def site_pages(site: Path) -> list[str]:
     pages = sorted(str(p.relative_to(site)) for p in site.rglob("index.html"))
     return [p for p in pages if not p.startswith(("assets/", "search/"))]
 
 
-def check_site(site: Path, out: Path, pages: list[str] | None = None) -> dict:
+def check_site(site: Path, out: Path, pages: list[str] | None = None,
+               no_webgl: bool = False) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     chromium = find_chromium()
     pages = pages or site_pages(site)
@@ -305,7 +416,7 @@ def check_site(site: Path, out: Path, pages: list[str] | None = None) -> dict:
     # must not fail a check whose pages all passed
     with serve(site) as base, tempfile.TemporaryDirectory(prefix="docs-check-profile-",
                                                           ignore_cleanup_errors=True) as prof:
-        browser = Browser(chromium, Path(prof))
+        browser = Browser(chromium, Path(prof), no_webgl=no_webgl)
         try:
             for rel in pages:
                 url = base + rel
@@ -320,13 +431,16 @@ def check_site(site: Path, out: Path, pages: list[str] | None = None) -> dict:
                     await_promise=True,
                 )
                 browser.evaluate("new Promise(r => setTimeout(r, 200))", await_promise=True)
-                probe = browser.evaluate(PAGE_PROBE)
+                probe = browser.evaluate(PAGE_PROBE, await_promise=True)
                 views = {"problems": [], "boxes": []}
                 if browser.evaluate("document.querySelectorAll('.hmt-view').length"):
-                    views = browser.evaluate(VIEWS_PROBE, await_promise=True)
+                    views = browser.evaluate(VIEWS_PICTURE_PROBE if no_webgl else VIEWS_PROBE,
+                                             await_promise=True)
                 browser.call("Runtime.evaluate", expression="0")  # flush queued events
-                problems = (probe["problems"] + views["problems"]
-                            + event_problems(browser.events, base))
+                events = event_problems(browser.events, base)
+                if no_webgl:   # three.js says so when it finds no WebGL: expected here
+                    events = [e for e in events if "Error creating WebGL context" not in e]
+                problems = probe["problems"] + views["problems"] + events
                 entry = {
                     "title": probe["title"],
                     "math": probe["math"],
@@ -371,13 +485,29 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--site", type=Path, default=Path("site"))
     ap.add_argument("--out", type=Path, default=Path("build/docs-check"))
+    ap.add_argument("--no-webgl", action="store_true",
+                    help="Chromium without WebGL: every 3D view must show its static picture")
+    ap.add_argument("--links-only", action="store_true",
+                    help="check the links and anchors of the HTML files only (no browser)")
     ap.add_argument("pages", nargs="*", help="site-relative pages (default: every page)")
     args = ap.parse_args(argv)
     if not (args.site / "index.html").exists():
         sys.exit(f"{args.site}/index.html not found: build the site first (mkdocs build --strict)")
     t0 = time.time()
-    report = check_site(args.site, args.out, args.pages or None)
+    dead = check_links(args.site)
+    for page, problems in dead.items():
+        print(f"DEAD {page}", flush=True)
+        for p in problems[:12]:
+            print(f"       {p}", flush=True)
+    n_dead = sum(len(p) for p in dead.values())
+    print(f"links: {n_dead} dead links or anchors on {len(dead)} pages ({time.time() - t0:.0f} s)")
+    if args.links_only:
+        return 1 if dead else 0
+    report = check_site(args.site, args.out, args.pages or None, no_webgl=args.no_webgl)
+    report["dead_links"] = dead
+    (args.out / "report.json").write_text(json.dumps(report, indent=1))
     bad = {p: e["problems"] for p, e in report["pages"].items() if e["problems"]}
+    bad.update({p: v for p, v in dead.items() if p not in bad})
     n = len(report["pages"])
     formulas = sum(e["math"] for e in report["pages"].values())
     print(f"\ndocs-check: {n} pages, {formulas} formulas typeset, {len(bad)} with problems "

@@ -1,4 +1,5 @@
-"""Write the 3D views of the docs page *3D views* (``docs/concepts/views/*.bin``).
+"""Write the 3D views of the docs page *3D views* (``docs/concepts/views/*.bin``) and their
+static pictures (``*.jpg``, shown where JavaScript or WebGL is missing).
 
 Usage: ``PYOPENGL_PLATFORM=egl python tools/draw_3d_views.py [docs/concepts/views]``.
 Three payloads of ``handmesh_tutorial.viz.web3d`` (meshcat commands): the right hand in the
@@ -79,7 +80,9 @@ def main(argv: list[str]) -> None:
     pred, mpjpe = prediction_view(sample)
     for name, view in (("hand", hand_view()), ("scene", scene_view(sample)), ("prediction", pred)):
         path = view.save(out / f"{name}.bin")
-        print(f"wrote {path} ({path.stat().st_size / 1e3:.0f} kB)")
+        picture = view.save_picture(out / f"{name}.jpg")
+        print(f"wrote {path} ({path.stat().st_size / 1e3:.0f} kB) and {picture.name} "
+              f"({picture.stat().st_size / 1e3:.0f} kB)")
     print(f"prediction: MPJPE {mpjpe:.1f} mm (root-aligned), sample_seed(21, {sample['seed_index']})")
 
 

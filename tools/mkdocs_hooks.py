@@ -11,8 +11,14 @@ concept, API or notebook, is typeset by the same MathJax 3 with the configuratio
 ``docs/javascripts/mathjax-config.js`` (``$...$`` inline enabled).
 
 Notebook pages also get: ipywidgets outputs as static, labelled HTML (the widget manager would come
-from a CDN and cannot run without a kernel anyway; a tqdm bar becomes its last line of text), and
-Markdown pipe tables printed as text turned into HTML tables.
+from a CDN and cannot run without a kernel anyway; a tqdm bar becomes its last line of text),
+Markdown pipe tables printed as text turned into HTML tables, a table of contents whose links
+reach their headings (mkdocs-jupyter's contents drop inline code from a heading's id, its
+headings keep it), code cells and prompts kept out of the search index (previews of notebook
+hits showed raw code and the copy buttons' "Copied!"), and a lighter page: the 0.6 MB of
+Jupyter CSS that nbconvert inlines into every notebook page becomes one cached file for the
+whole site, and the figures (base64 PNG, 0.7-1.7 MB a page) become image files next to the page,
+loaded lazily.
 
 3D views (``handmesh_tutorial.viz.web3d``): the build copies meshcat's viewer (MIT, from the
 installed ``meshcat``) to ``site/javascripts/vendor/meshcat/`` and the views' loader to
@@ -289,6 +295,111 @@ def _strip_inline_viewer(output: str) -> str:
     return _INLINE_VIEWER.sub("", output)
 
 
+# nbconvert's permalink inside a heading ("¶")
+_ANCHOR_LINK = re.compile(r'<a class="anchor-link"[^>]*>.*?</a>', re.S)
+# headings of a rendered notebook: level, id, inner HTML
+_HEADING = re.compile(r"<h([1-6])\b[^>]*?\bid=\"([^\"]+)\"[^>]*>(.*?)</h\1>", re.S)
+
+
+def _fix_toc(toc, content: str) -> int:
+    """Point the table of contents at the headings' real ids; returns how many links changed.
+
+    mkdocs-jupyter builds the contents from a Markdown copy of the notebook, whose ids drop inline
+    code (``### `pred.json`: what ...`` -> ``what-...``), while the rendered headings keep it
+    (``predjson-what-...``): such contents links were dead. Each contents entry takes the first
+    heading, after the previous entry's, whose id is its id or ends with ``-`` + its id.
+    """
+    headings = [(m.group(2), m.group(3)) for m in _HEADING.finditer(content)]
+    ids = [h[0] for h in headings]
+    fixed, start = 0, 0
+
+    def walk(items):
+        nonlocal fixed, start
+        for item in items:
+            for k in range(start, len(ids)):
+                if ids[k] == item.id or ids[k].endswith("-" + item.id):
+                    if ids[k] != item.id:
+                        item.id = ids[k]
+                        # the title lost the code too (": what ..."): the heading's own text
+                        text = _ANCHOR_LINK.sub("", headings[k][1])
+                        item.title = html.unescape(_TAGS.sub("", text)).strip() or item.title
+                        fixed += 1
+                    start = k + 1
+                    break
+            walk(item.children)
+
+    walk(toc)
+    return fixed
+
+
+# what Material's search must not index on a notebook page: the code of code cells (with their
+# copy buttons, "Copied!") and the In/Out prompts; the Markdown and the outputs stay searchable
+_SEARCH_NOISE = re.compile(
+    r'<div class="(?:jp-CodeMirrorEditor jp-Editor jp-InputArea-editor|jp-InputPrompt'
+    r'|jp-OutputPrompt)\b'
+)
+
+
+def _exclude_code_from_search(content: str) -> str:
+    """Mark code cells and prompts ``data-search-exclude`` (Material's search skips them and
+    strips the attribute from the page)."""
+    return _SEARCH_NOISE.sub(lambda m: m.group(0).replace("<div ", "<div data-search-exclude ", 1),
+                             content)
+
+
+def on_page_content(html_content, page, config, files, **kwargs):
+    if page.file.src_uri.endswith(".ipynb"):
+        if page.toc is not None and (n := _fix_toc(page.toc, html_content)):
+            log.debug("%s: %d contents links pointed at their headings", page.file.src_uri, n)
+        html_content = _exclude_code_from_search(html_content)
+    return html_content
+
+
+# nbconvert's inline CSS (Jupyter's and Pygments'): the same blocks on every notebook page
+_BIG_STYLE = re.compile(r"<style\b[^>]*>([^<]{2000,})</style>")
+_DATA_IMG = re.compile(r'(<img\b[^>]*?)\ssrc="data:image/(png|jpeg|gif);base64,([A-Za-z0-9+/=\s]+)"')
+
+
+def _site_root(page) -> str:
+    """Relative URL from a page to the site's root (``../../`` for ``notebooks/x/``)."""
+    return "../" * page.url.count("/") if page.url else ""
+
+
+def _lighten(output: str, page, site_dir: Path) -> str:
+    """Move nbconvert's big inline CSS blocks to shared files and base64 figures to files.
+
+    CSS: ``assets/notebook-css/<sha1>.css`` (content-addressed: one file for every page that
+    has the block). Figures: ``<page folder>/figures/<sha1>.<ext>`` (a figure shown twice is one
+    file), with ``loading="lazy"``. Both are relative links, so the pages work under any prefix
+    and from ``file://``.
+    """
+    css_dir = site_dir / "assets" / "notebook-css"
+
+    def css(m: re.Match) -> str:
+        body = m.group(1)
+        name = hashlib.sha1(body.encode()).hexdigest()[:16] + ".css"
+        if not (css_dir / name).is_file():
+            css_dir.mkdir(parents=True, exist_ok=True)
+            (css_dir / name).write_text(body, encoding="utf-8")
+        return f'<link rel="stylesheet" href="{_site_root(page)}assets/notebook-css/{name}">'
+
+    page_dir = Path(page.file.abs_dest_path).parent
+
+    def figure(m: re.Match) -> str:
+        data = base64.b64decode(re.sub(r"\s+", "", m.group(3)))
+        ext = {"jpeg": "jpg"}.get(m.group(2), m.group(2))
+        name = f"{hashlib.sha1(data).hexdigest()[:16]}.{ext}"
+        target = page_dir / "figures" / name
+        if not target.is_file():
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(data)
+        lazy = "" if "loading=" in m.group(1) else ' loading="lazy"'
+        return f'{m.group(1)}{lazy} src="figures/{name}"'
+
+    output = _BIG_STYLE.sub(css, output)
+    return _DATA_IMG.sub(figure, output)
+
+
 def on_post_page(output, page, config, **kwargs):
     if page.file.src_uri.endswith(".ipynb"):
         output = _strip_inline_viewer(output)
@@ -297,4 +408,5 @@ def on_post_page(output, page, config, **kwargs):
             log.warning("%s: no nbconvert MathJax block found to replace", page.file.src_uri)
         output = _static_widgets(output, page.file.src_uri)
         output = _pipe_tables(output)
+        output = _lighten(output, page, Path(config["site_dir"]))
     return output

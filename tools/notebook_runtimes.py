@@ -4,6 +4,7 @@ Usage (from the repository root, ``make execute-notebooks`` runs both steps):
 
     python tools/notebook_runtimes.py --measure-smoke [notebooks/NN_x.ipynb ...]
     python tools/notebook_runtimes.py            # rewrite the header cells and the page only
+    python tools/notebook_runtimes.py --page-only   # rewrite the Learning path page only
 
 ``--measure-smoke`` executes each notebook top to bottom under ``HANDMESH_BUDGET=smoke`` with
 nbclient, in memory (the committed file keeps its ``default`` outputs), and records the wall time
@@ -186,7 +187,8 @@ def header_cell_text(stem: str, rt: dict) -> str:
     return "\n".join(lines)
 
 
-def update_notebook(path: Path, smoke_seconds: float | None = None) -> dict:
+def update_notebook(path: Path, smoke_seconds: float | None = None, write: bool = True) -> dict:
+    """Rewrite a notebook's header cell (unless ``write`` is false); returns its table row."""
     nb = nbformat.read(path, as_version=4)
     stem = path.stem
     rt = runtimes(nb)
@@ -199,7 +201,8 @@ def update_notebook(path: Path, smoke_seconds: float | None = None) -> dict:
         nb.cells[1].source = text
     else:
         nb.cells.insert(1, nbformat.v4.new_markdown_cell(text))
-    path.write_text(nbformat.writes(nb) + "\n", encoding="utf-8")
+    if write:
+        path.write_text(nbformat.writes(nb) + "\n", encoding="utf-8")
     return {"stem": stem, "title": title(nb), **rt}
 
 
@@ -224,6 +227,12 @@ def machine_load() -> dict:
     return {"load": round(load, 1), "cores": os.cpu_count() or 1}
 
 
+def path_row_link(row: dict) -> str:
+    """The first cell of a Learning path row: the notebook's number, as the *read first* column
+    and the site's navigation (``NN · Title``) name it, then its title, linked."""
+    return f"**[{row['stem'][:2]} · {row['title']}]({row['stem']}.ipynb)**"
+
+
 def write_path_page(rows: list[dict]) -> None:
     table = [
         "| notebook: what you will learn | read first | `default` | `smoke` | trained model |",
@@ -232,7 +241,7 @@ def write_path_page(rows: list[dict]) -> None:
     for r in rows:
         pre = ", ".join(p[:2] for p in PREREQS[r["stem"]]) or "–"
         table.append(
-            f"| **[{r['title']}]({r['stem']}.ipynb)**<br>{LEARN[r['stem']]} | {pre} | "
+            f"| {path_row_link(r)}<br>{LEARN[r['stem']]} | {pre} | "
             f"{fmt(r.get('default'))}{'*' if r['stem'] in REUSED else ''} | {fmt(r.get('smoke'))} | "
             f"{TRAINED_SHORT.get(r['stem'], 'no')} |"
         )
@@ -262,7 +271,11 @@ def main(argv=None) -> int:
     ap.add_argument("notebooks", nargs="*", type=Path)
     ap.add_argument("--measure-smoke", action="store_true",
                     help="execute the notebooks under HANDMESH_BUDGET=smoke and record the time")
+    ap.add_argument("--page-only", action="store_true",
+                    help="rewrite the Learning path page only (the notebooks are read, not written)")
     args = ap.parse_args(argv)
+    if args.page_only and args.measure_smoke:
+        ap.error("--page-only writes no notebook, so it cannot record --measure-smoke times")
     chosen = {p.resolve() for p in args.notebooks}
     rows = []
     for path in sorted(NB_DIR.glob("[0-9][0-9]_*.ipynb")):
@@ -271,11 +284,12 @@ def main(argv=None) -> int:
             print(f"{path.name}: executing under smoke ...", flush=True)
             smoke = measure_smoke(path)
             print(f"{path.name}: {smoke:.1f} s", flush=True)
-        row = update_notebook(path, smoke)
+        row = update_notebook(path, smoke, write=not args.page_only)
         rows.append(row)
         print(f"{path.name}: default {fmt(row.get('default'))}, smoke {fmt(row.get('smoke'))}")
     write_path_page(rows)
-    print(f"updated {len(rows)} notebook headers and {PATH_PAGE.relative_to(ROOT)}")
+    print(f"updated {0 if args.page_only else len(rows)} notebook headers and "
+          f"{PATH_PAGE.relative_to(ROOT)}")
     return 0
 
 

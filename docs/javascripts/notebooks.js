@@ -18,3 +18,19 @@ document.addEventListener("click", (event) => {
 document.addEventListener("keydown", (event) => {
   if (event.key === "Escape") document.querySelector(".hmt-lightbox")?.remove();
 });
+
+// Wide output tables scroll inside their cell: fade the right edge while more lies to the right.
+function hmtMarkOverflow() {
+  for (const el of document.querySelectorAll(
+    ".jupyter-wrapper .md-typeset__scrollwrap, .jupyter-wrapper .hmt-table")) {
+    const update = () => el.classList.toggle("hmt-more-right",
+      el.scrollLeft + el.clientWidth < el.scrollWidth - 2);
+    if (!el.dataset.hmtOverflow) {
+      el.dataset.hmtOverflow = "1";
+      el.addEventListener("scroll", update, { passive: true });
+    }
+    update();
+  }
+}
+window.addEventListener("load", hmtMarkOverflow);
+window.addEventListener("resize", hmtMarkOverflow);

@@ -3,7 +3,9 @@
  * an inline gzip+base64 copy in the page (`script.hmt-viewer-js`, Jupyter), or the site's own copy
  * next to this file (`vendor/meshcat/main.min.js`, docs). The scene comes from `data-payload`
  * (base64) or `data-src` (a file on the same site): meshcat commands, each prefixed by its length
- * (uint32, little-endian). Nothing is loaded from another host. */
+ * (uint32, little-endian). Nothing is loaded from another host. Each view holds a static picture
+ * (`img.hmt-view-picture`, drawn by matplotlib) that shows until the live view has drawn; a view
+ * that cannot start (no WebGL, a page opened as a file) keeps its picture and says why. */
 (function () {
   "use strict";
   if (window.hmtViews) {
@@ -64,9 +66,10 @@
   async function start(el) {
     el.dataset.state = "loading";
     const note = el.querySelector(".hmt-view-note");
+    let pane = null;
     try {
       const [MeshCat, bytes] = await Promise.all([loadViewer(), payload(el)]);
-      const pane = document.createElement("div");
+      pane = document.createElement("div");
       pane.className = "hmt-view-pane";
       pane.style.cssText = "position:absolute;inset:0;";
       el.appendChild(pane);
@@ -81,11 +84,20 @@
         off += 4 + n;
       }
       if (note) note.remove();
+      const picture = el.querySelector(".hmt-view-picture");
+      if (picture) picture.remove();
       el.dataset.state = "ready";
       el.hmtViewer = v;
     } catch (err) {
       el.dataset.state = "failed";
-      if (note) note.textContent = "This 3D view could not start here (" + err.message + ").";
+      if (pane) pane.remove();   // a viewer that failed half-way: the picture shows again
+      const hint = location.protocol === "file:"
+        ? " Pages opened as files cannot fetch a view's data: serve the site (python -m http.server -d site)."
+        : "";
+      if (note) {
+        note.textContent = (el.querySelector(".hmt-view-picture") ? "Static picture: the" : "The")
+          + " 3D view could not start here (" + String(err.message).replace(/\.$/, "") + ")." + hint;
+      }
       console.warn("hmt view:", err);
     }
   }

@@ -8,9 +8,12 @@ site the viewer is served once by the site (the build copies it from the install
 and a page's view fetches its payload from a file next to the page
 ([`View3D.save`][handmesh_tutorial.viz.web3d.View3D.save]). Nothing is loaded from another host.
 The camera is the one of the matplotlib figures,
-[`HAND_VIEW`][handmesh_tutorial.viz.mesh3d.HAND_VIEW] for hands in the template frame; matplotlib
-figures stay the fallback where JavaScript or WebGL is missing. Page weights and the design: docs
-page "3D views" (``docs/concepts/3d_views.md``); taught in notebooks 01, 02 and 05.
+[`HAND_VIEW`][handmesh_tutorial.viz.mesh3d.HAND_VIEW] for hands in the template frame. Every view
+carries a static picture of the same meshes from the same camera (a JPEG drawn by matplotlib,
+[`View3D.picture`][handmesh_tutorial.viz.web3d.View3D.picture]): it is what a reader sees where
+JavaScript or WebGL is missing (GitHub's notebook view, a browser without WebGL), and the live
+view replaces it when it starts. Page weights and the design: docs page "3D views"
+(``docs/concepts/3d_views.md``); taught in notebooks 01, 02 and 05.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import base64
 import gzip
 import html
 import importlib.util
+import io
 import os
 import struct
 import uuid
@@ -30,7 +34,7 @@ import numpy as np
 from .._io import atomic_write_bytes
 from .._optional import require
 from ._common import _to_numpy
-from .mesh3d import FINGER_COLORS, HAND_VIEW, view_direction
+from .mesh3d import FINGER_COLORS, HAND_VIEW, set_axes_equal, shade_faces, view_direction
 
 __all__ = ["View3D", "view_meshes", "view_hand", "view_prediction", "viewer_js_path"]
 
@@ -46,6 +50,11 @@ _state = {"viewer_sent": False}
 # numpy dtype -> three.js typed array and msgpack-lite's extension code for it
 _TYPED = {np.dtype(np.uint8): ("Uint8Array", 0x12), np.dtype(np.uint16): ("Uint16Array", 0x14),
           np.dtype(np.uint32): ("Uint32Array", 0x16), np.dtype(np.float32): ("Float32Array", 0x17)}
+_PICTURE_ASPECT = 4 / 3   # width / height of the static picture (the view is as wide as its page)
+_PICTURE_QUALITY = 80     # JPEG quality: a 380 px hand picture is about 15-25 kB
+# the note over a view: its picture until the live view starts (hmt_views.js rewrites it on failure)
+_NOTE = ("Static picture: the 3D view (drag to turn, scroll to zoom) replaces it when it starts; "
+         "it needs JavaScript and WebGL.")
 
 
 def viewer_js_path() -> Path:
@@ -115,7 +124,9 @@ class View3D:
     Build one with [`view_meshes`][handmesh_tutorial.viz.web3d.view_meshes],
     [`view_hand`][handmesh_tutorial.viz.web3d.view_hand] or
     [`view_prediction`][handmesh_tutorial.viz.web3d.view_prediction]; a notebook displays it
-    (``_repr_html_``), a docs page shows a saved one (``save`` then ``html(src=...)``).
+    (``_repr_mimebundle_``: the HTML, and the static picture as ``image/jpeg`` for viewers that
+    run no HTML), a docs page shows a saved one (``save`` and ``save_picture``, then
+    ``html(src=..., picture_src=...)``).
 
     Attributes:
         commands: the msgpack-encoded meshcat commands, in order.
@@ -123,10 +134,14 @@ class View3D:
         camera: ``(3,)`` position of the camera in meshcat's camera frame (metres), for tests.
     """
 
-    def __init__(self, commands: list[bytes], height: int, camera: np.ndarray):
+    def __init__(self, commands: list[bytes], height: int, camera: np.ndarray,
+                 scene: dict | None = None):
         self.commands = list(commands)
         self.height = int(height)
         self.camera = np.asarray(camera, dtype=float)
+        # what the static picture draws: {"meshes": {name: parts}, "lines": {...}, "view": {...}}
+        self._scene = scene
+        self._picture: bytes | None = None
 
     @property
     def payload(self) -> bytes:
@@ -141,16 +156,50 @@ class View3D:
         """
         return atomic_write_bytes(path, self.payload)
 
-    def html(self, src: str | None = None, viewer: bool = False) -> str:
-        """The view's HTML: a ``div.hmt-view`` and the script that starts it when seen.
+    def picture(self) -> bytes | None:
+        """The static picture: a JPEG of the same meshes and lines from the same camera.
+
+        Drawn once with matplotlib (Agg, no window; per-face Lambert shading lit from the
+        camera, as [`shade_faces`][handmesh_tutorial.viz.mesh3d.shade_faces] computes), ``height``
+        pixels high and 4/3 as wide. It is what a reader sees where the live view cannot start.
+
+        Returns:
+            The JPEG's bytes, or ``None`` for a view made from commands alone (no meshes known).
+
+        Raises:
+            ModuleNotFoundError: matplotlib missing (the ``notebooks`` extra).
+        """
+        if self._picture is None and self._scene is not None:
+            self._picture = _draw_picture(self._scene, self.height)
+        return self._picture
+
+    def save_picture(self, path: str | os.PathLike) -> Path:
+        """Write [`picture`][handmesh_tutorial.viz.web3d.View3D.picture] atomically (a ``.jpg``).
+
+        Raises:
+            ValueError: the view has no picture (made from commands alone).
+        """
+        data = self.picture()
+        if data is None:
+            raise ValueError("this View3D was made from commands alone and has no picture; build "
+                             "it with view_meshes, view_hand or view_prediction")
+        return atomic_write_bytes(path, data)
+
+    def html(self, src: str | None = None, viewer: bool = False,
+             picture_src: str | None = None) -> str:
+        """The view's HTML: a ``div.hmt-view`` with its static picture, and the script that
+        replaces the picture by the live view when it scrolls into view.
 
         Args:
             src: URL of a saved payload, relative to the page (docs pages); ``None`` puts the
                 payload inline (base64).
             viewer: also inline meshcat's viewer (gzip, base64; needed once per Jupyter page).
+            picture_src: URL of a saved picture (``save_picture``), relative to the page;
+                ``None`` puts the picture inline (a base64 ``data:`` URL).
 
         Returns:
-            An HTML fragment that loads nothing from another host.
+            An HTML fragment that loads nothing from another host. Without JavaScript or WebGL
+            it shows the picture and a note saying so.
         """
         where = (f'data-src="{html.escape(src)}"' if src is not None else
                  f'data-payload="{base64.b64encode(self.payload).decode()}"')
@@ -158,13 +207,22 @@ class View3D:
         if viewer:
             parts.append('<script type="application/octet-stream" class="hmt-viewer-js">'
                          f"{_viewer_gz_b64()}</script>")
+        if picture_src is not None:
+            img = html.escape(picture_src)
+        else:
+            data = self.picture()
+            img = None if data is None else ("data:image/jpeg;base64,"
+                                              + base64.b64encode(data).decode())
+        picture = ("" if img is None else
+                   f'<img class="hmt-view-picture" src="{img}" alt="static picture of the 3D view"'
+                   ' style="display:block;width:100%;height:100%;object-fit:contain">')
         parts.append(
             f'<div class="hmt-view" {where} style="position:relative;width:100%;'
             f'height:{self.height}px;border:1px solid #ddd;overflow:hidden;'
-            'background:linear-gradient(#fff,#e2e7f0)">'
-            '<p class="hmt-view-note" style="margin:1em;color:#666">3D view (drag to turn, '
-            "scroll to zoom): it starts when it scrolls into view and needs JavaScript and "
-            "WebGL.</p></div>")
+            f'background:linear-gradient(#fff,#e2e7f0)">{picture}'
+            '<p class="hmt-view-note" style="position:absolute;left:0;bottom:0;margin:0;'
+            'padding:0.2em 0.6em;font-size:12px;color:#555;background:rgba(255,255,255,0.8)">'
+            f"{_NOTE}</p></div>")
         if src is None:
             parts.append(f"<script>{_ASSET.read_text()}</script>")
         return "\n".join(parts)
@@ -174,9 +232,79 @@ class View3D:
         _state["viewer_sent"] = True
         return self.html(viewer=first)
 
+    def _repr_mimebundle_(self, include=None, exclude=None) -> dict:
+        """Jupyter's outputs: the HTML (Jupyter, the docs site), the picture as ``image/jpeg``
+        (viewers that show no HTML or run no script, e.g. GitHub's notebook view), the text."""
+        bundle = {"text/html": self._repr_html_(), "text/plain": repr(self)}
+        data = self.picture()
+        if data is not None:
+            bundle["image/jpeg"] = base64.b64encode(data).decode()
+        return bundle
+
     def __repr__(self) -> str:
         return (f"View3D({len(self.commands)} commands, {len(self.payload) / 1e3:.0f} kB, "
                 f"height={self.height})")
+
+
+def _draw_picture(scene: dict, height: int) -> bytes:
+    """JPEG bytes of a view's meshes and lines, drawn by matplotlib from the view's camera.
+
+    Drawn at twice the size, cropped to what was drawn (plus a margin) and scaled into a
+    ``4/3 * height`` by ``height`` picture: the meshes fill it whatever their shape.
+    """
+    require("matplotlib", "hmt.viz 3D views' static pictures")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from PIL import Image  # a matplotlib dependency
+
+    view, background = scene["view"], (244, 246, 250)
+    width = int(round(_PICTURE_ASPECT * height))
+    dpi = 100
+    fig = Figure(figsize=(2 * width / dpi, 2 * height / dpi), dpi=dpi,
+                 facecolor=np.array(background) / 255)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0, 0, 1, 1), projection="3d")
+    ax.set_facecolor(fig.get_facecolor())
+    ax.computed_zorder = False                   # skeletons over the meshes, as in the browser
+    light = view_direction(view)                 # lit from the camera, as a headlamp
+    points = []
+    # opaque meshes first (matplotlib sorts whole artists): a translucent one reads over them
+    meshes = sorted(scene["meshes"].values(), key=lambda p: p["opacity"] < 1.0)
+    for z, p in enumerate(meshes):
+        v, f = p["vertices"], p["faces"]
+        colors = p["colors"] if p["colors"] is not None else np.tile(p["color"], (len(v), 1))
+        points.append(v)
+        if len(f):
+            rgba = shade_faces(v, f, colors, light=light)
+            rgba[:, 3] = p["opacity"]
+            opaque = p["opacity"] >= 1.0               # edges in the faces' colour: no seams
+            ax.add_collection3d(Poly3DCollection(
+                v[f], facecolors=rgba, edgecolors=rgba if opaque else "none",
+                linewidths=0.4 if opaque else 0.0, zorder=z))
+    for segments, colours in scene["lines"].values():
+        for seg, c in zip(segments.reshape(-1, 2, 3), colours, strict=False):
+            ax.plot(*seg.T, color=tuple(c), linewidth=2.5, zorder=len(meshes) + 1)
+    set_axes_equal(ax, np.concatenate(points), pad=0.0)
+    ax.view_init(**view)
+    ax.set_axis_off()
+    canvas.draw()
+    rgb = np.asarray(canvas.buffer_rgba())[..., :3]
+    drawn = np.argwhere(np.abs(rgb.astype(int) - background).sum(-1) > 12)
+    image = Image.fromarray(np.ascontiguousarray(rgb))
+    if len(drawn):
+        (y0, x0), (y1, x1) = drawn.min(0), drawn.max(0) + 1
+        m = int(0.06 * max(y1 - y0, x1 - x0))
+        image = image.crop((max(x0 - m, 0), max(y0 - m, 0), min(x1 + m, rgb.shape[1]),
+                            min(y1 + m, rgb.shape[0])))
+    scale = min(width / image.width, height / image.height)
+    image = image.resize((max(1, round(image.width * scale)), max(1, round(image.height * scale))),
+                         Image.LANCZOS)
+    out = Image.new("RGB", (width, height), background)
+    out.paste(image, ((width - image.width) // 2, (height - image.height) // 2))
+    buf = io.BytesIO()
+    out.save(buf, format="JPEG", quality=_PICTURE_QUALITY, optimize=True)
+    return buf.getvalue()
 
 
 def _mesh_parts(name: str, item) -> dict:
@@ -226,17 +354,21 @@ def view_meshes(meshes: dict, *, lines: dict | None = None, view: dict | None = 
             at the centre of the meshes' bounding box along
             [`view_direction`][handmesh_tutorial.viz.mesh3d.view_direction], the vertical axis up,
             from where the whole box fits.
-        height: view height, pixels.
+        height: view height, pixels, at least 50 (the static picture is as high, 4/3 as wide).
 
     Returns:
-        The [`View3D`][handmesh_tutorial.viz.web3d.View3D].
+        The [`View3D`][handmesh_tutorial.viz.web3d.View3D]; its static picture is drawn when
+        first needed (its HTML, ``picture()``).
 
     Raises:
         ValueError: no mesh, a mesh that is not ``(V, 3)`` / ``(F, 3)``, face indices out of
-            range, per-vertex colours of the wrong length, an unknown ``vertical_axis``.
+            range, per-vertex colours of the wrong length, an unknown ``vertical_axis``, a
+            ``height`` under 50.
         ModuleNotFoundError: ``meshcat`` (and its ``umsgpack``) missing: the ``notebooks`` extra.
     """
     umsgpack = require("umsgpack", "hmt.viz 3D views")
+    if not height >= 50:
+        raise ValueError(f"height must be at least 50 pixels, got {height!r}")
     view = HAND_VIEW if view is None else view
     d = view_direction(view)                      # also checks vertical_axis
     if not meshes:
@@ -268,12 +400,14 @@ def view_meshes(meshes: dict, *, lines: dict | None = None, view: dict | None = 
         obj = _object(name, "Mesh", p["vertices"], p["faces"], p["colors"], p["color"],
                       p["opacity"])
         cmds.append(cmd({"type": "set_object", "path": f"/hmt/{name}", "object": obj}))
+    line_parts = {}
     for name, (segments, col) in (lines or {}).items():
         seg = np.asarray(_to_numpy(segments), dtype=float).reshape(-1, 3)
         one = isinstance(col, str) or (np.ndim(col) == 1 and not isinstance(col[0], str))
         col = np.asarray([_rgb(col)] * (len(seg) // 2) if one else [_rgb(c) for c in col])
         obj = _object(name, "LineSegments", seg, None, np.repeat(col, 2, axis=0), col[0], 1.0)
         cmds.append(cmd({"type": "set_object", "path": f"/hmt/{name}", "object": obj}))
+        line_parts[name] = (seg, col)
     cam = "/Cameras/default/rotated/<object>"
     cmds += [cmd({"type": "set_property", "path": cam, "property": "fov", "value": _FOV}),
              cmd({"type": "set_property", "path": cam, "property": "near",
@@ -282,7 +416,8 @@ def view_meshes(meshes: dict, *, lines: dict | None = None, view: dict | None = 
                   "value": distance * 100}),
              cmd({"type": "set_property", "path": cam, "property": "position",
                   "value": camera.tolist()})]
-    return View3D(cmds, height, camera)
+    return View3D(cmds, height, camera,
+                  scene={"meshes": parts, "lines": line_parts, "view": dict(view)})
 
 
 def _skeleton(joints) -> tuple[np.ndarray, list]:
