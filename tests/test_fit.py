@@ -1,10 +1,10 @@
-"""Tests of benchmarks/fit_probe.py: the auto-decoder fit test as a regression test of the decoder.
+"""Tests of handmesh_tutorial.train.fit_probe: the auto-decoder fit test, a regression test of the
+decoder.
 
 The fit runs on a decimated copy of the library's hand (a level of its own mesh hierarchy, about
 200 vertices) so that it takes a few seconds; it is template-agnostic (any ``HandModel``).
 """
 
-import fit_probe as fit
 import numpy as np
 import pytest
 import torch
@@ -13,6 +13,7 @@ from handmesh_tutorial.hand import HandModel, random_pose
 from handmesh_tutorial.nn.blocks import compose_down
 from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
 from handmesh_tutorial.nn.model import MeshTemplate, build_model, root_centred_template
+from handmesh_tutorial.train import fit_probe as fit
 
 torch.set_num_threads(1)
 

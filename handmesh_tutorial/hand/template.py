@@ -5,7 +5,7 @@ template frame: wrist at the origin, +x towards the fingers, palm facing -y, rig
 skinning weights over MANO's 16 joints, rest joints, fingertip vertex ids, the keypoint regressor,
 the phenotype shape space and appearance labels. The right-hand template ships as package data
 ([`ASSET_PATH`][handmesh_tutorial.hand.template.ASSET_PATH], built once by
-``tools/makehuman_hand.py``);
+``handmesh_tutorial.apps.makehuman_hand``);
 [`load_template`][handmesh_tutorial.hand.template.load_template] reads it and
 [`HandTemplate.mirrored`][handmesh_tutorial.hand.template.HandTemplate.mirrored] gives the left
 hand. Shape parameters: [`SHAPE_PARAM_NAMES`][handmesh_tutorial.hand.template.SHAPE_PARAM_NAMES],
@@ -35,7 +35,7 @@ __all__ = [
 SHAPE_PARAM_NAMES: tuple[str, ...] = ("gender", "age", "muscle", "weight", "height", "proportions")
 """Shape parameters (``shape[:, i]``), 0 = anny's average phenotype (every value 0.5): MakeHuman
 phenotypes linearised about 0.5, one unit = a phenotype change of 0.25
-(``PHENOTYPE_STEP`` (``tools/makehuman_hand.py``)), so
+(``PHENOTYPE_STEP`` (``handmesh_tutorial.apps.makehuman_hand``)), so
 ``shape`` in [-2, 2] spans anny's phenotype range [0, 1]. Signs: positive ``gender`` is female,
 positive ``age`` older (0 lies between anny's child and young adult); what one unit does to the
 hand's length and volume: docs page "The hand model", "What the build does".
@@ -49,7 +49,7 @@ SHAPE_SAMPLE_RANGES: tuple[tuple[float, float], ...] = (
 
 ASSET_PATH: Path = Path(__file__).resolve().parents[1] / "assets" / "makehuman_hand.npz"
 """Where the shipped template lives (package data, built by
-``tools/makehuman_hand.py``)."""
+``handmesh_tutorial.apps.makehuman_hand``)."""
 
 
 @dataclass
@@ -155,7 +155,7 @@ def load_template(path: str | os.PathLike | None = None) -> HandTemplate:
     path = Path(ASSET_PATH if path is None else path)
     if not path.exists():
         raise FileNotFoundError(f"hand template asset not found: {path} (rebuild it with "
-                                "python tools/makehuman_hand.py)")
+                                "python -m handmesh_tutorial.apps.makehuman_hand)")
     names = [fl.name for fl in fields(HandTemplate) if fl.name != "side"]
     data = read_npz(path, names)
     missing = [n for n in names if n not in data]

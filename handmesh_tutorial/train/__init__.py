@@ -23,6 +23,9 @@ Every public name below is importable from ``handmesh_tutorial.train`` itself; t
   (notebook 09, "Evaluation").
 * [`baselines`][handmesh_tutorial.train.baselines]: the constant rest-hand and mean-hand baselines
   (notebooks 08 and 09).
+* [`fit_probe`][handmesh_tutorial.train.fit_probe]: the decoder fit probe, an auto-decoder on
+  known hands with no image and no encoder (notebook 07); its names stay in the submodule
+  (``hmt.train.fit_probe.fit_decoder``).
 
 (``hmt.train`` is this package; ``hmt.train.train`` is the training function of
 [`loop`][handmesh_tutorial.train.loop].)
@@ -33,6 +36,7 @@ from __future__ import annotations
 # EpochBatchSampler, template_hash, vertex_loss (nn.losses), existing_run, changed_settings,
 # CHECKPOINT_FORMAT, RUN_CHECKPOINTS: not public, importable from here as in 0.1
 from ..nn.losses import vertex_loss  # noqa: F401
+from . import fit_probe  # noqa: F401 - hmt.train.fit_probe (notebook 07); its names stay there
 from .baselines import (
     MEAN_HAND,
     REST_HAND,
