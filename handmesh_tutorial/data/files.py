@@ -340,6 +340,20 @@ def read_annotation(directory: str | os.PathLike) -> dict:
                for k in ann.get("extra_arrays") or []):
         raise ValueError(f"{path}: 'extra_arrays' must list identifiers, got "
                          f"{str(ann['extra_arrays'])[:80]}")
+    extra_keys = [*(ann.get("extra") or {}), *(ann.get("extra_arrays") or [])]
+    shadow = sorted({k for k in extra_keys if k in _KNOWN_KEYS or k == "alone_images"}
+                    | {k for k in extra_keys if extra_keys.count(k) > 1})
+    bad_name = [k for k in ann.get("extra") or {}
+                if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", k)]
+    if shadow or bad_name:  # an extra entry never replaces a validated field
+        raise ValueError(f"{path}: 'extra' entries {str(shadow or bad_name)[:80]} "
+                         + ("would replace sample fields (or each other)" if shadow
+                            else "are not identifiers") + ": a damaged or foreign file")
+    for key in ("index", "seed", "attempt"):
+        v = ann.get(key)
+        if v is not None and (type(v) is not int or v < 0):
+            raise ValueError(f"{path}: '{key}' must be a non-negative integer or null, got "
+                             f"{str(v)[:40]}")
     if ann.get("scene_mask_bits", 8) not in (8, 16):
         raise ValueError(f"{path}: 'scene_mask_bits' must be 8 or 16, got "
                          f"{str(ann['scene_mask_bits'])[:20]}")
@@ -421,7 +435,7 @@ def read_sample(directory: str | os.PathLike) -> dict:
                          f"says {ann['image_size']}")
     if not s["alone_images"]:  # returned only when stored
         del s["alone_images"]
-    for k, v in (ann.get("extra") or {}).items():
+    for k, v in (ann.get("extra") or {}).items():  # never a field: read_annotation checks
         s[k] = v
     for k in ann.get("extra_arrays", []):
         s[k] = arrays[f"extra_{k}"]
@@ -446,6 +460,13 @@ def read_target(directory: str | os.PathLike) -> tuple:
         FileNotFoundError: a file is missing. ValueError: a file is corrupt or inconsistent (the
             message names the file and key).
     """
+    return _read_target(directory)[0]
+
+
+@_named_errors
+def _read_target(directory: str | os.PathLike) -> tuple[tuple, dict]:
+    """`read_target`'s tuple and the annotation it read (for the checks against ``meta.json``
+    that `InterSHDataset.target` shares with the full read)."""
     d = Path(directory)
     ann = read_annotation(d)
     t = ann["target"]
@@ -472,7 +493,7 @@ def read_target(directory: str | os.PathLike) -> tuple:
     if side not in ("left", "right"):
         raise ValueError(f"{d / 'annotation.json'}: side of target {t} is {side!r}")
     return (image, K.astype(np.float64), verts.astype(np.float32), joints.astype(np.float32),
-            side, float(ann["vr"][t]))
+            side, float(ann["vr"][t])), ann
 
 
 _TMP_NAME = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
@@ -497,3 +518,29 @@ def _is_own_temporary(p: Path) -> bool:
                    for c in p.iterdir())
     return p.is_file() and (m["name"] == META_FILE or _SAMPLE_FILE.match(m["name"]) is not None)
 
+
+
+def _remove_sample_folder(folder: Path) -> list[str]:
+    """Delete a sample folder of the generator's, touching nothing else: a link at its place is
+    unlinked (its target untouched); in a real folder only the files a sample has
+    (`_SAMPLE_FILE` names, links among them unlinked) are deleted, then the folder if that
+    emptied it.
+
+    Returns:
+        The names left in the folder (other files, sub-folders): empty when it was removed.
+
+    Raises:
+        OSError: a deletion failed (read-only or forbidden folder); names the path.
+    """
+    if folder.is_symlink() or not folder.is_dir():
+        folder.unlink()
+        return []
+    left = []
+    for child in sorted(folder.iterdir()):
+        if _SAMPLE_FILE.match(child.name) and (child.is_symlink() or child.is_file()):
+            child.unlink()
+        else:
+            left.append(child.name)
+    if not left:
+        folder.rmdir()
+    return left

@@ -10,14 +10,21 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from .._io import fsync_dir, single_writer
-from .files import _is_own_temporary, _temporary, _write_atomic
-from .reader import _planned, _present, read_meta
-from .schema import _LOCK_FILE, _TMP_PREFIX, META_FILE, SAMPLES_DIR
+from .files import _SAMPLE_FILE, _is_own_temporary, _temporary, _write_atomic, read_annotation
+from .reader import _disagreements, _planned, _present, read_meta
+from .schema import (
+    _LOCK_FILE,
+    _TMP_PREFIX,
+    META_FILE,
+    MIN_INDEX_WIDTH,
+    SAMPLES_DIR,
+    _sample_index,
+)
 
 __all__ = ["merge_shards"]
 
@@ -74,8 +81,71 @@ def _clean_stale(folder: Path) -> int:
     return n
 
 
+def _foreign_entries(root: Path, meta: Mapping) -> list[str]:
+    """What in a root without ``meta.json`` is not the set's own: the entries (relative paths,
+    with why) other than the writer lock, this module's temporaries and ``samples/`` holding only
+    sample folders of ``meta``'s planned indices whose files are a sample's and whose
+    ``annotation.json`` agrees with ``meta`` (`reader._disagreements`: kind, image size, seed
+    rule, index). Empty: the folder may become this set's root."""
+    out: list[str] = []
+    for p in sorted(root.iterdir()):
+        if p.name == _LOCK_FILE or (p.name.startswith(_TMP_PREFIX) and _is_own_temporary(p)):
+            continue
+        if p.name != SAMPLES_DIR or p.is_symlink() or not p.is_dir():
+            out.append(p.name)
+            continue
+        for q in sorted(p.iterdir()):
+            rel = f"{SAMPLES_DIR}/{q.name}"
+            if q.name.startswith(_TMP_PREFIX) and _is_own_temporary(q):
+                continue
+            index = _sample_index(q.name, meta["index_width"])
+            if index is None or not any(a <= index < b for a, b in meta["ranges"]):
+                out.append(f"{rel} (not a sample this run plans)")
+            elif q.is_symlink() or not q.is_dir():
+                out.append(f"{rel} (not a folder)")
+            elif other := [c.name for c in q.iterdir()
+                           if not _SAMPLE_FILE.match(c.name) or c.is_symlink() or c.is_dir()]:
+                out.append(f"{rel} (holds {', '.join(map(repr, sorted(other)[:3]))}, no sample's "
+                           "file)")
+            else:
+                try:
+                    why = [w for _, w in _disagreements(read_annotation(q), q, meta)]
+                except (OSError, ValueError) as err:
+                    why = [str(err).splitlines()[0]]
+                if why:
+                    out.append(f"{rel} ({why[0]})")
+    return out
+
+
+def _check_root(root: Path, meta: Mapping) -> None:
+    """Refuse, before anything is written, a root that is not this set's: a symbolic link as
+    its ``samples`` folder, or (without ``meta.json``) files the generator did not write or
+    samples of another set (`_foreign_entries`).
+
+    Raises:
+        ValueError: naming the entries (at most five) and what to do.
+    """
+    samples = root / SAMPLES_DIR
+    if samples.is_symlink():
+        raise ValueError(f"{samples} is a symbolic link (to {os.readlink(samples)}): a generator "
+                         "writes only inside its own folder, found without following links; "
+                         "replace the link by the folder itself (nothing was written)")
+    if (root / META_FILE).exists():
+        return
+    foreign = _foreign_entries(root, meta)
+    if foreign:
+        shown = "; ".join(foreign[:5]) + (f"; and {len(foreign) - 5} more" if len(foreign) > 5
+                                          else "")
+        raise ValueError(f"{root} has no {META_FILE} but holds what this run did not write: "
+                         f"{shown}. Generate into an empty or new folder, or move these out "
+                         f"(nothing was written; a set whose {META_FILE} was lost resumes only "
+                         "with the parameters its samples were made with)")
+
+
 def _open_root(root: Path, meta: dict) -> int:
-    """Create or check ``root/meta.json``; clean stale temporaries. Returns their count."""
+    """Create or check ``root/meta.json`` (written only after `_check_root`: the folder is empty
+    or the set's own); clean stale temporaries. Returns their count."""
+    _check_root(root, meta)
     path = root / META_FILE
     if path.exists():
         old = read_meta(root)
@@ -125,7 +195,7 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
             raise ValueError(f"cannot merge {roots[0]} and {r}: " +
                              _diff_message(r / META_FILE, base, m, keys))
     for r, m in zip(roots, metas, strict=True):
-        present = set(_present(r / SAMPLES_DIR))
+        present = set(_present(r / SAMPLES_DIR, m.get("index_width", MIN_INDEX_WIDTH)))
         absent = [i for i in _planned(m) if i not in present]
         if absent:
             raise ValueError(f"shard {r} is incomplete: {len(absent)} samples missing (first "
