@@ -26,7 +26,8 @@ JPEG's SOF). Byte positions are drawn half uniformly, half in a file's structure
 and directory, ``.npy`` headers, pickle opcodes).
 
     python benchmarks/fuzz_files.py [--cases 980] [--seed 0] [--timeout 60] [--mem-gb 2]
-                                    [--targets a,b] [--work DIR] [--case TARGET:MUTATION:N]
+                                    [--targets a,b] [--mutations a,b] [--work DIR]
+                                    [--case TARGET:MUTATION:N]
 
 ``--case`` reruns one case in this process (the reproducer printed for each failure) and shows
 the traceback. Prints a table of outcomes per target and mutation; exits 1 on any failure. Docs
@@ -861,12 +862,13 @@ class Child:
             self.proc = None
 
 
-def cases(n: int, seed: int, targets) -> list[tuple[str, str, int]]:
-    """``n`` cases, targets and mutations in turn, case ``i`` seeded ``seed * 10**6 + i``."""
+def cases(n: int, seed: int, targets, mutations=MUTATIONS) -> list[tuple[str, str, int]]:
+    """``n`` cases, targets and mutations in turn (those of ``mutations`` that apply to each
+    target), case ``i`` seeded ``seed * 10**6 + i``."""
     out = []
     for i in range(n):
         t = targets[i % len(targets)]
-        ms = mutations_of(t)
+        ms = [m for m in mutations_of(t) if m in mutations]
         m = ms[(i // len(targets)) % len(ms)]
         out.append((t, m, seed * 10**6 + i))
     return out
@@ -914,6 +916,8 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=60.0, help="seconds per case")
     ap.add_argument("--mem-gb", type=float, default=2.0, help="the child's RLIMIT_AS")
     ap.add_argument("--targets", default=",".join(TARGETS))
+    ap.add_argument("--mutations", default=",".join(MUTATIONS),
+                    help="comma-separated (default: all that apply to each target)")
     ap.add_argument("--work", default=None, help="folder of the corpus (kept; default a temp)")
     ap.add_argument("--case", default=None, help="TARGET:MUTATION:N: rerun one case here")
     ap.add_argument("--json", default=None, help="write every result to this file")
@@ -936,7 +940,7 @@ def main(argv=None) -> int:
                 traceback.print_exc()
         return 0
     targets = [t for t in args.targets.split(",") if t]
-    todo = cases(args.cases, args.seed, targets)
+    todo = cases(args.cases, args.seed, targets, args.mutations.split(","))
     t0 = time.perf_counter()
 
     def show(r):

@@ -217,7 +217,7 @@ def test_a_repair_that_cannot_remove_prints_its_list_then_names_the_file(tmp_pat
     def read_only(folder):
         raise OSError(errno.EROFS, "Read-only file system", str(folder / "image.png"))
 
-    monkeypatch.setattr(F, "_remove_sample_folder", read_only)
+    monkeypatch.setattr(D.root, "_remove_sample_folder", read_only)
     capsys.readouterr()
     assert cli.main(["verify", str(root), "--remove-bad", "--no-progress"]) == 6
     cap = capsys.readouterr()
@@ -315,7 +315,22 @@ def test_the_lean_training_read_refuses_a_foreign_sample_as_the_full_read_does(
     with pytest.raises(ValueError, match=why):
         ds.target(1)  # the read training and evaluation use
     crops = InterSHTorchDataset(root, train=False)
-    with pytest.raises(BadSampleError, match=f"sample 000001: .*{why}.*handmesh verify"):
+    hint = f"handmesh verify {re.escape(str(root))}"
+    with pytest.raises(BadSampleError, match=f"sample 000001: .*{why}.*{hint}"):
         crops[1]
     assert [b["sample"] for b in find_bad_items(crops)] == ["000001"]
     assert crops[0]["image"].shape[-1] == 128 and crops[2] is not None
+
+
+def test_a_bad_freihand_sample_is_not_sent_to_verify(tmp_path):
+    """`handmesh verify` reads INTER-SH roots only: a FreiHAND bad sample's message says how to
+    list such samples there (--skip-bad), not verify."""
+    from handmesh_tutorial.data.torch_views import FreiHANDTorchDataset
+    from handmesh_tutorial.testing import write_freihand_root
+
+    root = write_freihand_root(tmp_path / "fh", 2, image_size=32)
+    image = sorted((root / "training" / "rgb").iterdir())[0]
+    image.write_bytes(image.read_bytes()[:50])
+    with pytest.raises(BadSampleError, match="--skip-bad lists each one") as err:
+        FreiHANDTorchDataset(root, "training", image_size=32, train=False)[0]
+    assert "handmesh verify" not in str(err.value)

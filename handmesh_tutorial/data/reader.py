@@ -311,6 +311,10 @@ class VerifyReport:
                     if self.foreign else "")]
         lines += [f"  {name}: {why}" for name, why in self.bad]
         lines += [f"  {name}: not removed: {why}" for name, why in self.kept]
+        if self.removed:  # only indices meta.json plans: the generator writes exactly these
+            lines.append("  rerun the `handmesh generate` command that made it (same --kind, "
+                         "--num, --seed, --image-size, --shard) to write the removed samples "
+                         "again")
         lines += [f"  {name!r}: {what}, not a sample (left as it is)"
                   for name, what in self.foreign[:20]]
         if len(self.foreign) > 20:
@@ -378,7 +382,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
     """
     from .._io import single_writer
     from .._progress import progress_bar
-    from .files import _is_own_temporary, _remove_sample_folder
+    from .root import _is_own_temporary, _remove_sample_folder
     from .schema import _LOCK_FILE, _TMP_PREFIX
 
     root = Path(root)

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from .._io import fsync_dir, single_writer
-from .files import _SAMPLE_FILE, _is_own_temporary, _temporary, _write_atomic, read_annotation
+from .files import _temporary, _write_atomic, read_annotation
 from .reader import _disagreements, _planned, _present, read_meta
 from .schema import (
     _LOCK_FILE,
@@ -27,6 +28,56 @@ from .schema import (
 )
 
 __all__ = ["merge_shards"]
+
+
+_TMP_NAME = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
+"""Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``."""
+_SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+|alone_rgb_\d+)\.png$"
+                          r"|^annotation\.(npz|json)$")
+"""Files a sample folder can hold (``_encode``): what a half-written sample may contain."""
+
+
+def _is_own_temporary(p: Path) -> bool:
+    """Whether ``p`` is a temporary that a writer of this module made (and may be removed).
+
+    The name must be `_temporary`'s ``.tmp-<name>-<pid>-<8 hex>``; a folder may hold only sample
+    files, a file must stand for ``meta.json`` or a sample file. Anything else, e.g. a user's
+    ``.tmp-my-notes/``, is left alone.
+    """
+    m = _TMP_NAME.match(p.name)
+    if m is None or p.is_symlink():
+        return False
+    if p.is_dir():
+        return all(c.is_file() and not c.is_symlink() and _SAMPLE_FILE.match(c.name)
+                   for c in p.iterdir())
+    return p.is_file() and (m["name"] == META_FILE or _SAMPLE_FILE.match(m["name"]) is not None)
+
+
+
+def _remove_sample_folder(folder: Path) -> list[str]:
+    """Delete a sample folder of the generator's, touching nothing else: a link at its place is
+    unlinked (its target untouched); in a real folder only the files a sample has
+    (`_SAMPLE_FILE` names, links among them unlinked) are deleted, then the folder if that
+    emptied it.
+
+    Returns:
+        The names left in the folder (other files, sub-folders): empty when it was removed.
+
+    Raises:
+        OSError: a deletion failed (read-only or forbidden folder); names the path.
+    """
+    if folder.is_symlink() or not folder.is_dir():
+        folder.unlink()
+        return []
+    left = []
+    for child in sorted(folder.iterdir()):
+        if _SAMPLE_FILE.match(child.name) and (child.is_symlink() or child.is_file()):
+            child.unlink()
+        else:
+            left.append(child.name)
+    if not left:
+        folder.rmdir()
+    return left
 
 
 def _coalesce(ranges: Sequence[Sequence[int]]) -> list[list[int]]:

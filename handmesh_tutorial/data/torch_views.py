@@ -113,9 +113,7 @@ class HandCropDataset(torch.utils.data.Dataset):
         self._indices = None if indices is None else [int(i) for i in indices]
         self._cache: dict[int, tuple] | None = {} if cache else None
 
-    list_bad_hint = "--skip-bad lists each one it leaves out"
-    """How a user lists the bad samples of this reader, for the message of a
-    [`BadSampleError`][handmesh_tutorial.data.torch_views.BadSampleError]."""
+    list_bad_hint = "--skip-bad lists each one it leaves out"  # how a user lists bad samples
 
     # -- subclass interface ------------------------------------------------------------------
     def num_raw(self) -> int:
@@ -402,11 +400,9 @@ class InterSHTorchDataset(HandCropDataset):
         super().__init__(image_size, train, seed, augment, **kwargs)
 
     @property
-    def list_bad_hint(self) -> str:  # type: ignore[override]
-        """An on-disk root's bad samples are listed by ``handmesh verify``."""
+    def list_bad_hint(self) -> str:  # type: ignore[override]  # verify reads INTER-SH roots
         root = getattr(self.source, "root", None)
-        return (f"list them with `handmesh verify {root}`" if root is not None
-                else super().list_bad_hint)
+        return super().list_bad_hint if root is None else f"list them with handmesh verify {root}"
 
     def num_raw(self) -> int:
         return len(self.source)
