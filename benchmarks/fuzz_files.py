@@ -475,6 +475,7 @@ def _plant_foreign(rng: random.Random, case_root: Path, base: Path) -> tuple[str
         npz.write_bytes(npz.read_bytes()[:100])  # one bad sample: a repair would delete it
         names += ["samples", "31"]
     elif kind == "lock-link":
+        (root / ".generate.lock").unlink(missing_ok=True)  # the corpus's own lock
         (root / ".generate.lock").symlink_to(outside / "nologin")
         planted["outside/nologin"] = None
         npz = samples / name / "annotation.npz"
