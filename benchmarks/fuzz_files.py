@@ -26,7 +26,8 @@ JPEG's SOF). Byte positions are drawn half uniformly, half in a file's structure
 and directory, ``.npy`` headers, pickle opcodes).
 
     python benchmarks/fuzz_files.py [--cases 980] [--seed 0] [--timeout 60] [--mem-gb 2]
-                                    [--targets a,b] [--work DIR] [--case TARGET:MUTATION:N]
+                                    [--targets a,b] [--mutations a,b] [--work DIR]
+                                    [--case TARGET:MUTATION:N]
 
 ``--case`` reruns one case in this process (the reproducer printed for each failure) and shows
 the traceback. Prints a table of outcomes per target and mutation; exits 1 on any failure. Docs
@@ -59,9 +60,13 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 TARGETS = ("intersh-verify", "intersh-evaluate", "checkpoint", "template", "mano",
-           "freihand-read", "freihand-evaluate")
-MUTATIONS = ("bitflip", "truncate", "insert", "zero", "swap", "value", "header")
-FAILURES = ("crash", "timeout", "memory", "exception", "unnamed", "implausible")
+           "freihand-read", "freihand-evaluate", "intersh-repair")
+MUTATIONS = ("bitflip", "truncate", "insert", "zero", "swap", "value", "header", "foreign",
+             "extra")
+ROOT_MUTATIONS = ("foreign", "extra")
+"""What only an INTER-SH root can be given: entries that are no sample (a user's files, links
+to outside, non-ASCII names, a sample of another set) and ``annotation.json`` ``extra`` fields."""
+FAILURES = ("crash", "timeout", "memory", "exception", "unnamed", "implausible", "touched")
 OUTCOMES = ("clean", "refused", *FAILURES, "skipped")
 IMAGE = 32  # pixels, corpus images and crops
 
@@ -97,8 +102,28 @@ def build_corpus(work: Path) -> Path:
         net = T.build_model_from_config(cfg)
         T.save_checkpoint(base / name, model=net, config=cfg,
                           template_id=T.template_hash(cfg.template), durable=False)
+    _other_set(base)
     (base / "done").touch()
     return base
+
+
+def _other_set(base: Path) -> Path:
+    """Another INTER-SH set (48 px, seed 9): its samples are foreign to ``base/intersh``."""
+    other = base / "intersh-other"
+    if not (other / "meta.json").exists():
+        from handmesh_tutorial.data import generate_dataset
+        from handmesh_tutorial.testing import toy_sample
+
+        generate_dataset(other, functools.partial(toy_sample, image_size=48), num=4, seed=9,
+                         kind="hand-hand", progress=False, durable=False)
+    return other
+
+
+def mutations_of(target: str) -> tuple[str, ...]:
+    """The mutations that apply to a target (`ROOT_MUTATIONS` to INTER-SH roots only)."""
+    if target.startswith("intersh"):
+        return MUTATIONS
+    return tuple(m for m in MUTATIONS if m not in ROOT_MUTATIONS)
 
 
 def target_files(base: Path, target: str) -> tuple[str, list[str]]:
@@ -106,7 +131,7 @@ def target_files(base: Path, target: str) -> tuple[str, list[str]]:
     if target.startswith("intersh"):
         root = base / "intersh"
         return "intersh", [str(p.relative_to(base)) for p in sorted(root.rglob("*"))
-                           if p.is_file() and not p.name.startswith(".")]
+                           if p.is_file() and not p.name.startswith(".")]  # no lock
     if target.startswith("freihand"):
         root = base / "freihand"
         return "freihand", [str(p.relative_to(base)) for p in sorted(root.rglob("*"))
@@ -382,10 +407,130 @@ def _bitflip(rng: random.Random, data: bytes, name: str) -> tuple[bytes, str]:
     return bytes(data), "bits " + ",".join(flips)
 
 
+def _digest(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _outside_tree(case_root: Path) -> dict:
+    """Every entry under ``case_root/outside`` (links not followed): path -> sha256 or kind."""
+    out = case_root / "outside"
+    return {p.relative_to(out).as_posix(): ("link" if p.is_symlink() else "dir" if p.is_dir()
+                                            else _digest(p))
+            for p in sorted(out.rglob("*"))} if out.is_dir() else {}
+
+
+FOREIGN_KINDS = ("user-files", "photo", "photo-in-bad", "non-ascii", "samples-link", "lock-link",
+                 "sample-link", "other-set", "file-at-name")
+"""What `_plant_foreign` plants (one per case, drawn first)."""
+
+
+def _plant_foreign(rng: random.Random, case_root: Path, base: Path) -> tuple[str, list[str]]:
+    """Put what is no sample of the root's into ``case_root/intersh``: a user's files, links to
+    ``case_root/outside``, non-ASCII names, a sample of another set. What a reader must leave
+    as it is goes to ``case_root/planted.json`` (path -> sha256, or ``None``: must not exist),
+    checked after the read with ``outside/`` (`_untouched`)."""
+    root, outside = case_root / "intersh", case_root / "outside"
+    samples = root / "samples"
+    outside.mkdir()
+    (outside / "keep.txt").write_text("a file outside the root")
+    planted: dict[str, str | None] = {}
+
+    def plant(rel: str, data: bytes) -> None:
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_bytes(data)
+        planted[f"intersh/{rel}"] = _digest(root / rel)
+
+    kind = rng.choice(FOREIGN_KINDS)
+    i = rng.randrange(4)
+    name = f"{i:06d}"
+    names = [name]
+    if kind == "user-files":
+        plant("samples/notes.txt", b"a user's notes")
+        plant("samples/99", b"a file named by digits")
+        plant("samples/2024/notes.txt", b"a folder named by digits")
+        plant(".tmp-my-notes/todo.txt", b"a user's temporary-looking folder")
+        names = ["notes.txt", "99", "2024"]
+    elif kind in ("photo", "photo-in-bad"):
+        plant(f"samples/{name}/photo.jpg", b"\xff\xd8 a user's photo")
+        if kind == "photo-in-bad":
+            npz = samples / name / "annotation.npz"
+            npz.write_bytes(npz.read_bytes()[:100])
+        names += ["photo.jpg"]
+    elif kind == "non-ascii":
+        digits = rng.choice(["\u0660\u0661\u0662\u0663\u0664\u0665\u0666\u0667\u0668\u0669",
+                             "\uff10\uff11\uff12\uff13\uff14\uff15\uff16\uff17\uff18\uff19"])
+        copy = "".join(digits[int(c)] for c in name)
+        shutil.copytree(samples / name, samples / copy)
+        (samples / "\u00b2").mkdir()
+        for p in (samples / copy).iterdir():
+            planted[f"intersh/samples/{copy}/{p.name}"] = _digest(p)
+        names += [copy, "\u00b2"]
+    elif kind == "samples-link":  # samples/ itself a link to a folder outside the root
+        shutil.move(samples, outside / "samples")
+        samples.symlink_to(outside / "samples", target_is_directory=True)
+        (outside / "samples" / "31").write_text("a user's file beside the samples")
+        npz = outside / "samples" / name / "annotation.npz"
+        npz.write_bytes(npz.read_bytes()[:100])  # one bad sample: a repair would delete it
+        names += ["samples", "31"]
+    elif kind == "lock-link":
+        (root / ".generate.lock").unlink(missing_ok=True)  # the corpus's own lock
+        (root / ".generate.lock").symlink_to(outside / "nologin")
+        planted["outside/nologin"] = None
+        npz = samples / name / "annotation.npz"
+        npz.write_bytes(npz.read_bytes()[:100])
+        names += [".generate.lock"]
+    elif kind == "sample-link":  # a sample folder that is a link to a copy outside
+        shutil.move(samples / name, outside / name)
+        (samples / name).symlink_to(outside / name, target_is_directory=True)
+    elif kind == "other-set":
+        other = _other_set(base)
+        shutil.rmtree(samples / name)
+        shutil.copytree(other / "samples" / name, samples / name)
+    else:  # a file where a sample folder belongs
+        shutil.rmtree(samples / name)
+        plant(f"samples/{name}", b"a user's file named like a sample")
+    (case_root / "planted.json").write_text(json.dumps({"planted": planted,
+                                                        "outside": _outside_tree(case_root)}))
+    return kind, names
+
+
+_SHADOWS = ({"image": 5}, {"attempt": "zz"}, {"vr": {"1": 42}}, {"target": 7},
+            {"K": [[1, 0], [0, 1]]}, {"seed": None}, {"kind": "hand-object"}, {"index": 3})
+_ODD_EXTRAS = ({"note": [1, {"a": None}]}, {"x": 1e308}, {"deep": [[[[[]]]]]}, {"s": "\u00b2"})
+
+
+def _edit_extra(rng: random.Random, case_root: Path) -> tuple[str, list[str]]:
+    """An ``annotation.json`` ``extra`` entry: one shadowing a field, an odd but legal value,
+    a non-identifier key, ``extra`` not an object, or ``extra_arrays`` naming a field."""
+    name = f"{rng.randrange(4):06d}"
+    path = case_root / "intersh" / "samples" / name / "annotation.json"
+    ann = json.loads(path.read_text())
+    how = rng.choice(["shadow", "shadow", "odd", "key", "type", "arrays"])
+    if how == "shadow":
+        ann["extra"] = dict(rng.choice(_SHADOWS))
+    elif how == "odd":
+        ann["extra"] = dict(rng.choice(_ODD_EXTRAS))
+    elif how == "key":
+        ann["extra"] = {rng.choice(["not an id", "\u00b2", "1x", ""]): 1}
+    elif how == "type":
+        ann["extra"] = rng.choice([[1, 2], "image", 5, None])
+    else:
+        ann["extra_arrays"] = [rng.choice(["K", "image", "vertices_1", "joints_1"])]
+    path.write_text(json.dumps(ann))
+    return f"{name}: {how} {json.dumps(ann.get('extra'))[:60]}", [name, "annotation.json"]
+
+
 def mutate(rng: random.Random, mutation: str, case_root: Path, files: list[str], base: Path,
            target: str) -> tuple[str, list[str]]:
     """Damage the copy under ``case_root`` in place; returns (what was done, names that a
     refusal must mention: any one of them)."""
+    if mutation in ROOT_MUTATIONS:
+        if not target.startswith("intersh"):
+            raise ValueError(f"{mutation} applies to INTER-SH roots only")
+        return (_plant_foreign(rng, case_root, base) if mutation == "foreign"
+                else _edit_extra(rng, case_root))
     name = rng.choice(files)
     if mutation == "value":
         editable = [f for f in files if f.endswith((".json", ".npz", ".pkl", ".pt"))]
@@ -474,6 +619,33 @@ def _plausible_sample(s: dict) -> str | None:
     return None
 
 
+def _exactly_the_set(ds) -> str | None:
+    """Why ``ds`` is not the corpus's four samples (a copy counted twice, one missing)."""
+    got = [int(i) for i in ds.indices]
+    return None if got == [0, 1, 2, 3] else f"samples {got}, expected [0, 1, 2, 3]"
+
+
+def _untouched(case_root: Path) -> list[str]:
+    """What a read changed of what it must leave: planted files (`_plant_foreign`) and
+    everything under ``case_root/outside``."""
+    path = case_root / "planted.json"
+    if not path.exists():
+        return []
+    rec = json.loads(path.read_text())
+    out = []
+    for rel, digest in rec["planted"].items():
+        p = case_root / rel
+        if digest is None and (p.exists() or p.is_symlink()):
+            out.append(f"{rel} created")
+        elif digest is not None and (not p.is_file() or _digest(p) != digest):
+            out.append(f"{rel} deleted or changed")
+    now = _outside_tree(case_root)
+    out += [f"outside/{k} deleted or changed" for k in rec["outside"] if now.get(k) !=
+            rec["outside"][k]]
+    out += [f"outside/{k} created" for k in now if k not in rec["outside"]]
+    return out
+
+
 def read(target: str, case_root: Path, base: Path) -> dict:
     """Run the target's reader on the damaged copy: ``{"ok": True, "implausible": why | None}``
     or ``{"ok": False, "error": type, "message": ..., "code": exit code}``."""
@@ -488,7 +660,21 @@ def read(target: str, case_root: Path, base: Path) -> dict:
         if code != 0:
             return {"ok": False, "code": code, "message": text}
         ds = InterSHDataset(case_root / "intersh")
-        why = next(filter(None, (_plausible_sample(ds[i]) for i in range(len(ds)))), None)
+        why = _exactly_the_set(ds) or next(
+            filter(None, (_plausible_sample(ds[i]) for i in range(len(ds)))), None)
+        return {"ok": True, "implausible": why}
+    if target == "intersh-repair":  # `verify --remove-bad`, then the generate that made it
+        from handmesh_tutorial.data import InterSHDataset, generate_dataset
+        from handmesh_tutorial.testing import toy_sample
+
+        code, text = _cli(["verify", str(case_root / "intersh"), "--remove-bad", "--quiet"])
+        if code != 0:
+            return {"ok": False, "code": code, "message": text}
+        generate_dataset(case_root / "intersh", functools.partial(toy_sample, image_size=IMAGE),
+                         num=4, seed=3, kind="hand-hand", progress=False, durable=False)
+        ds = InterSHDataset(case_root / "intersh")
+        why = _exactly_the_set(ds) or next(
+            filter(None, (_plausible_sample(ds[i]) for i in range(len(ds)))), None)
         return {"ok": True, "implausible": why}
     if target.endswith("-evaluate"):
         data = case_root / ("intersh" if target.startswith("intersh") else "freihand")
@@ -591,19 +777,22 @@ def run_case(base: Path, scratch: Path, target: str, mutation: str, n: int) -> d
         res = {"ok": False, "error": type(e).__name__, "value_error": isinstance(e, ValueError),
                "message": str(e)[:2000]}
     res.update(what=what, names=names, seconds=round(time.perf_counter() - t, 3))
+    res["touched"] = _untouched(case_root)
     res["outcome"] = classify(res)
     shutil.rmtree(case_root, ignore_errors=True)
     return res
 
 
 def classify(r: dict) -> str:
+    if r.get("touched"):  # a file outside the run's own written, moved or deleted
+        return "touched"
     if r.get("ok"):
         return "implausible" if r.get("implausible") else "clean"
     if r.get("error") == "MemoryError":
         return "memory"
     named = any(n and n in r.get("message", "") for n in r["names"])
-    if "code" in r:  # a CLI run: 0 with the sample skipped, or 3..5 (bad input)
-        if r["code"] in (0, 3, 4, 5):
+    if "code" in r:  # a CLI run: 0 with the sample skipped, 3..5 (bad input), 6 (a link as
+        if r["code"] in (0, 3, 4, 5, 6):  # the lock, a read-only root: the environment)
             return "refused" if named else "unnamed"
         return "memory" if "MemoryError" in r["message"] else "exception"
     if r.get("value_error") or r.get("error") in ("FileNotFoundError",):
@@ -674,12 +863,14 @@ class Child:
             self.proc = None
 
 
-def cases(n: int, seed: int, targets) -> list[tuple[str, str, int]]:
-    """``n`` cases, targets and mutations in turn, case ``i`` seeded ``seed * 10**6 + i``."""
+def cases(n: int, seed: int, targets, mutations=MUTATIONS) -> list[tuple[str, str, int]]:
+    """``n`` cases, targets and mutations in turn (those of ``mutations`` that apply to each
+    target), case ``i`` seeded ``seed * 10**6 + i``."""
     out = []
     for i in range(n):
         t = targets[i % len(targets)]
-        m = MUTATIONS[(i // len(targets)) % len(MUTATIONS)]
+        ms = [m for m in mutations_of(t) if m in mutations]
+        m = ms[(i // len(targets)) % len(ms)]
         out.append((t, m, seed * 10**6 + i))
     return out
 
@@ -726,6 +917,8 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=60.0, help="seconds per case")
     ap.add_argument("--mem-gb", type=float, default=2.0, help="the child's RLIMIT_AS")
     ap.add_argument("--targets", default=",".join(TARGETS))
+    ap.add_argument("--mutations", default=",".join(MUTATIONS),
+                    help="comma-separated (default: all that apply to each target)")
     ap.add_argument("--work", default=None, help="folder of the corpus (kept; default a temp)")
     ap.add_argument("--case", default=None, help="TARGET:MUTATION:N: rerun one case here")
     ap.add_argument("--json", default=None, help="write every result to this file")
@@ -748,7 +941,7 @@ def main(argv=None) -> int:
                 traceback.print_exc()
         return 0
     targets = [t for t in args.targets.split(",") if t]
-    todo = cases(args.cases, args.seed, targets)
+    todo = cases(args.cases, args.seed, targets, args.mutations.split(","))
     t0 = time.perf_counter()
 
     def show(r):

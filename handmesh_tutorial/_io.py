@@ -14,6 +14,7 @@ import io
 import json
 import math
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -58,29 +59,53 @@ def single_writer(lock_file: str | os.PathLike, what: str):
     """One writer at a time: an exclusive ``flock`` on ``lock_file``, which the OS drops when the
     process dies (even on SIGKILL), so a stale lock never blocks a rerun.
 
+    The lock is opened with ``O_NOFOLLOW``: a symbolic link in its place is refused, never
+    followed (a planted ``.generate.lock -> /etc/nologin`` would otherwise create the link's
+    target), and anything but a regular file there (a folder, a FIFO) is refused too.
+
     Args:
         lock_file: the lock's path (created if missing; its folder must exist).
         what: the resource, for the message (e.g. ``"runs/demo/data"``).
 
     Raises:
-        EnvironmentFailure: another process holds the lock (a ``RuntimeError``; the message
-            names ``what`` and the file).
+        EnvironmentFailure: another process holds the lock, or ``lock_file`` is a symbolic link
+            or not a regular file (a ``RuntimeError``; the message names ``what`` and the file).
+        OSError: the lock cannot be created (read-only or forbidden folder); names the file.
     """
     try:
         import fcntl
     except ImportError:  # not POSIX: no protection against two writers
         yield
         return
-    with open(lock_file, "a+b") as fh:
+    flags = (os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+             | getattr(os, "O_NONBLOCK", 0))  # O_NONBLOCK: a FIFO planted there cannot block
+    try:
+        fd = os.open(lock_file, flags, 0o644)
+    except OSError as err:
+        if os.path.islink(lock_file):  # ELOOP (Linux) or EMLINK (BSD): a link in its place
+            raise EnvironmentFailure(
+                f"{lock_file} is a symbolic link (to {os.readlink(lock_file)}): a lock file is "
+                f"never opened through a link, so {what} is not written; remove the link and "
+                "rerun") from None
+        if os.path.isdir(lock_file):
+            raise EnvironmentFailure(f"{lock_file} is a folder: it cannot serve as the writer "
+                                     f"lock of {what}; move it away and rerun") from None
+        raise OSError(err.errno, err.strerror, os.fspath(lock_file)) from err
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise EnvironmentFailure(f"{lock_file} is not a regular file: it cannot serve as the "
+                                     f"writer lock of {what}; remove it and rerun")
         try:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             raise EnvironmentFailure(f"{what} is being written by another process ({lock_file} "
                                      "is locked); wait for it to end, or stop it") from None
         try:
             yield
         finally:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
 
 
 def check_writable(folder: str | os.PathLike) -> Path:

@@ -873,7 +873,11 @@ def test_verify_lists_bad_samples_and_regenerating_them_restores_the_bytes(tmp_p
     assert "not a sample folder" in why["000004"] and report.removed == []
     assert "3 bad" in str(report)
     fixed = D.verify_dataset(root, remove=True, progress=False)
-    assert fixed.removed == ["000001", "000002", "000004"]
+    # a file is no sample folder the generator made: listed and left, never deleted
+    assert fixed.removed == ["000001", "000002"] and not fixed.ok
+    assert [n for n, _ in fixed.kept] == ["000004"] and "move it away" in str(fixed)
+    assert (s / "000004").read_text() == "a file where a sample folder belongs"
+    (s / "000004").unlink()  # the user moves it away
     assert gen(root, num=6).written == 3
     assert tree(root) == tree(tmp_path / "ref")
     assert D.verify_dataset(root, progress=False).bad == []
@@ -892,11 +896,18 @@ def test_a_meta_json_that_disagrees_with_every_sample_removes_nothing(tmp_path, 
     good = (root / "meta.json").read_text()
     _rewrite_json(root / "meta.json", **{key: value})
     report = D.verify_dataset(root, remove=True, progress=False)
-    assert [n for n, _ in report.bad] == ["000002"] and report.removed == ["000002"]
+    # with 7-digit names planned, 000002 is no name of the set: a repair leaves it
+    planned = key != "index_width"
+    assert [n for n, _ in report.bad] == ["000002"]
+    assert report.removed == (["000002"] if planned else [])
+    assert [n for n, _ in report.kept] == ([] if planned else ["000002"])
     assert report.disagreements() == {key: ["000000", "000001"]} and not report.ok
     assert f"meta.json '{key}' disagrees with 2 sample(s) (000000, 000001)" in str(report)
     assert "none of them was removed" in report.advice() and key in report.advice()
-    assert sample_dirs(root) == ["000000", "000001"]  # the readable samples are all kept
+    # the readable samples are all kept
+    assert sample_dirs(root) == ["000000", "000001"] + ([] if planned else ["000002"])
+    if not planned:
+        shutil.rmtree(root / "samples" / "000002")
     (root / "meta.json").write_text(good)  # the user restores meta.json: the run completes
     assert gen(root, num=3).written == 1 and tree(root) == before
     assert D.verify_dataset(root, progress=False).ok

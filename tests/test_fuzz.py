@@ -36,17 +36,39 @@ import fuzz_files as F  # noqa: E402
 
 def test_a_seeded_subset_of_the_fuzz_run_is_clean_or_refused_by_name(tmp_path):
     base = F.build_corpus(tmp_path)
-    todo = [(t, m, 7_000 + i) for i, (t, m) in enumerate(
-        (F.TARGETS[(3 * k) % len(F.TARGETS)], F.MUTATIONS[k % len(F.MUTATIONS)])
-        for k in range(10))]
+    targets = [F.TARGETS[(3 * k) % len(F.TARGETS)] for k in range(10)]
+    todo = [(t, F.mutations_of(t)[k % len(F.mutations_of(t))], 7_000 + k)
+            for k, t in enumerate(targets)]
+    # the classes of hostile roots (issue 43): foreign entries, links, non-ASCII names, extra
+    todo += [(t, m, 7_100 + k) for k, (t, m) in enumerate(
+        [("intersh-repair", "foreign")] * 4 + [("intersh-verify", "foreign"),
+                                               ("intersh-repair", "extra"),
+                                               ("intersh-verify", "extra")])]
     results = F.fuzz(base, todo, timeout=60)
     assert len(results) == len(todo)
     bad = [(r["target"], r["mutation"], r["n"], r["outcome"], r.get("what"),
-            r.get("message", "")[-200:]) for r in results if r["outcome"] not in
-           ("clean", "refused")]
+            r.get("touched"), r.get("message", "")[-200:]) for r in results
+           if r["outcome"] not in ("clean", "refused")]
     assert not bad, bad
     assert {r["outcome"] for r in results} == {"clean", "refused"}  # both classes are seen
-    assert "| all | all | 10 |" in F.table(results)
+    assert f"| all | all | {len(todo)} |" in F.table(results)
+
+
+def test_the_fuzz_run_sees_a_touched_file(tmp_path):
+    """The `touched` class is real: a planted file deleted, or a file created outside the root,
+    is a failure whatever the reader said."""
+    import random
+
+    case = tmp_path / "case"
+    (case / "intersh" / "samples").mkdir(parents=True)
+    n = next(n for n in range(100) if random.Random(n).choice(F.FOREIGN_KINDS) == "user-files")
+    assert F._plant_foreign(random.Random(n), case, tmp_path)[0] == "user-files"
+    assert F._untouched(case) == []
+    (case / "intersh" / "samples" / "notes.txt").unlink()
+    (case / "outside" / "nologin").write_text("")
+    assert sorted(F._untouched(case)) == ["intersh/samples/notes.txt deleted or changed",
+                                          "outside/nologin created"]
+    assert F.classify({"ok": True, "touched": F._untouched(case)}) == "touched"
 
 
 def _flip_member_byte(path: Path, member: str) -> None:

@@ -118,8 +118,8 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
     report = verify_dataset(args.root, remove=args.remove_bad, progress=not args.no_progress)
     print(f"handmesh verify: {report}")
-    if report.removed:
-        print("rerun the same `handmesh generate` command to write the removed samples again")
+    if report.error is not None:  # a read-only root: the report above, then the file named
+        raise report.error
     if report.disagree:
         raise ValueError(report.advice())
     return 0 if report.ok else EXIT_CODES["bad-input"]
@@ -133,8 +133,9 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         report = verify_dataset(args.out, remove=True, progress=not args.no_progress)
         print(f"handmesh generate --verify: {report}")
         if not report.ok:  # nothing generated: the samples left would count as done
-            raise ValueError(report.advice() or "some bad samples could not be removed (see "
-                             "above); fix their permissions, then rerun this command")
+            raise report.error or ValueError(report.advice() or "some bad samples could not "
+                                             "be removed (see above): move them away, or fix "
+                                             "their permissions, then rerun this command")
 
     s = interact.generate_interactions(
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,
@@ -331,9 +332,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "if any)")
     ver.add_argument("root", help="the dataset folder (with meta.json)")
     ver.add_argument("--remove-bad", action="store_true",
-                     help="delete the unreadable samples; rerunning the same generate command "
-                     "writes them again, byte for byte (samples that read correctly but "
-                     "disagree with meta.json are never removed)")
+                     help="delete the unreadable sample folders meta.json plans (their "
+                     "sample files only: anything else is listed and left); the generate "
+                     "command that made ROOT then writes them again, byte for byte")
     ver.set_defaults(func=_cmd_verify)
     for p in (gen, ver):  # --quiet: their old spelling
         p.add_argument("--no-progress", action="store_true", help="no progress bar")

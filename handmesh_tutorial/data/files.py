@@ -340,6 +340,20 @@ def read_annotation(directory: str | os.PathLike) -> dict:
                for k in ann.get("extra_arrays") or []):
         raise ValueError(f"{path}: 'extra_arrays' must list identifiers, got "
                          f"{str(ann['extra_arrays'])[:80]}")
+    extra_keys = [*(ann.get("extra") or {}), *(ann.get("extra_arrays") or [])]
+    shadow = sorted({k for k in extra_keys if k in _KNOWN_KEYS or k == "alone_images"}
+                    | {k for k in extra_keys if extra_keys.count(k) > 1})
+    bad_name = [k for k in ann.get("extra") or {}
+                if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", k)]
+    if shadow or bad_name:  # an extra entry never replaces a validated field
+        raise ValueError(f"{path}: 'extra' entries {str(shadow or bad_name)[:80]} "
+                         + ("would replace sample fields (or each other)" if shadow
+                            else "are not identifiers") + ": a damaged or foreign file")
+    for key in ("index", "seed", "attempt"):
+        v = ann.get(key)
+        if v is not None and (type(v) is not int or v < 0):
+            raise ValueError(f"{path}: '{key}' must be a non-negative integer or null, got "
+                             f"{str(v)[:40]}")
     if ann.get("scene_mask_bits", 8) not in (8, 16):
         raise ValueError(f"{path}: 'scene_mask_bits' must be 8 or 16, got "
                          f"{str(ann['scene_mask_bits'])[:20]}")
@@ -421,7 +435,7 @@ def read_sample(directory: str | os.PathLike) -> dict:
                          f"says {ann['image_size']}")
     if not s["alone_images"]:  # returned only when stored
         del s["alone_images"]
-    for k, v in (ann.get("extra") or {}).items():
+    for k, v in (ann.get("extra") or {}).items():  # never a field: read_annotation checks
         s[k] = v
     for k in ann.get("extra_arrays", []):
         s[k] = arrays[f"extra_{k}"]
@@ -446,6 +460,13 @@ def read_target(directory: str | os.PathLike) -> tuple:
         FileNotFoundError: a file is missing. ValueError: a file is corrupt or inconsistent (the
             message names the file and key).
     """
+    return _read_target(directory)[0]
+
+
+@_named_errors
+def _read_target(directory: str | os.PathLike) -> tuple[tuple, dict]:
+    """`read_target`'s tuple and the annotation it read (for the checks against ``meta.json``
+    that `InterSHDataset.target` shares with the full read)."""
     d = Path(directory)
     ann = read_annotation(d)
     t = ann["target"]
@@ -472,28 +493,4 @@ def read_target(directory: str | os.PathLike) -> tuple:
     if side not in ("left", "right"):
         raise ValueError(f"{d / 'annotation.json'}: side of target {t} is {side!r}")
     return (image, K.astype(np.float64), verts.astype(np.float32), joints.astype(np.float32),
-            side, float(ann["vr"][t]))
-
-
-_TMP_NAME = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
-"""Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``."""
-_SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+|alone_rgb_\d+)\.png$"
-                          r"|^annotation\.(npz|json)$")
-"""Files a sample folder can hold (``_encode``): what a half-written sample may contain."""
-
-
-def _is_own_temporary(p: Path) -> bool:
-    """Whether ``p`` is a temporary that a writer of this module made (and may be removed).
-
-    The name must be `_temporary`'s ``.tmp-<name>-<pid>-<8 hex>``; a folder may hold only sample
-    files, a file must stand for ``meta.json`` or a sample file. Anything else, e.g. a user's
-    ``.tmp-my-notes/``, is left alone.
-    """
-    m = _TMP_NAME.match(p.name)
-    if m is None or p.is_symlink():
-        return False
-    if p.is_dir():
-        return all(c.is_file() and not c.is_symlink() and _SAMPLE_FILE.match(c.name)
-                   for c in p.iterdir())
-    return p.is_file() and (m["name"] == META_FILE or _SAMPLE_FILE.match(m["name"]) is not None)
-
+            side, float(ann["vr"][t])), ann

@@ -24,8 +24,8 @@ from typing import Any
 
 from .candidates import _probe, _probe_summary, _Task
 from .files import read_annotation
-from .reader import _planned, _present, read_meta
-from .root import _coalesce, _diff, _diff_message, _lock, _open_root, merge_shards
+from .reader import _disagreements, _planned, _present, read_meta
+from .root import _check_root, _coalesce, _diff, _diff_message, _lock, _open_root, merge_shards
 from .schema import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -278,6 +278,7 @@ def generate_dataset(
                  str(root / SAMPLES_DIR), width, durable)
     probe, probe_calls, pool = None, 0, None
     with _lock(root), contextlib.ExitStack() as stack:
+        _check_root(root, meta)  # before the probe: a folder that is not this set's is refused
         if balance_vr:
             old = read_meta(root) if (root / META_FILE).exists() else {}
             probe = old.get("vr_probe")
@@ -310,16 +311,18 @@ def generate_dataset(
         stale = _open_root(root, meta)
         samples_dir = root / SAMPLES_DIR
         done_vr: dict[int, float] = {}
-        for i in _present(samples_dir):
+        for i in _present(samples_dir, width):
             if i not in indices:
                 continue
             d = samples_dir / f"{i:0{width}d}"
             ann = read_annotation(d)
+            why = [w for _, w in _disagreements(ann, d, meta)]
             if ann.get("index") != i or ann.get("seed") != sample_seed(seed, i,
                                                                         ann.get("attempt") or 0):
-                raise ValueError(f"{d / 'annotation.json'}: index/seed {ann.get('index')}/"
-                                 f"{ann.get('seed')} do not match this dataset (seed {seed}); "
-                                 f"remove the folder or use another root")
+                why.insert(0, f"{d / 'annotation.json'}: index/seed {ann.get('index')}/"
+                              f"{ann.get('seed')} do not match this dataset (seed {seed})")
+            if why:  # a sample of another set (kind, image size, seed): never counted as done
+                raise ValueError(f"{why[0]}; remove the folder or use another root")
             done_vr[i] = float(ann["vr"][ann["target"]])
         skipped = len(done_vr)
         todo = [i for i in indices if i not in done_vr]
@@ -374,7 +377,7 @@ def _kept_parts(root: Path, meta: dict, parts: int, bins, t0: float) -> Generati
         raise ValueError(_diff_message(root / META_FILE, old, meta, keys) + "\nuse another "
                          "root, or delete the folder to generate anew")
     samples, width = root / SAMPLES_DIR, old["index_width"]
-    present = set(_present(samples))
+    present = set(_present(samples, width))
     planned = _planned(old)
     absent = [i for i in planned if i not in present]
     if absent:

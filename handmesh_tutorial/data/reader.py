@@ -7,8 +7,8 @@ in notebook 05 ("Rendering and the visibility ratio"), used from notebook 08 ("T
 
 from __future__ import annotations
 
+import contextlib
 import os
-import shutil
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .files import _read_json, read_annotation, read_sample, read_target
+from .files import _read_json, _read_target, read_annotation, read_sample
 from .schema import (
     FORMAT_NAME,
     KINDS,
@@ -26,6 +26,7 @@ from .schema import (
     MIN_INDEX_WIDTH,
     READABLE_FORMAT_VERSIONS,
     SAMPLES_DIR,
+    _sample_index,
 )
 from .seeds import sample_seed
 
@@ -69,10 +70,13 @@ def read_meta(root: str | os.PathLike) -> dict:
     return meta
 
 
-def _present(samples_dir: Path) -> list[int]:
+def _present(samples_dir: Path, width: int) -> list[int]:
+    """Indices of the sample folders in ``samples_dir``: folders named by exactly ``width`` ASCII
+    digits (`schema._sample_index`); anything else there is not a sample of the set."""
     if not samples_dir.is_dir():
         return []
-    return sorted(int(p.name) for p in samples_dir.iterdir() if p.name.isdigit() and p.is_dir())
+    found = ((_sample_index(p.name, width), p) for p in samples_dir.iterdir())
+    return sorted(i for i, p in found if i is not None and p.is_dir())
 
 
 def _planned(meta: Mapping) -> list[int]:
@@ -117,7 +121,9 @@ class InterSHDataset:
         self.root = Path(root)
         self.meta = read_meta(self.root)
         self.transform = transform
-        self.indices = np.asarray(_present(self.root / SAMPLES_DIR), dtype=np.int64)
+        self.indices = np.asarray(_present(self.root / SAMPLES_DIR,
+                                           self.meta.get("index_width", MIN_INDEX_WIDTH)),
+                                  dtype=np.int64)
         self._vr: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -151,15 +157,21 @@ class InterSHDataset:
     def target(self, i: int) -> tuple:
         """Only what a training crop of sample ``i``'s target hand needs, read without the masks
         and the other bodies ([`read_target`][handmesh_tutorial.data.files.read_target]):
-        ``(image, K, vertices, joints, side, vr)``. ``transform`` is not applied."""
-        return read_target(self.sample_dir(i))
+        ``(image, K, vertices, joints, side, vr)``. ``transform`` is not applied.
+
+        Raises:
+            ValueError: as ``ds[i]``: the sample is damaged, or disagrees with ``meta.json``
+                (kind, image size, seed rule, index), so a foreign sample is never trained on.
+        """
+        d = self.sample_dir(i)
+        target, ann = _read_target(d)
+        _refuse_disagreements(ann, d, self.meta)  # the same checks as the full read
+        return target
 
     def __getitem__(self, i: int) -> Any:
         d = self.sample_dir(i)
         s = read_sample(d)
-        for key, why in _disagreements(s, d, self.meta):
-            if key in ("index", "kinds", "image_size"):
-                raise ValueError(why)
+        _refuse_disagreements({**s, "image_size": list(s["image"].shape[:2])}, d, self.meta)
         return self.transform(s) if self.transform is not None else s
 
     def vr_table(self) -> np.ndarray:
@@ -170,8 +182,20 @@ class InterSHDataset:
         return self._vr
 
 
-def _disagreements(s: Mapping, folder: Path, meta: Mapping) -> list[tuple[str, str]]:
+def _disagreements(fields: Mapping, folder: Path, meta: Mapping) -> list[tuple[str, str]]:
     """Where a sample that reads correctly disagrees with ``meta.json`` or its folder's name.
+
+    One check for every reader of a root (the full read ``ds[i]``, the lean training read
+    ``ds.target(i)``, `verify_dataset`, and `generate_dataset` resuming), so that no path takes
+    a sample the others refuse.
+
+    Args:
+        fields: the sample's ``index``, ``seed``, ``attempt``, ``kind`` and ``image_size``
+            ([H, W]): a validated ``annotation.json``
+            ([`read_annotation`][handmesh_tutorial.data.files.read_annotation]) or a sample
+            dict with ``image_size`` added.
+        folder: the sample's folder (its name is its index).
+        meta: the root's ``meta.json`` (`read_meta`).
 
     Returns:
         ``[(key, message)]``: the ``meta.json`` key (``"index"`` for the folder's name) and a
@@ -179,28 +203,42 @@ def _disagreements(s: Mapping, folder: Path, meta: Mapping) -> list[tuple[str, s
     """
     out = []
     ann, name = folder / "annotation.json", folder.name
-    if s["index"] is not None and s["index"] != int(name):
-        out.append(("index", f"{ann}: index {s['index']} but folder is {name}"))
+    index = _sample_index(name)
+    if index is None:
+        return [("index", f"{folder}: not a sample number (ASCII digits)")]
+    if fields.get("index") is not None and fields["index"] != index:
+        out.append(("index", f"{ann}: index {fields['index']} but folder is {name}"))
     width = meta.get("index_width", MIN_INDEX_WIDTH)
     if len(name) != width:
         out.append(("index_width", f"{folder}: a {len(name)}-digit folder name, meta.json "
                                    f"index_width {width}"))
-    if not any(a <= int(name) < b for a, b in meta["ranges"]):
-        out.append(("ranges", f"{folder}: index {int(name)} outside meta.json ranges "
+    if not any(a <= index < b for a, b in meta["ranges"]):
+        out.append(("ranges", f"{folder}: index {index} outside meta.json ranges "
                               f"{str(meta['ranges'])[:80]}"))
-    if s["kind"] not in meta["kinds"]:
-        out.append(("kinds", f"{ann}: kind {s['kind']!r} not in meta.json kinds "
+    if fields.get("kind") not in meta["kinds"]:
+        out.append(("kinds", f"{ann}: kind {fields.get('kind')!r} not in meta.json kinds "
                              f"{meta['kinds']}"))
     size = meta.get("image_size")
-    if size is not None and list(s["image"].shape[:2]) != list(size):
-        out.append(("image_size", f"{folder / 'image.png'}: size {list(s['image'].shape[:2])}, "
-                                  f"meta.json image_size {size}"))
-    if s["seed"] is not None and s["attempt"] is not None and "seed" in meta:
-        want = sample_seed(meta["seed"], int(name), int(s["attempt"]))
-        if int(s["seed"]) != want:
-            out.append(("seed", f"{ann}: seed {s['seed']}, the seed rule of meta.json (seed "
+    if size is not None and list(fields.get("image_size") or []) != list(size):
+        out.append(("image_size", f"{folder / 'image.png'}: size "
+                                  f"{list(fields.get('image_size') or [])}, meta.json "
+                                  f"image_size {size}"))
+    seed, attempt = fields.get("seed"), fields.get("attempt")
+    if seed is not None and attempt is not None and "seed" in meta:
+        want = sample_seed(meta["seed"], index, int(attempt))
+        if int(seed) != want:
+            out.append(("seed", f"{ann}: seed {seed}, the seed rule of meta.json (seed "
                                 f"{meta['seed']}) gives {want}"))
     return out
+
+
+def _refuse_disagreements(fields: Mapping, folder: Path, meta: Mapping) -> None:
+    """Raise the first of `_disagreements` as a ``ValueError`` naming the file (a foreign or
+    mislabelled sample is a bad sample for ``--skip-bad``, never read as one of the set)."""
+    found = _disagreements(fields, folder, meta)
+    if found:
+        raise ValueError(f"{found[0][1]} (a sample of another set, or an edited meta.json: "
+                         "`handmesh verify` lists them)")
 
 
 @dataclass
@@ -209,15 +247,26 @@ class VerifyReport:
 
     Attributes:
         root: the dataset folder.
-        checked: sample entries read.
+        checked: sample entries read (entries of ``samples/`` named by ASCII digits).
         bad: ``[(folder name, reason)]`` of the samples that cannot be read on their own
             (missing, damaged or implausible files), sorted by name.
-        removed: the bad entries deleted (``remove=True``); rerunning the same ``generate``
-            call then writes exactly these again, with the same bytes as before.
+        removed: the bad sample folders deleted (``remove=True``): only folders named by an
+            index that ``meta.json`` plans (its ``ranges``, ``index_width`` digits), so that
+            rerunning the ``generate`` command that made the root writes exactly these again,
+            with the same bytes as before.
         disagree: ``[(folder name, meta.json key, reason)]`` of the samples that read correctly
             but disagree with ``meta.json`` (``seed``, ``image_size``, ``kinds``, ``ranges``,
             ``index_width``) or with their folder's name (``index``). Never removed: either
             ``meta.json`` or the samples are wrong, and only the user knows which.
+        kept: ``[(folder name, why)]`` of the bad entries a repair leaves as they are: a file
+            where a folder belongs, a folder of an index the root does not plan, a folder that
+            also holds files no sample has, one a permission error hid, or one that could not
+            be removed (the error).
+        foreign: ``[(entry name, what)]`` of the entries of ``samples/`` that are no sample
+            (not named by ASCII digits): listed, never read, never removed.
+        error: the first ``OSError`` that kept a bad sample from being removed (a read-only
+            root: ``handmesh verify`` prints the report, then exits 6 naming the file), else
+            ``None``.
     """
 
     root: Path
@@ -225,10 +274,14 @@ class VerifyReport:
     bad: list[tuple[str, str]]
     removed: list[str]
     disagree: list[tuple[str, str, str]] = field(default_factory=list)
+    kept: list[tuple[str, str]] = field(default_factory=list)
+    foreign: list[tuple[str, str]] = field(default_factory=list)
+    error: OSError | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
-        """Nothing left to fix: no disagreement, and every bad sample removed."""
+        """Nothing left to fix: no disagreement, and every bad sample removed (entries that are
+        no sample, ``foreign``, do not count)."""
         return not self.disagree and len(self.removed) == len(self.bad)
 
     def disagreements(self) -> dict[str, list[str]]:
@@ -253,8 +306,19 @@ class VerifyReport:
         lines = [f"{self.root}: {self.checked} samples read, {len(self.bad)} bad"
                  + (f", {len(self.removed)} removed" if self.removed else "")
                  + (f", {len({n for n, _, _ in self.disagree})} disagree with meta.json"
-                    if self.disagree else "")]
+                    if self.disagree else "")
+                 + (f", {len(self.foreign)} entries that are no sample (left as they are)"
+                    if self.foreign else "")]
         lines += [f"  {name}: {why}" for name, why in self.bad]
+        lines += [f"  {name}: not removed: {why}" for name, why in self.kept]
+        if self.removed:  # only indices meta.json plans: the generator writes exactly these
+            lines.append("  rerun the `handmesh generate` command that made it (same --kind, "
+                         "--num, --seed, --image-size, --shard) to write the removed samples "
+                         "again")
+        lines += [f"  {name!r}: {what}, not a sample (left as it is)"
+                  for name, what in self.foreign[:20]]
+        if len(self.foreign) > 20:
+            lines.append(f"  and {len(self.foreign) - 20} more entries that are no sample")
         first = {}
         for _, key, why in self.disagree:
             first.setdefault(key, why)
@@ -266,6 +330,15 @@ class VerifyReport:
         return "\n".join(lines)
 
 
+def _entry_kind(p: Path) -> str:
+    """``"folder"``, ``"link"``, ``"file"`` or ``"other"`` of ``p``, links not followed."""
+    if p.is_symlink():
+        return "link"
+    if p.is_dir():
+        return "folder"
+    return "file" if p.is_file() else "other"
+
+
 def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                    progress: bool = True) -> VerifyReport:
     """Re-read every sample of an INTER-SH root; list the unreadable ones and those that disagree
@@ -274,55 +347,115 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
     A sample folder is *bad* when it does not read back on its own
     ([`read_sample`][handmesh_tutorial.data.files.read_sample]: every file, key, shape, dtype
     and the plausibility ranges of [`schema`][handmesh_tutorial.data.schema]), or is a file
-    where a folder belongs. A sample that reads correctly but disagrees with ``meta.json`` (kind,
-    image size, the seed of the sample-seed rule,
+    or a link where a folder belongs. A sample that reads correctly but disagrees with
+    ``meta.json`` (kind, image size, the seed of the sample-seed rule,
     [`sample_seed`][handmesh_tutorial.data.seeds.sample_seed], index width and ranges) or
     with its folder's name is listed in ``disagree``, by key: one edited field of ``meta.json``
-    makes every sample disagree, so such samples are never removed.
+    makes every sample disagree, so such samples are never removed. Entries of ``samples/`` not
+    named by ASCII digits are no samples: listed in ``foreign``, never read nor removed.
+
+    A repair (``remove=True``) takes the root's writer lock (as ``generate`` does, so it never
+    removes a sample under a running ``generate``) and touches only what the generator makes:
+    a bad folder named by an index ``meta.json`` plans (its ``ranges``, ``index_width``
+    digits), found without following links. In it, it deletes only a sample's files
+    (``image.png``, ``annotation.json``...), then the folder if that left it empty; a link at
+    such a name is unlinked (its target is never touched). Everything else is left and listed
+    in ``kept``: a file where a folder belongs, a folder of an index the root does not plan, a
+    folder that also holds other files.
 
     Args:
         root: the dataset folder (with ``meta.json``).
-        remove: delete the bad entries, so that rerunning the same ``generate`` regenerates them
-            (not those that a permission error kept from being read, nor any in ``disagree``).
+        remove: delete the bad sample folders, so that rerunning the ``generate`` command that
+            made the root writes them again (not those in ``kept``, nor any in ``disagree``).
         progress: tqdm progress bar.
 
     Returns:
         A [`VerifyReport`][handmesh_tutorial.data.reader.VerifyReport]; ``report.ok`` tells
-        whether anything is left to fix.
+        whether anything is left to fix; ``report.error`` holds the first ``OSError`` that kept
+        a bad sample from being removed (the report is still complete).
 
     Raises:
-        ValueError: ``meta.json`` itself is unreadable (nothing is removed).
+        ValueError: ``meta.json`` itself is unreadable, or with ``remove``, ``samples`` is a
+            symbolic link (nothing is removed).
+        RuntimeError: with ``remove``, another process writes into the root
+            ([`EnvironmentFailure`][handmesh_tutorial._io.EnvironmentFailure]).
     """
+    from .._io import single_writer
     from .._progress import progress_bar
+    from .root import _is_own_temporary, _remove_sample_folder
+    from .schema import _LOCK_FILE, _TMP_PREFIX
 
     root = Path(root)
     meta = read_meta(root)
     samples = root / SAMPLES_DIR
+    width = meta.get("index_width", MIN_INDEX_WIDTH)
+    if remove and samples.is_symlink():
+        raise ValueError(f"{samples} is a symbolic link (to {os.readlink(samples)}): a repair "
+                         "never works through a link, so nothing was removed; replace the link "
+                         "by the folder itself, or verify without --remove-bad")
     bad: list[tuple[str, str]] = []
     disagree: list[tuple[str, str, str]] = []
-    keep: set[str] = set()  # bad, but not to be removed
-    entries = sorted(p for p in samples.iterdir() if p.name.isdigit()) if samples.is_dir() \
-        else []
-    for p in progress_bar(entries, disable=not progress, desc="verify", unit="sample"):
-        if not p.is_dir() or p.is_symlink():
-            bad.append((p.name, "not a sample folder (a file or link)"))
-            continue
-        try:
-            s = read_sample(p)
-        except (ValueError, OSError) as err:  # read_sample raises no other (files._named_errors)
-            bad.append((p.name, str(err).splitlines()[0] if str(err) else type(err).__name__))
-            if isinstance(err, PermissionError):
-                keep.add(p.name)
-            continue
-        disagree += [(p.name, key, why) for key, why in _disagreements(s, p, meta)]
-    removed = []
-    if remove:
-        for name, _ in bad:
-            if name in keep:
+    kept: list[tuple[str, str]] = []
+    foreign: list[tuple[str, str]] = []
+    removable: list[str] = []
+    error: OSError | None = None
+    with contextlib.ExitStack() as stack:
+        if remove:
+            try:
+                stack.enter_context(single_writer(root / _LOCK_FILE, str(root)))
+            except OSError as err:  # a read-only root: read and report, remove nothing
+                error = err
+        entries = []
+        for p in sorted(samples.iterdir()) if samples.is_dir() else []:
+            if _sample_index(p.name) is not None:
+                entries.append(p)
+            elif not (p.name.startswith(_TMP_PREFIX) and _is_own_temporary(p)):
+                foreign.append((p.name, _entry_kind(p)))
+        for p in progress_bar(entries, disable=not progress, desc="verify", unit="sample"):
+            index, kind = int(p.name), _entry_kind(p)
+            planned = (_sample_index(p.name, width) is not None
+                       and any(a <= index < b for a, b in meta["ranges"]))
+            if kind != "folder":
+                bad.append((p.name, f"not a sample folder (a {kind})"))
+                if kind == "link" and planned:
+                    removable.append(p.name)  # unlinked: its target is never touched
+                elif planned:
+                    kept.append((p.name, f"a {kind} where a sample folder belongs: it is not the "
+                                         "generator's; move it away"))
+                else:
+                    kept.append((p.name, f"meta.json plans no sample {p.name}"))
                 continue
-            target = samples / name
-            shutil.rmtree(target) if target.is_dir() and not target.is_symlink() \
-                else target.unlink()
-            removed.append(name)
+            try:
+                s = read_sample(p)
+            except (ValueError, OSError) as err:  # read_sample raises no other (_named_errors)
+                bad.append((p.name, str(err).splitlines()[0] if str(err) else
+                            type(err).__name__))
+                if isinstance(err, PermissionError):
+                    kept.append((p.name, "a permission error kept it from being read"))
+                elif not planned:
+                    kept.append((p.name, f"meta.json plans no sample {p.name} (index_width "
+                                         f"{width}, ranges {str(meta['ranges'])[:60]})"))
+                else:
+                    removable.append(p.name)
+                continue
+            fields = {**s, "image_size": list(s["image"].shape[:2])}
+            disagree += [(p.name, key, why) for key, why in _disagreements(fields, p, meta)]
+        removed = []
+        for name in removable if remove else []:
+            if error is not None:
+                kept.append((name, str(error)))
+                continue
+            try:
+                left = _remove_sample_folder(samples / name)
+            except OSError as err:
+                error = error or err
+                kept.append((name, str(err)))
+                continue
+            if left:
+                kept.append((name, f"it also holds {', '.join(map(repr, left[:5]))}, which no "
+                                   "sample has: the sample's own files were removed, the rest "
+                                   "left as it is"))
+            else:
+                removed.append(name)
     return VerifyReport(root=root, checked=len(entries), bad=bad, removed=removed,
-                        disagree=disagree)
+                        disagree=disagree, kept=kept, foreign=foreign, error=error)

@@ -9,17 +9,75 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from .._io import fsync_dir, single_writer
-from .files import _is_own_temporary, _temporary, _write_atomic
-from .reader import _planned, _present, read_meta
-from .schema import _LOCK_FILE, _TMP_PREFIX, META_FILE, SAMPLES_DIR
+from .files import _temporary, _write_atomic, read_annotation
+from .reader import _disagreements, _planned, _present, read_meta
+from .schema import (
+    _LOCK_FILE,
+    _TMP_PREFIX,
+    META_FILE,
+    MIN_INDEX_WIDTH,
+    SAMPLES_DIR,
+    _sample_index,
+)
 
 __all__ = ["merge_shards"]
+
+
+_TMP_NAME = re.compile(rf"^{re.escape(_TMP_PREFIX)}(?P<name>.+)-\d+-[0-9a-f]{{8}}$")
+"""Names of this module's temporaries: ``.tmp-<final name>-<pid>-<8 hex digits>``."""
+_SAMPLE_FILE = re.compile(r"^(image|scene_mask|alone_\d+|alone_rgb_\d+)\.png$"
+                          r"|^annotation\.(npz|json)$")
+"""Files a sample folder can hold (``_encode``): what a half-written sample may contain."""
+
+
+def _is_own_temporary(p: Path) -> bool:
+    """Whether ``p`` is a temporary that a writer of this module made (and may be removed).
+
+    The name must be `_temporary`'s ``.tmp-<name>-<pid>-<8 hex>``; a folder may hold only sample
+    files, a file must stand for ``meta.json`` or a sample file. Anything else, e.g. a user's
+    ``.tmp-my-notes/``, is left alone.
+    """
+    m = _TMP_NAME.match(p.name)
+    if m is None or p.is_symlink():
+        return False
+    if p.is_dir():
+        return all(c.is_file() and not c.is_symlink() and _SAMPLE_FILE.match(c.name)
+                   for c in p.iterdir())
+    return p.is_file() and (m["name"] == META_FILE or _SAMPLE_FILE.match(m["name"]) is not None)
+
+
+
+def _remove_sample_folder(folder: Path) -> list[str]:
+    """Delete a sample folder of the generator's, touching nothing else: a link at its place is
+    unlinked (its target untouched); in a real folder only the files a sample has
+    (`_SAMPLE_FILE` names, links among them unlinked) are deleted, then the folder if that
+    emptied it.
+
+    Returns:
+        The names left in the folder (other files, sub-folders): empty when it was removed.
+
+    Raises:
+        OSError: a deletion failed (read-only or forbidden folder); names the path.
+    """
+    if folder.is_symlink() or not folder.is_dir():
+        folder.unlink()
+        return []
+    left = []
+    for child in sorted(folder.iterdir()):
+        if _SAMPLE_FILE.match(child.name) and (child.is_symlink() or child.is_file()):
+            child.unlink()
+        else:
+            left.append(child.name)
+    if not left:
+        folder.rmdir()
+    return left
 
 
 def _coalesce(ranges: Sequence[Sequence[int]]) -> list[list[int]]:
@@ -74,8 +132,71 @@ def _clean_stale(folder: Path) -> int:
     return n
 
 
+def _foreign_entries(root: Path, meta: Mapping) -> list[str]:
+    """What in a root without ``meta.json`` is not the set's own: the entries (relative paths,
+    with why) other than the writer lock, this module's temporaries and ``samples/`` holding only
+    sample folders of ``meta``'s planned indices whose files are a sample's and whose
+    ``annotation.json`` agrees with ``meta`` (`reader._disagreements`: kind, image size, seed
+    rule, index). Empty: the folder may become this set's root."""
+    out: list[str] = []
+    for p in sorted(root.iterdir()):
+        if p.name == _LOCK_FILE or (p.name.startswith(_TMP_PREFIX) and _is_own_temporary(p)):
+            continue
+        if p.name != SAMPLES_DIR or p.is_symlink() or not p.is_dir():
+            out.append(p.name)
+            continue
+        for q in sorted(p.iterdir()):
+            rel = f"{SAMPLES_DIR}/{q.name}"
+            if q.name.startswith(_TMP_PREFIX) and _is_own_temporary(q):
+                continue
+            index = _sample_index(q.name, meta["index_width"])
+            if index is None or not any(a <= index < b for a, b in meta["ranges"]):
+                out.append(f"{rel} (not a sample this run plans)")
+            elif q.is_symlink() or not q.is_dir():
+                out.append(f"{rel} (not a folder)")
+            elif other := [c.name for c in q.iterdir()
+                           if not _SAMPLE_FILE.match(c.name) or c.is_symlink() or c.is_dir()]:
+                out.append(f"{rel} (holds {', '.join(map(repr, sorted(other)[:3]))}, no sample's "
+                           "file)")
+            else:
+                try:
+                    why = [w for _, w in _disagreements(read_annotation(q), q, meta)]
+                except (OSError, ValueError) as err:
+                    why = [str(err).splitlines()[0]]
+                if why:
+                    out.append(f"{rel} ({why[0]})")
+    return out
+
+
+def _check_root(root: Path, meta: Mapping) -> None:
+    """Refuse, before anything is written, a root that is not this set's: a symbolic link as
+    its ``samples`` folder, or (without ``meta.json``) files the generator did not write or
+    samples of another set (`_foreign_entries`).
+
+    Raises:
+        ValueError: naming the entries (at most five) and what to do.
+    """
+    samples = root / SAMPLES_DIR
+    if samples.is_symlink():
+        raise ValueError(f"{samples} is a symbolic link (to {os.readlink(samples)}): a generator "
+                         "writes only inside its own folder, found without following links; "
+                         "replace the link by the folder itself (nothing was written)")
+    if (root / META_FILE).exists():
+        return
+    foreign = _foreign_entries(root, meta)
+    if foreign:
+        shown = "; ".join(foreign[:5]) + (f"; and {len(foreign) - 5} more" if len(foreign) > 5
+                                          else "")
+        raise ValueError(f"{root} has no {META_FILE} but holds what this run did not write: "
+                         f"{shown}. Generate into an empty or new folder, or move these out "
+                         f"(nothing was written; a set whose {META_FILE} was lost resumes only "
+                         "with the parameters its samples were made with)")
+
+
 def _open_root(root: Path, meta: dict) -> int:
-    """Create or check ``root/meta.json``; clean stale temporaries. Returns their count."""
+    """Create or check ``root/meta.json`` (written only after `_check_root`: the folder is empty
+    or the set's own); clean stale temporaries. Returns their count."""
+    _check_root(root, meta)
     path = root / META_FILE
     if path.exists():
         old = read_meta(root)
@@ -125,7 +246,7 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
             raise ValueError(f"cannot merge {roots[0]} and {r}: " +
                              _diff_message(r / META_FILE, base, m, keys))
     for r, m in zip(roots, metas, strict=True):
-        present = set(_present(r / SAMPLES_DIR))
+        present = set(_present(r / SAMPLES_DIR, m.get("index_width", MIN_INDEX_WIDTH)))
         absent = [i for i in _planned(m) if i not in present]
         if absent:
             raise ValueError(f"shard {r} is incomplete: {len(absent)} samples missing (first "

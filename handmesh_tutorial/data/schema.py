@@ -82,8 +82,22 @@ def _fail(where: str, what: str) -> ValueError:
     return ValueError(f"{where}: {what}")
 
 
+_ASCII_NUMBER = re.compile(r"[0-9]{1,18}")
+"""A label or a sample folder's name: ASCII digits only (``str.isdigit`` also takes ``"²"``,
+``"٣"`` or ``"５"``, which would name one sample twice or fail in ``int``)."""
+
+
+def _sample_index(name: str, width: int | None = None) -> int | None:
+    """The index a sample folder's name stands for, or ``None`` when the name is not a sample
+    number: ASCII digits only, and exactly ``width`` of them when given (``meta.json``'s
+    ``index_width``: ``"3"`` and ``"000003"`` cannot both be sample 3)."""
+    if _ASCII_NUMBER.fullmatch(name) is None or (width is not None and len(name) != width):
+        return None
+    return int(name)
+
+
 def _label(key: Any, where: str) -> int:
-    if isinstance(key, str) and key.isdigit():
+    if isinstance(key, str) and _ASCII_NUMBER.fullmatch(key):
         key = int(key)
     if isinstance(key, bool) or not isinstance(key, (int, np.integer)) or not 1 <= key <= MAX_LABEL:
         raise _fail(where, f"label {key!r} is not an integer in 1..{MAX_LABEL}")

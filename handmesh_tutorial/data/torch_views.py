@@ -113,6 +113,8 @@ class HandCropDataset(torch.utils.data.Dataset):
         self._indices = None if indices is None else [int(i) for i in indices]
         self._cache: dict[int, tuple] | None = {} if cache else None
 
+    list_bad_hint = "--skip-bad lists each one it leaves out"  # how a user lists bad samples
+
     # -- subclass interface ------------------------------------------------------------------
     def num_raw(self) -> int:
         """Number of samples of the underlying reader."""
@@ -164,7 +166,7 @@ class HandCropDataset(torch.utils.data.Dataset):
         except BAD_SAMPLE_ERRORS as e:  # also a crop the sample's values make impossible
             name = self.sample_name(index)
             raise BadSampleError(f"sample {name}: {e} (leave such samples out with "
-                                 "skip_bad=True / --skip-bad; list them with handmesh verify)",
+                                 f"skip_bad=True / --skip-bad; {self.list_bad_hint})",
                                  index=index, reason=str(e), sample=name) from e
 
     def make_item(self, image, K, vertices, joints, side: str, vr: float,
@@ -396,6 +398,11 @@ class InterSHTorchDataset(HandCropDataset):
             root_or_dataset = InterSHDataset(root_or_dataset)
         self.source = root_or_dataset
         super().__init__(image_size, train, seed, augment, **kwargs)
+
+    @property
+    def list_bad_hint(self) -> str:  # type: ignore[override]  # verify reads INTER-SH roots
+        root = getattr(self.source, "root", None)
+        return super().list_bad_hint if root is None else f"list them with handmesh verify {root}"
 
     def num_raw(self) -> int:
         return len(self.source)

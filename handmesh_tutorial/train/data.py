@@ -21,7 +21,7 @@ from ..data import InterSHDataset, read_meta
 from ..data import torch_views as TV
 from ..data.freihand import FreiHAND
 from ..data.reader import _present
-from ..data.schema import SAMPLES_DIR
+from ..data.schema import MIN_INDEX_WIDTH, SAMPLES_DIR
 from .config import TrainConfig
 
 __all__ = ["make_datasets"]
@@ -149,7 +149,7 @@ def _root_fingerprint(root: str, dataset: str) -> dict:
     path = Path(root)
     if dataset == "intersh":
         meta = {k: v for k, v in read_meta(path).items() if k != "generator_version"}
-        ids = _present(path / SAMPLES_DIR)
+        ids = _present(path / SAMPLES_DIR, meta.get("index_width", MIN_INDEX_WIDTH))
         digest = hashlib.sha256(",".join(map(str, ids)).encode()).hexdigest()[:16]
         return {"format": dataset, "meta": meta, "samples": len(ids), "ids_sha256": digest}
     files = {p.name: p.stat().st_size for p in sorted(path.glob("*.json"))}
