@@ -241,7 +241,16 @@ def test_recipes_reach_the_training_config(smoke_run, tmp_path):
     assert (cfg["keypoint_weight"], cfg["aligned_weight"]) == (0.5, 1.0)
     assert "recipe `cpu`" in (smoke_run / "report.md").read_text()
     paper = demo.train_config(demo.DemoConfig(recipe="paper"), tmp_path, tmp_path / "t")
-    assert paper.model_kwargs == {"output": "xyz", "smoothing_length": 0.0}
+    # the paper's output and loss, reading the frozen pretrained encoder as it was trained
+    assert paper.model_kwargs == {"output": "xyz", "smoothing_length": 0.0, "keypoints": True}
     assert paper.keypoint_weight == 0 and paper.aligned_weight == 0
+    assert paper.freeze_encoder >= paper.epochs
+    glob = demo.train_config(demo.DemoConfig(recipe="paper", pooling="global"), tmp_path,
+                             tmp_path / "t")
+    assert glob.model_kwargs == {"output": "xyz", "smoothing_length": 0.0}
+    with pytest.raises(ValueError, match="pooling must be"):
+        demo.train_config(demo.DemoConfig(recipe="paper", pooling="x"), tmp_path, tmp_path / "t")
+    with pytest.raises(ValueError, match="choice of the paper recipe"):
+        demo.train_config(demo.DemoConfig(pooling="global"), tmp_path, tmp_path / "t")
     with pytest.raises(ValueError, match=r"recipe must be one of \['cpu', 'paper'\], got 'x'"):
         demo.train_config(demo.DemoConfig(recipe="x"), tmp_path, tmp_path / "t")

@@ -76,3 +76,13 @@ def test_bad_arguments_are_named(call, match):
 def test_format_interval_keeps_signs_readable():
     assert format_interval({"difference": -4.3, "low": -6.09, "high": -2.56}) == \
         "-4.30 (-6.09 to -2.56)"
+
+
+def test_the_lazy_submodules_are_the_right_modules():
+    import subprocess
+    import sys
+
+    code = ("import handmesh_tutorial as hmt; "
+            "assert hmt.metrics.intervals.__name__.endswith('.intervals'); "
+            "assert hmt.metrics.surface.__name__.endswith('.surface')")
+    subprocess.run([sys.executable, "-c", code], check=True)

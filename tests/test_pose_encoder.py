@@ -2,6 +2,7 @@
 pose objective, the int8 file, loading into MSMR-Net, pretraining runs, the shipped file."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -226,3 +227,30 @@ def test_stop_after_keeps_the_schedule_and_a_rerun_continues_to_the_same_weights
     a = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=True)["model"]
     b = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)["model"]
     assert all(torch.allclose(a[k].float(), b[k].float(), atol=1e-5) for k in a)
+
+
+def test_the_neutral_encoder_descends_from_random_weights_and_names_resolve():
+    path = PE.pretrained_encoder_path("neutral")
+    assert PE.encoder_source_path("neutral") == path and path.stat().st_size < 10e6
+    assert PE.encoder_source_path("pretrained") == PE.pretrained_encoder_path()
+    assert PE.encoder_source_path("x/y.pt") == Path("x/y.pt")
+    with pytest.raises(ValueError, match="shipped encoders are"):
+        PE.pretrained_encoder_path("other")
+    _, meta = PE.read_pose_encoder(path)
+    lineage = PE.encoder_lineage(meta)
+    assert lineage["decoder_neutral"] and lineage["origin"] == "random weights"
+    made = meta["pretrained"]
+    assert made["recipe"]["init"] is None and made["stop_after"] == made["steps"]
+    test_seeds = set(range(0, 12)) | {20, 21, 40, 41, 500}
+    assert made["data"]["train_seed"] not in test_seeds
+    assert "/" not in str(made["recipe"]) and "/" not in str(made.get("command"))  # no paths
+    # the demo's shipped encoder descends from the shipped network: not decoder-neutral
+    assert not PE.encoder_lineage(PE.pretrained_encoder_info())["decoder_neutral"]
+
+
+def test_encoder_lineage_of_an_empty_or_unknown_record_says_so():
+    assert PE.encoder_lineage({})["origin"] == "unknown"
+    chain = {"pretrained": {"recipe": {"init": "some.pt", "data_seed": 3},
+                            "init_from": {"recipe": {"init": None, "data_seed": 2}}}}
+    got = PE.encoder_lineage(chain)
+    assert got["decoder_neutral"] and [r["data_seed"] for r in got["runs"]] == [2, 3]

@@ -91,5 +91,5 @@ def __getattr__(name: str):
     if name in ("surface", "intervals"):
         import importlib
 
-        return importlib.import_module(f"{__name__}.surface")
+        return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

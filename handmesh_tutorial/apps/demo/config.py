@@ -91,6 +91,12 @@ class DemoConfig:
             keypoint head with pose pooling, a global-rotation head, the skinned decoder output,
             keypoint and aligned-joint losses beside the paper's L1) or ``"paper"`` (L1 vertex loss
             only, global-pooling encoder).
+        pooling: where the paper recipe's network reads the frozen pretrained encoder:
+            ``"joints"`` (default: its features pooled at its own predicted 2D joints, as the
+            encoder was pretrained; no keypoint loss, the encoder is not trained) or ``"global"``
+            (the ResNet part only, globally pooled, as the paper's ImageNet encoder). The CPU
+            recipe always pools at the joints. Docs page "Why the paper starts from pretrained
+            weights".
         balance_train: VR-balance the training scenes too (several times slower to generate:
             docs page "INTER-SH on disk", "VR-balanced sets").
         init_encoder: where the encoder starts: ``"pretrained"`` (the shipped hand encoder,
@@ -117,6 +123,7 @@ class DemoConfig:
     attention: bool = True
     augment: bool = False
     recipe: str = "cpu"
+    pooling: str = "joints"
     balance_train: bool = False
     init_encoder: str | None = "pretrained"
     freeze_encoder: int = 10
@@ -177,6 +184,15 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
     """
     from ...train import TrainConfig  # lazy: torch
 
+    if config.pooling not in ("joints", "global"):
+        raise ValueError(f"pooling must be 'joints' or 'global', got {config.pooling!r}")
+    if config.pooling == "global" and config.recipe != "paper":
+        raise ValueError("pooling='global' is a choice of the paper recipe; the CPU recipe "
+                         "pools at the joints")
+    recipe = _recipe_fields(config.recipe)
+    if config.recipe == "paper" and config.pooling == "joints" and config.init_encoder:
+        # the pretrained encoder as it was trained: its features pooled at its own joints
+        recipe["model_kwargs"] = {**recipe["model_kwargs"], "keypoints": True}
     kw = dict(data=str(data), out_dir=str(out_dir), image_size=config.image_size,
               epochs=config.epochs, batch_size=config.batch_size, lr=config.lr,
               lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
@@ -185,6 +201,6 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
               init_encoder=config.init_encoder,
               freeze_encoder=config.freeze_encoder if config.init_encoder else 0,
               encoder_lr_scale=config.encoder_lr_scale if config.init_encoder else 1.0,
-              **_recipe_fields(config.recipe))
+              **recipe)
     kw.update(overrides)
     return TrainConfig.preset("demo", **kw)
