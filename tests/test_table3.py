@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from handmesh_tutorial.apps.demo import DemoConfig, generate_data
-from handmesh_tutorial.apps.demo.table3 import run_table3, summarise_table3
+from handmesh_tutorial.apps.demo.table3 import format_table3, run_table3, summarise_table3
 from handmesh_tutorial.budget import budget
 
 
@@ -49,6 +49,10 @@ def test_the_summary_recovers_known_differences_and_the_bottleneck():
     b = s["bottleneck"]
     assert b["spread_paper"] == pytest.approx(0.5, abs=0.02)
     assert b["spread_cpu"] < 0.06 and b["low"] > 0.3
+    md = format_table3(s)
+    single = paper["variants"]["single"]
+    assert f"| single | {single['pa_mpjpe']:.2f} ± {single['half_width']:.2f} |" in md
+    assert md.count("| single - multi |") == 2 and f"{b['spread_paper']:.2f} mm" in md
 
 
 def test_no_bottleneck_is_reported_when_both_configurations_spread_alike():

@@ -31,7 +31,7 @@ from ...visibility import VR_BINS
 from .ablation import run_ablation
 from .config import DemoConfig
 
-__all__ = ["CONFIGURATIONS", "run_table3", "summarise_table3", "shipped_table3",
+__all__ = ["CONFIGURATIONS", "run_table3", "summarise_table3", "shipped_table3", "format_table3",
            "RESULTS_FILE"]
 
 CONFIGURATIONS = {
@@ -194,3 +194,43 @@ def shipped_table3() -> dict:
 
     path = _version.shipped_file(RESULTS_FILE, "python benchmarks/dev/table3_two_configs.py")
     return json.loads(path.read_text())
+
+
+def format_table3(summary: dict) -> str:
+    """`summarise_table3`'s result as markdown: per configuration the decoders' rows (PA-MPJPE
+    mean +- 95 % half-width over seeds, per seed, the paired difference to the mean training
+    hand, roughness, flipped faces) and every pair (scene-paired and seed intervals, the smallest
+    detectable differences); then the bottleneck test. Millimetres."""
+    out = []
+    for conf, c in summary["configurations"].items():
+        out += [f"**{conf}** ({c['description']}; {c['scenes']} test scenes, seeds "
+                f"{', '.join(map(str, c['seeds']))}; mean training hand {c['mean_hand']:.2f}, "
+                f"rest hand {c['rest_hand']:.2f})", "",
+                "| decoder | PA-MPJPE | per seed | vs mean hand (95 % CI) | / rest hand | "
+                "roughness (deg) | flipped |", "|---|---|---|---|---|---|---|"]
+        for name, r in c["variants"].items():
+            d = r["vs_mean_hand"]
+            hw = "" if r["half_width"] is None else f" ± {r['half_width']:.2f}"
+            out.append(f"| {name} | {r['pa_mpjpe']:.2f}{hw} | "
+                       f"{', '.join(f'{v:.2f}' for v in r['pa_mpjpe_per_seed'])} | "
+                       f"{d['difference']:+.2f} ({d['low']:+.2f} to {d['high']:+.2f}) | "
+                       f"{r['ratio_to_rest_hand']:.2f} | {r['roughness_deg']:.1f} | "
+                       f"{100 * r['flipped']:.2f} % |")
+        out += ["", "| pair (a - b) | over scenes (95 % CI) | over seeds (95 % CI) | "
+                "detectable: scenes / seeds |", "|---|---|---|---|"]
+        for pr in c["pairs"]:
+            s, sd = pr["scenes"], pr.get("seeds")
+            seeds = "-" if sd is None else \
+                f"{sd['difference']:+.2f} ({sd['low']:+.2f} to {sd['high']:+.2f})"
+            det = f"{pr['detectable_scenes']:.2f}" + (
+                "" if "detectable_seeds" not in pr else f" / {pr['detectable_seeds']:.2f}")
+            out.append(f"| {pr['a']} - {pr['b']} | {s['difference']:+.2f} ({s['low']:+.2f} to "
+                       f"{s['high']:+.2f}) | {seeds} | {det} |")
+        out.append("")
+    if "bottleneck" in summary:
+        b = summary["bottleneck"]
+        out.append(f"Spread of the decoders' means: {b['spread_paper']:.2f} mm in the paper's "
+                   f"configuration, {b['spread_cpu']:.2f} mm in the CPU recipe; difference "
+                   f"{b['difference']:+.2f} mm (95 % bootstrap interval over scenes "
+                   f"{b['low']:+.2f} to {b['high']:+.2f}).")
+    return "\n".join(out)
