@@ -36,7 +36,7 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
               "lr", "max_steps", "seed", "device", "workers")
     kw = {k: getattr(args, k) for k in fields if getattr(args, k) is not None}
     if args.image_sizes:
-        kw["image_sizes"] = tuple(int(s) for s in args.image_sizes.split(","))
+        kw["image_sizes"] = args.image_sizes
     if args.init is not None:
         kw["init"] = None if args.init == "none" else args.init
     res = build_pretrained_encoder(args.out, PosePretrainConfig(**kw),
@@ -49,6 +49,15 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
           f"{last['64']['pa_mpjpe']:.2f} mm at 64 px (mean training hand "
           f"{last['mean training hand']['pa_mpjpe']:.2f}) -> {res['file']}")
     return 0
+
+
+def _sides(text: str) -> tuple[int, ...]:
+    """``"64,96,128"`` -> ``(64, 96, 128)``; argparse's error names the option and the form."""
+    try:
+        return tuple(int(s) for s in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be comma-separated crop sides in pixels (e.g. "
+                                         f"64,96,128), got {text!r}") from None
 
 
 def add_pretrain_commands(sub) -> None:
@@ -103,8 +112,8 @@ def add_pretrain_commands(sub) -> None:
     pe.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 900; "
                     "validation: the next)")
     pe.add_argument("--render-size", type=int, help="scene image side (default: 224)")
-    pe.add_argument("--image-sizes", help="crop sides trained on, comma-separated (default: "
-                    "64,96,128)")
+    pe.add_argument("--image-sizes", type=_sides, help="crop sides trained on, "
+                    "comma-separated (default: 64,96,128)")
     pe.add_argument("--encoder", dest="backbone", help="image encoder, a ResNet (default: "
                     "resnet10)")
     pe.add_argument("--backbone", action=_DeprecatedAlias, dest="backbone", canonical="--encoder")
