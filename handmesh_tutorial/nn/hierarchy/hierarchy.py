@@ -12,6 +12,8 @@ import hashlib
 import math
 import os
 import warnings
+import zipfile
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -209,8 +211,11 @@ def _load(path: Path, v: np.ndarray, f: np.ndarray, factors: tuple[float, ...]) 
             [0, 1], rows that do not sum to 1, a kept vertex not mapped to itself.
         OSError, ValueError: an unreadable or refused file (`open_npz`).
     """
-    with open_npz(path) as z:
-        z = {k: z[k] for k in z.files}
+    try:
+        with open_npz(path) as z:
+            z = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, EOFError, zlib.error) as e:  # a member that fails its CRC...
+        raise _BadCache(f"unreadable ({type(e).__name__}: {e})") from None
     n = len(factors) + 1
     names = ["factors", "digest", *(f"{a}_{l}" for l in range(n) for a in ("vertices", "faces")),
              *(f"{a}_{l}" for l in range(n - 1)
