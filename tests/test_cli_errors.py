@@ -206,3 +206,20 @@ def test_pretrain_encoder_image_sizes_that_are_not_numbers_name_the_option(capsy
     assert e.value.code == 2
     assert "--image-sizes: must be comma-separated crop sides in pixels (e.g. 64,96,128), got " \
            "'64,abc'" in capsys.readouterr().err
+
+
+def test_a_finished_command_does_not_fail_on_a_terminal_that_cannot_show_its_output(tmp_path):
+    """Issue 43 item 11: under ``PYTHONIOENCODING=ascii`` (or a C locale) a finished ``generate``
+    into a folder named with an accent exited 3 ("'ascii' codec can't encode")."""
+    import os
+    import subprocess
+    import sys
+
+    root = tmp_path / "données"
+    generate_dataset(root, functools.partial(toy_sample, image_size=64), num=2, seed=1,
+                     kind="hand-hand", progress=False, durable=False)
+    env = dict(os.environ, PYTHONIOENCODING="ascii")
+    out = subprocess.run([sys.executable, "-m", "handmesh_tutorial.apps.cli", "verify", str(root),
+                          "--no-progress"], capture_output=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr.decode("ascii", "replace")
+    assert b"donn\\xe9es: 2 samples read, 0 bad" in out.stdout, out.stdout

@@ -65,7 +65,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     init = None if args.init_encoder == "none" else args.init_encoder
     cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe, init_encoder=init)
-    res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress)
+    res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress,
+                        overwrite=args.overwrite)
     print(f"handmesh demo: report written to {res.report} ({res.seconds['total'] / 60:.1f} min "
           f"this run; budget tier {cfg.budget})")
     print(f"held-out: {res.scores['num_samples']} scenes; '{demo.BASELINE_ROW}' = the "
@@ -165,6 +166,14 @@ def _channels(text: str) -> tuple[int, ...]:
     return channels
 
 
+def _out_folder(text: str) -> str:
+    """An output folder: ``""`` is refused (it would silently mean the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"must name a folder, got {text!r} (use . for the "
+                                         "current folder)")
+    return text
+
+
 def _positive_int(text: str) -> int:
     """An integer >= 1 (``--threads``, ``--batch-size``...); argparse names the option."""
     try:
@@ -237,7 +246,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                         device=args.device, out_dir=args.out, num_samples=args.num,
                         template=args.template, progress=not args.no_progress,
                         threads=args.threads, camera_frame=not args.network_frame,
-                        skip_bad=args.skip_bad)
+                        skip_bad=args.skip_bad, overwrite=args.overwrite)
     from .demo import BASELINE_ROW, headline
 
     sc = ev["scores"]
@@ -265,7 +274,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     demo = sub.add_parser("demo", help="generate a VR-balanced INTER-SH set, train MSMR-Net on "
                           "CPU, evaluate on held-out scenes, write OUT/report.md (resumable)")
-    demo.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
+    demo.add_argument("--out", type=_out_folder, default="runs/demo",
+                      help="output folder (default: runs/demo); a folder holding files the demo "
+                      "did not write is refused unless --overwrite")
+    demo.add_argument("--overwrite", action="store_true",
+                      help="write into an --out that holds other files (the demo's files of "
+                      "the same names are replaced, the others left)")
     demo.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     demo.add_argument("--budget", choices=("smoke", "default", "full"), default=None,
                       help="size tier (default: HANDMESH_BUDGET, else default)")
@@ -287,7 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="scene kind; mixed draws one per sample")
     gen.add_argument("--num", type=int, required=True, help="samples in the whole dataset")
     gen.add_argument("--seed", type=int, default=0, help="base seed (default: 0)")
-    gen.add_argument("--out", required=True, help="output folder (rerun to resume)")
+    gen.add_argument("--out", type=_out_folder, required=True,
+                     help="output folder (rerun to resume)")
     gen.add_argument("--image-size", type=int, default=224, help="image side in pixels "
                      "(default: 224)")
     gen.add_argument("--workers", type=int, default=1, help="worker processes (default: 1)")
@@ -342,7 +357,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--val-data", help="separate validation root (default: hold out "
                     "--val-fraction of --data)")
     tr.add_argument("--val-fraction", type=float, help="held-out share (default: 0.1)")
-    tr.add_argument("--out", default="runs/train", help="output folder (default: runs/train)")
+    tr.add_argument("--out", type=_out_folder, default="runs/train",
+                    help="output folder (default: runs/train); a folder holding files train did "
+                    "not write is refused unless --overwrite")
     tr.add_argument("--budget", choices=("smoke", "default", "full"), default=None,
                     help="size tier for epochs / batch / image size / threads (default: "
                     "HANDMESH_BUDGET)")
@@ -384,8 +401,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--checkpoint-every", type=int, help="checkpoint every N epochs")
     tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint_last.pt")
     tr.add_argument("--overwrite", action="store_true",
-                    help="start afresh in an OUT that already holds a run (its checkpoints are "
-                    "replaced); without --resume or --overwrite such an OUT is refused")
+                    help="start afresh in an OUT that already holds a run (all its files are "
+                    "removed first: checkpoints, logs, config.json); without --resume or "
+                    "--overwrite such an OUT is refused. Also writes into an OUT holding files "
+                    "train did not write (those are left)")
     tr.add_argument("--skip-bad", action="store_true",
                     help="load every sample once first, leave out those that cannot be read and "
                     "list them at the end (default: the first bad sample stops the run, named)")
@@ -408,7 +427,13 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--kind", action=_DeprecatedAlias, dest="dataset", canonical="--dataset",
                     choices=("intersh", "freihand"))
     ev.add_argument("--split", default="evaluation", help="FreiHAND split (default: evaluation)")
-    ev.add_argument("--out", default=None, help="write eval.json, predictions.npz and figures")
+    ev.add_argument("--out", type=_out_folder, default=None,
+                    help="write eval.json, predictions.npz and figures (an earlier evaluation's "
+                    "files there are replaced as a set; a folder holding files evaluate did not "
+                    "write is refused unless --overwrite)")
+    ev.add_argument("--overwrite", action="store_true",
+                    help="write into an --out that holds other files (evaluate's files of the "
+                    "same names are replaced, the others left)")
     ev.add_argument("--image-size", type=int, default=None, help="default: the checkpoint's")
     ev.add_argument("--batch-size", type=_positive_int, default=16)
     ev.add_argument("--num", type=int, default=None, help="only the first N samples")
@@ -426,8 +451,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _tolerant_output() -> None:
+    """Let stdout and stderr write any text: a character the terminal's encoding cannot show
+    (a folder named ``données`` under ``PYTHONIOENCODING=ascii`` or a C locale) is written as
+    an escape (``\\xe9``) instead of ending a finished command with a ``UnicodeEncodeError``."""
+    for stream in (sys.stdout, sys.stderr):
+        encoding = (getattr(stream, "encoding", None) or "").lower().replace("-", "")
+        if hasattr(stream, "reconfigure") and not encoding.startswith("utf") \
+                and getattr(stream, "errors", "strict") == "strict":
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # a stream that cannot change now: left as it is
+                pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``handmesh`` console script; returns the exit code."""
+    _tolerant_output()
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:
