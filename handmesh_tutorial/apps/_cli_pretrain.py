@@ -62,10 +62,10 @@ def _sides(text: str) -> tuple[int, ...]:
 
 def add_pretrain_commands(sub) -> None:
     """Add ``pretrain`` and ``pretrain-encoder`` to the ``handmesh`` sub-parsers."""
-    from .cli import _DeprecatedAlias  # at call time: cli imports this module
+    from .cli import _DeprecatedAlias, _out_folder  # at call time: cli imports this module
     pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
                          "(a GPU when there is one), export a small int8 file (resumable)")
-    pre.add_argument("--out", default="runs/pretrained",
+    pre.add_argument("--out", type=_out_folder, default="runs/pretrained",
                      help="output folder (default: runs/pretrained)")
     pre.add_argument("--install", action="store_true",
                      help="copy the result into the package, where hmt.pretrained.pretrained() and "
@@ -102,7 +102,7 @@ def add_pretrain_commands(sub) -> None:
     pe = sub.add_parser("pretrain-encoder", help="make the pretrained hand image encoder: generate "
                         "scenes, train on 2D keypoints and 3D joints (no mesh decoder), export a "
                         "small int8 file (resumable)")
-    pe.add_argument("--out", default="runs/pretrained_encoder",
+    pe.add_argument("--out", type=_out_folder, default="runs/pretrained_encoder",
                     help="output folder (default: runs/pretrained_encoder)")
     pe.add_argument("--install", action="store_true",
                     help="copy the result into the package, where "
