@@ -62,7 +62,8 @@ def _sides(text: str) -> tuple[int, ...]:
 
 def add_pretrain_commands(sub) -> None:
     """Add ``pretrain`` and ``pretrain-encoder`` to the ``handmesh`` sub-parsers."""
-    from .cli import _DeprecatedAlias, _out_folder  # at call time: cli imports this module
+    from ._cli_types import _out_folder
+    from .cli import _DeprecatedAlias  # at call time: cli imports this module
     pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
                          "(a GPU when there is one), export a small int8 file (resumable)")
     pre.add_argument("--out", type=_out_folder, default="runs/pretrained",

@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["generate_training_scenes", "generate_train_val", "check_device"]
+__all__ = ["generate_training_scenes", "generate_train_val"]
 
 _DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?|mps")
 

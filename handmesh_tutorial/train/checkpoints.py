@@ -25,7 +25,7 @@ import torch
 from torch import nn
 
 from .._io import atomic_write_bytes as _atomic_write_bytes
-from .._io import json_record, leftover_temporaries
+from .._io import claim_out_dir, json_record, leftover_temporaries, remove_outputs
 from .._untrusted import load_torch_file
 from .._version import PRETRAINED_FILE, __version__, shipped_file
 from ..nn.quantize import dequantize_state_dict, quantize_state_dict  # noqa: F401 - as in 0.1
@@ -221,6 +221,22 @@ refuses them by default)."""
 RUN_OUTPUTS = (*RUN_CHECKPOINTS, "metrics.csv", "steps.csv", "skipped.json", "config.json")
 """Every file a run writes in its ``out_dir``: ``overwrite=True`` removes them all before the new
 run starts, so none of an earlier run (a best checkpoint the new run never writes) is left."""
+
+
+def claim_run_dir(out_dir, *, overwrite: bool, lock: str, fresh: bool = False) -> Path:
+    """[`claim_out_dir`][handmesh_tutorial._io.claim_out_dir] for a training run: a folder
+    holding files ``train`` did not write is refused unless ``overwrite`` (a run of an older
+    version is recognised by `is_train_run`); ``fresh``: then remove every file of an earlier
+    run (``RUN_OUTPUTS``), so that none is taken for the new run's (a stale best checkpoint).
+
+    Raises:
+        ValueError, NotADirectoryError, FileExistsError, OSError: as ``claim_out_dir``.
+    """
+    out = claim_out_dir(out_dir, "train", RUN_OUTPUTS, overwrite=overwrite,
+                        recognise=is_train_run, hidden=(lock,))
+    if fresh:
+        remove_outputs(out, RUN_OUTPUTS)
+    return out
 
 
 def is_train_run(out_dir) -> bool:
