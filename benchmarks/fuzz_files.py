@@ -965,3 +965,170 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+# ------------------------------------------------------------------ issue 43: planted caches and
+# files of the user's in --out. Appended as its own section: it extends TARGETS, FAILURES and the
+# dispatch above (target_files, mutate, read, classify) by wrapping them.
+#
+# ``hierarchy-cache``: the mesh-hierarchy cache of the library's hand (``hierarchy_*.npz``)
+# damaged by the mutations above, then read by ``mesh_hierarchy`` and applied by the network's
+# ``SparseVertexMap``: the hierarchy must equal a fresh build (``refused`` = rebuilt with a
+# warning naming the file; a changed hierarchy is ``implausible``, a crash ``crash``).
+# ``out-folder``: files of the user's (named like the command's outputs or not, a symlink to a
+# file outside, a sub-folder) planted in the ``--out`` of ``train``, ``evaluate`` or ``demo``; the
+# command must refuse the folder naming them (exit 5) or, in a folder that is its own, leave
+# them. A planted file changed, removed or written through is the failure ``clobbered``.
+
+PLANTED_TARGETS = ("hierarchy-cache", "out-folder")
+TARGETS = (*TARGETS, *PLANTED_TARGETS)
+FAILURES = (*FAILURES, "clobbered")
+OUTCOMES = ("clean", "refused", *FAILURES, "skipped")
+
+_OUT_COMMANDS = ("train", "evaluate", "demo", "evaluate-own")
+_OUT_NAMES = {"train": ["config.json", "metrics.csv", "steps.csv", "checkpoint_best.pt"],
+              "evaluate": ["eval.json", "predictions.npz", "vr.png", "pred.json"],
+              "demo": ["report.md", "loss.png", "demo.json", "overlays.png"]}
+_base_target_files, _base_mutate, _base_read, _base_classify = (target_files, mutate, read,
+                                                                 classify)
+
+
+def _planted_corpus(base: Path) -> None:
+    """The pristine cache under ``base/cache`` and an empty ``base/out`` (made once)."""
+    if not list((base / "cache").glob("hierarchy_*.npz")):
+        from handmesh_tutorial.hand import HandModel
+        from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+
+        t = HandModel().template
+        mesh_hierarchy(t.vertices, t.faces, cache_dir=base / "cache")
+    (base / "out").mkdir(exist_ok=True)
+
+
+def target_files(base: Path, target: str) -> tuple[str, list[str]]:  # noqa: F811 - extended
+    if target == "hierarchy-cache":
+        _planted_corpus(base)
+        return "cache", [str(p.relative_to(base)) for p in sorted((base / "cache").iterdir())]
+    if target == "out-folder":
+        _planted_corpus(base)
+        return "out", ["out"]
+    return _base_target_files(base, target)
+
+
+def _digest_file(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _plant_user_files(rng: random.Random, mutation: str, case_root: Path) -> tuple[str, list]:
+    """Plant the user's files in ``case_root/out`` (the mutation picks their contents);
+    ``planted.json`` records what must stay untouched."""
+    out = case_root / "out"
+    command = rng.choice(_OUT_COMMANDS)
+    own = command == "evaluate-own"
+    names = [] if own else rng.sample(_OUT_NAMES[command], rng.randrange(1, 3))
+    names += rng.sample(["notes.txt", "photo.jpg", "my results.csv", "données.md"],
+                        rng.randrange(0 if names else 1, 3))
+    outside = case_root / "outside.txt"
+    outside.write_text("a file outside --out\n")
+    for name in names:
+        data = {"bitflip": b"\x00\x01", "truncate": b"", "value": b'{"config": {}}'}.get(
+            mutation, f"the user's own {name} ({mutation})\n".encode())
+        (out / name).write_bytes(data)
+    if not own and rng.random() < 0.5:  # a link named like an output, to a file outside
+        link = rng.choice(_OUT_NAMES[command])
+        if link not in names:
+            (out / link).symlink_to(outside)
+            names.append(link)
+    if not own and rng.random() < 0.3:
+        (out / "sub").mkdir()
+        (out / "sub" / "keep.txt").write_text("mine")
+        names.append("sub")
+    if own:  # the command's own folder (its marker): the user's other files are left there
+        (out / ".handmesh-evaluate").write_text("{}")
+    record = {"command": command.removesuffix("-own"), "own": own,
+              "files": {str(p.relative_to(case_root)): _digest_file(p)
+                        for p in [outside, *sorted(out.rglob("*"))]
+                        if p.is_file() and not p.name.startswith(".handmesh-")}}
+    (case_root / "planted.json").write_text(json.dumps(record))
+    return f"{command}: {names}", names
+
+
+def mutate(rng: random.Random, mutation: str, case_root: Path, files: list[str],  # noqa: F811
+           base: Path, target: str) -> tuple[str, list[str]]:
+    if target == "out-folder":
+        return _plant_user_files(rng, mutation, case_root)
+    return _base_mutate(rng, mutation, case_root, files, base, target)
+
+
+def _read_cache(case_root: Path) -> dict:
+    import warnings
+
+    import numpy as np
+    import torch
+
+    from handmesh_tutorial.hand import HandModel
+    from handmesh_tutorial.nn.blocks import SparseVertexMap
+    from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+
+    t = HandModel().template
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        h = mesh_hierarchy(t.vertices, t.faces, cache_dir=case_root / "cache")
+    ref = mesh_hierarchy(t.vertices, t.faces, use_cache=False)
+    for m in h.up + h.down:  # as the network applies them (a bad index crashed scipy here)
+        SparseVertexMap(m)(torch.ones(1, m.shape[1], 2))
+    same = all(np.array_equal(a.toarray(), b.toarray()) for a, b in
+               zip(h.up + h.down, ref.up + ref.down, strict=True)) and all(
+        np.array_equal(a, b) for a, b in zip(h.faces + h.vertices, ref.faces + ref.vertices,
+                                             strict=True))
+    if not same:
+        return {"ok": True, "implausible": "the planted cache changed the hierarchy"}
+    warned = [str(w.message) for w in caught if "mesh-hierarchy cache" in str(w.message)]
+    if warned:  # rebuilt, with a warning naming the file
+        return {"ok": False, "value_error": True, "message": warned[0]}
+    return {"ok": True, "implausible": None}
+
+
+def _read_out(case_root: Path, base: Path) -> dict:
+    record = json.loads((case_root / "planted.json").read_text())
+    out = str(case_root / "out")
+    command = record["command"]
+    if command == "train":
+        argv = ["train", "--data", str(base / "intersh"), "--out", out, "--epochs", "1",
+                "--batch-size", "4", "--image-size", str(IMAGE), "--encoder", "resnet10",
+                "--channels", "4,4,8,8,8", "--latent-channels", "8", "--threads", "1",
+                "--no-progress", "--no-fsync"]
+    elif command == "evaluate":
+        argv = ["evaluate", "--checkpoint", str(base / "checkpoint.pt"), "--data",
+                str(base / "intersh"), "--out", out, "--threads", "1", "--no-progress",
+                "--batch-size", "4", "--device", "cpu"]
+    else:
+        argv = ["demo", "--out", out, "--budget", "smoke", "--no-progress"]
+    code, text = _cli(argv)
+    changed = [name for name, digest in record["files"].items()
+               if not (case_root / name).is_file() or _digest_file(case_root / name) != digest]
+    res = {"ok": code == 0, "code": code, "message": text, "implausible": None}
+    if changed:
+        res["clobbered"] = changed
+    if record["own"] and code == 0 and not (case_root / "out" / "eval.json").is_file():
+        res["implausible"] = "evaluate exited 0 without eval.json"
+    return res
+
+
+def read(target: str, case_root: Path, base: Path) -> dict:  # noqa: F811 - extended
+    if target == "hierarchy-cache":
+        return _read_cache(case_root)
+    if target == "out-folder":
+        return _read_out(case_root, base)
+    return _base_read(target, case_root, base)
+
+
+def classify(r: dict) -> str:  # noqa: F811 - extended
+    if r.get("clobbered"):
+        r["message"] = f"changed: {r['clobbered']}; {r.get('message', '')}"
+        return "clobbered"
+    if r.get("code") == 5 and not r.get("ok"):
+        named = any(n and n in r.get("message", "") for n in r["names"])
+        return "refused" if named else "unnamed"
+    return _base_classify(r)

@@ -117,6 +117,17 @@ def moved_attribute(module: str, name: str):
 _MISSING = object()
 
 
+def _is_module(old: str) -> bool:
+    """Whether an old dotted path names a module in its new home (not a function, not nothing)."""
+    for target in _targets(old) or ():
+        try:
+            if importlib.util.find_spec(target) is not None:
+                return True
+        except (ImportError, ValueError):  # the parent is a plain module, not a package
+            continue
+    return False
+
+
 class _Moved(types.ModuleType):
     """Stand-in for an old module path: attributes come from the new module(s)."""
 
@@ -134,11 +145,10 @@ class _Moved(types.ModuleType):
             value = getattr(mod, name, _MISSING)  # once: a renamed name warns on each access
             if value is not _MISSING:
                 return value
-        if _targets(f"{self.__name__}.{name}"):  # an old submodule: its stand-in
+        if name in MOVED_NAMES.get(self.__name__[len(_P):], {}):  # a name that left the module
+            return moved_attribute(self.__name__, name)  # before submodules: hmt.model.pretrained
+        if _is_module(f"{self.__name__}.{name}"):  # an old submodule: its stand-in
             return importlib.import_module(f"{self.__name__}.{name}")
-        extra = MOVED_NAMES.get(self.__name__[len(_P):], {})
-        if name in extra:
-            return getattr(importlib.import_module(_P + extra[name]), name)
         raise AttributeError(f"module {self.__name__!r} (now {self.__dict__['_targets']}) has "
                              f"no attribute {name!r}")
 

@@ -9,6 +9,7 @@ into plain JSON values, and names where a value that JSON cannot hold sits.
 from __future__ import annotations
 
 import contextlib
+import fnmatch
 import glob
 import io
 import json
@@ -24,7 +25,8 @@ import numpy as np
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
            "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer",
-           "EnvironmentFailure", "names_path", "check_writable"]
+           "EnvironmentFailure", "names_path", "check_writable", "claim_out_dir", "out_marker",
+           "json_record", "remove_outputs"]
 
 
 _TMP_SUFFIX = ".tmp"
@@ -273,3 +275,110 @@ def write_json(path: str | os.PathLike, obj: Any, *, indent: int = 1, sort_keys:
     text = json.dumps(json_safe(obj, Path(path).name), indent=indent, sort_keys=sort_keys,
                       allow_nan=False)
     return atomic_write_text(path, text + "\n", durable)
+
+
+# ------------------------------------------------------------------ output folders
+
+_MARKER = ".handmesh-{command}"
+_RECORD_MAX_BYTES = 1 << 20
+
+
+def out_marker(folder: str | os.PathLike, command: str) -> Path:
+    """The small file that makes ``folder`` an output folder of ``command``:
+    ``.handmesh-<command>``."""
+    return Path(folder) / _MARKER.format(command=command)
+
+
+def json_record(path: str | os.PathLike, *keys: str) -> bool:
+    """Whether ``path`` is a JSON object (at most 1 MiB) holding every key of ``keys``: how an
+    output folder of an older version, written before the marker files, is recognised."""
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(_RECORD_MAX_BYTES + 1)
+        obj = json.loads(raw) if len(raw) <= _RECORD_MAX_BYTES else None
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(obj, dict) and all(k in obj for k in keys)
+
+
+def claim_out_dir(out: str | os.PathLike, command: str, outputs: tuple[str, ...] = (), *,
+                  overwrite: bool = False, recognise: Callable[[Path], bool] | None = None,
+                  hidden: tuple[str, ...] = ()) -> Path:
+    """Make ``out`` an output folder of ``command``, or refuse it: the one rule every command
+    with ``--out`` follows, checked before any work (docs page *Reliability*).
+
+    A folder is the command's own when it holds the command's marker (`out_marker`, written
+    here) or, for folders of older versions, when ``recognise(out)`` says so (the command's
+    record, such as a run's ``config.json``). A missing or empty folder becomes the command's
+    own. Any other folder holding files is refused, its files listed, unless ``overwrite``:
+    the user then gives it to the command, whose outputs of the same names are replaced and
+    whose other files are left. Nothing is written in a refused folder.
+
+    Args:
+        out: the folder (``--out``); ``""`` is refused (it would mean the current folder).
+        command: the command's name (``"train"``, ``"evaluate"``, ``"demo"``).
+        outputs: the names of the files the command writes there (for the temporaries of a
+            killed write, which do not make a folder foreign).
+        overwrite: accept a folder holding files the command did not write.
+        recognise: recognises an output folder of an older version (no marker yet).
+        hidden: other names the command makes there (its lock file), which do not make a folder
+            foreign either.
+
+    Returns:
+        The folder (created with its parents when missing).
+
+    Raises:
+        ValueError: ``out`` is empty.
+        NotADirectoryError: ``out`` is a file.
+        FileExistsError: ``out`` holds files the command did not write (the message lists up to
+            eight and says what to do) and ``overwrite`` is false.
+        OSError: the folder or the marker cannot be written (the error names it).
+    """
+    raw = os.fspath(out)
+    if not str(raw).strip():
+        raise ValueError(f"the output folder of {command} is empty ({raw!r}): name a folder, "
+                         f"e.g. --out runs/{command} (use --out . for the current folder)")
+    folder = Path(raw)
+    marker = out_marker(folder, command)
+    if folder.exists() and not folder.is_dir():
+        raise NotADirectoryError(f"{folder} is a file, not a folder: choose another --out")
+    own = folder.is_dir() and (marker.is_file() or (recognise is not None and recognise(folder)))
+    if folder.is_dir() and not own:
+        ours = {marker.name, *hidden}
+        pats = [f".{name}.*{_TMP_SUFFIX}" for name in outputs]
+        foreign = sorted(e.name for e in os.scandir(folder) if e.name not in ours
+                         and not any(fnmatch.fnmatchcase(e.name, p) for p in pats))
+        if foreign and not overwrite:
+            shown = ", ".join(foreign[:8]) + (f" and {len(foreign) - 8} more"
+                                              if len(foreign) > 8 else "")
+            raise FileExistsError(
+                f"{folder} holds files that {command} did not write ({shown}): choose another "
+                f"--out (a new or empty folder), move them away, or pass --overwrite to write "
+                f"there anyway ({command}'s files of the same names are then replaced, the "
+                "others left)")
+    with names_path(folder):
+        folder.mkdir(parents=True, exist_ok=True)
+        if not marker.is_file():
+            atomic_write_text(marker, json.dumps({"command": command, "written_by":
+                                                  "handmesh_tutorial"}) + "\n", durable=False)
+    return folder
+
+
+def remove_outputs(folder: str | os.PathLike, names: tuple[str, ...]) -> list[Path]:
+    """Delete a command's previous outputs ``names`` from its own ``folder`` (in that order;
+    links are removed, never followed), so that no file of an earlier run is left beside a new
+    run's. Other files are left.
+
+    Returns:
+        The removed paths.
+
+    Raises:
+        OSError: one cannot be removed (a folder of that name, no permission); it is named.
+    """
+    gone = []
+    for name in names:
+        path = Path(folder) / name
+        if os.path.lexists(path):
+            path.unlink()
+            gone.append(path)
+    return gone

@@ -1,11 +1,12 @@
 """The optional dependencies (pip extras) and the one helper that imports them.
 
 The core install (``pip install handmesh_tutorial``) is what the components a researcher lifts
-need: torch, numpy, scipy, trimesh, tqdm and pillow. Scene generation and rendering, figures and
-the notebooks' widgets need more; they come as extras (``pip install "handmesh_tutorial[scenes]"``,
-``[notebooks]``, ``[docs]``, ``[dev]``; ``make setup`` installs them all). The library imports an
-extra's package only inside the function that needs it, through `require`, so a missing extra
-fails there with an `ImportError` that names the extra to install. Docs page "Installation".
+need: torch, numpy, scipy, trimesh, tqdm and pillow. Scene generation and rendering, figures,
+the notebooks' widgets and ONNX export need more; they come as extras (``pip install
+"handmesh_tutorial[scenes]"``, ``[notebooks]``, ``[export]``, ``[docs]``, ``[dev]``; ``make setup``
+installs them all). The library imports an extra's package only inside the function that needs
+it, through `require`, so a missing extra fails there with an `ImportError` that names the extra
+to install. Docs page "Installation".
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "matplotlib": ("matplotlib", "notebooks"),
     "ipywidgets": ("ipywidgets", "notebooks"),
     "meshcat": ("meshcat", "notebooks"),
+    "onnx": ("onnx", "export"),
+    "onnxscript": ("onnxscript", "export"),
+    "onnxruntime": ("onnxruntime", "export"),
 }
 """Each optional package the library imports: import name -> (PyPI distribution, extra)."""
 

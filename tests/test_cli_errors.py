@@ -167,3 +167,59 @@ def test_evaluate_checks_its_output_folder_before_evaluating(root, tmp_path, cap
     err = capsys.readouterr().err
     assert code == cli.EXIT_CODES["environment"], err
     assert f"Read-only file system: {out}" in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["pretrain", "--device", "cdua"], r"device must be 'auto', 'cpu', 'cuda', 'cuda:N' or 'mps', "
+                                       r"got 'cdua'"),
+    (["pretrain", "--lr", "-1"], r"lr must be a finite number > 0, got -1\.0"),
+    (["pretrain", "--lr", "nan"], r"lr must be a finite number > 0, got nan"),
+    (["pretrain", "--image-size", "100000"], r"image_size must be an integer in \[32, 4096\]"),
+    (["pretrain", "--device", "cuda:99"], r"device 'cuda:99': this machine has \d+ CUDA"),
+    (["pretrain-encoder", "--device", "gpu"], r"device must be .* got 'gpu'"),
+    (["pretrain-encoder", "--device", "cuda:99"], r"device 'cuda:99': this machine has"),
+    (["pretrain-encoder", "--lr", "0"], r"lr must be positive, got 0\.0"),
+])
+def test_pretrain_checks_its_options_before_generating_any_scene(argv, message, tmp_path, capsys,
+                                                                 monkeypatch):
+    """Issue 43 item 11: ``--device``, ``--image-size`` and ``--lr`` were checked by the training
+    run, after the scenes (hours at the default sizes) were generated."""
+    import re
+
+    from handmesh_tutorial.apps import pretrain_network
+
+    def never(*a, **k):
+        raise AssertionError("generated scenes before checking the options")
+
+    monkeypatch.setattr(pretrain_network, "generate_train_val", never)
+    out = tmp_path / "run"
+    code = cli.main([*argv, "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 3, err
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+def test_pretrain_encoder_image_sizes_that_are_not_numbers_name_the_option(capsys):
+    with pytest.raises(SystemExit) as e:  # was exit 3 "invalid literal for int()", no option
+        cli.main(["pretrain-encoder", "--image-sizes", "64,abc"])
+    assert e.value.code == 2
+    assert "--image-sizes: must be comma-separated crop sides in pixels (e.g. 64,96,128), got " \
+           "'64,abc'" in capsys.readouterr().err
+
+
+def test_a_finished_command_does_not_fail_on_a_terminal_that_cannot_show_its_output(tmp_path):
+    """Issue 43 item 11: under ``PYTHONIOENCODING=ascii`` (or a C locale) a finished ``generate``
+    into a folder named with an accent exited 3 ("'ascii' codec can't encode")."""
+    import os
+    import subprocess
+    import sys
+
+    root = tmp_path / "données"
+    generate_dataset(root, functools.partial(toy_sample, image_size=64), num=2, seed=1,
+                     kind="hand-hand", progress=False, durable=False)
+    env = dict(os.environ, PYTHONIOENCODING="ascii")
+    out = subprocess.run([sys.executable, "-m", "handmesh_tutorial.apps.cli", "verify", str(root),
+                          "--no-progress"], capture_output=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr.decode("ascii", "replace")
+    assert b"donn\\xe9es: 2 samples read, 0 bad" in out.stdout, out.stdout

@@ -264,3 +264,20 @@ def test_a_mano_sparse_matrix_with_indices_beyond_its_shape_is_refused_not_a_cra
     assert out.returncode == 0, (out.returncode, out.stderr[-300:])
     assert re.search(r"MANO_RIGHT\.pkl: sparse matrix .*csc_matrix: inconsistent arrays",
                      out.stdout), out.stdout
+
+
+def test_a_seeded_subset_of_planted_caches_and_users_files_in_out_is_clean_or_refused(tmp_path):
+    """Issue 43: a planted ``hierarchy_*.npz`` is rebuilt with a warning naming it (it crashed
+    scipy or changed the scores); the user's files in ``--out`` are refused by name, or left in
+    a folder that is the command's own (they were overwritten)."""
+    base = F.build_corpus(tmp_path)
+    todo = [("hierarchy-cache", m, 9_100 + i) for i, m in enumerate(F.MUTATIONS)]
+    todo += [("out-folder", m, 9_200 + i) for i, m in enumerate(F.MUTATIONS[:5])]
+    results = F.fuzz(base, todo, timeout=120)
+    bad = [(r["target"], r["mutation"], r["n"], r["outcome"], r.get("what"),
+            r.get("message", "")[-200:]) for r in results if r["outcome"] not in
+           ("clean", "refused")]
+    assert not bad, bad
+    seen = {(r["target"], r["outcome"]) for r in results}
+    assert ("hierarchy-cache", "refused") in seen and ("out-folder", "refused") in seen, seen
+    assert "clobbered" in F.FAILURES and "| all | all | 12 |" in F.table(results)

@@ -280,3 +280,16 @@ def test_the_library_map_names_every_module_file():
              and not (p.name.startswith("_") and p.name != "_numba.py" and p.parent != PACKAGE_DIR)]
     missing = [f for f in files if f"`{f}`" not in page]
     assert not missing, f"docs/concepts/pipeline.md 'Map of the library' does not name {missing}"
+
+
+def test_the_0_1_name_hmt_model_pretrained_still_works(monkeypatch):
+    """Issue 43 item 18: ``hmt.model.pretrained`` of 0.1 (now ``hmt.pretrained.pretrained``)."""
+    import sys
+
+    for name in [m for m in sys.modules if m == "handmesh_tutorial.model"]:
+        monkeypatch.delitem(sys.modules, name)
+    with pytest.warns(FutureWarning, match=r"handmesh_tutorial\.pretrained\.pretrained.*0\.3"):
+        old = hmt.model.pretrained
+    assert old is hmt.pretrained.pretrained
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        hmt.model.nope  # noqa: B018 - an unknown name stays an AttributeError, not an import error

@@ -214,3 +214,18 @@ def test_shipped_files_are_recorded_with_the_version_that_shipped_them():
         assert _version.shipped_version(assets / name) == version
     assert hmt.pretrained.pretrained_info()["library_version"] == (
         _version.SHIPPED_ASSETS["msmr_net_pretrained.pt"][1])
+
+
+def test_onnx_export_has_its_own_extra_and_a_missing_package_names_it():
+    """Issue 43 item 16: ONNX export needed the whole ``dev`` extra (jupyterlab, pytest...)."""
+    extras = PYPROJECT["project"]["optional-dependencies"]
+    export = {_dist(r) for r in extras["export"]}
+    assert export == {"onnx", "onnxscript", "onnxruntime"}, export
+    dev = {_dist(r) for r in extras["dev"]}
+    assert export <= dev or any(r.replace(" ", "").startswith("handmesh_tutorial[") and
+                                "export" in r for r in extras["dev"]), extras["dev"]
+    for module in ("onnx", "onnxscript", "onnxruntime"):
+        message = _optional.missing_extra_message(module, "ONNX export")
+        assert 'pip install "handmesh_tutorial[export]"' in message, message
+    page = (ROOT / "docs" / "concepts" / "export.md").read_text()
+    assert 'pip install "handmesh_tutorial[export]"' in page

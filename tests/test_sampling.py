@@ -263,10 +263,81 @@ def test_cache_rebuilds_a_corrupt_file(tmp_path, sphere):
     h1 = mesh_hierarchy(*sphere, factors=(2,), cache_dir=tmp_path)
     (path,) = tmp_path.glob("hierarchy_*.npz")
     path.write_bytes(b"not an npz file")
-    h2 = mesh_hierarchy(*sphere, factors=(2,), cache_dir=tmp_path)
+    with pytest.warns(UserWarning, match=r"not a readable npz .*; rebuilding it"):
+        h2 = mesh_hierarchy(*sphere, factors=(2,), cache_dir=tmp_path)
     assert np.array_equal(h1.faces[1], h2.faces[1])
     with np.load(path, allow_pickle=False) as z:
         assert "faces_1" in z.files
+
+
+
+def _plant(arrays: dict, key: str, how: str, redigest: bool) -> dict:
+    a = {k: v.copy() for k, v in arrays.items()}
+    if how == "drop":
+        del a[key]
+    elif how == "swap_in_row":  # two weights of one 3-entry row swapped: rows still sum to 1
+        indptr = a["up_indptr_1"]
+        r = int(np.flatnonzero(np.diff(indptr) == 3)[0])
+        i = indptr[r]
+        d = a["up_data_1"]
+        d[i], d[i + 1] = d[i + 1], d[i]
+        assert d[i] != d[i + 1]
+    else:
+        how(a[key])
+    if redigest:  # a planted file that also forges the digest: the structural checks catch it
+        from handmesh_tutorial.nn.hierarchy.hierarchy import _digest
+
+        a["digest"] = np.asarray(_digest(a))
+    return a
+
+
+def _set(i, value):
+    def f(x):
+        x[i] = value
+    return f
+
+
+@pytest.mark.parametrize("key, how, redigest, reason", [
+    # issue 43 item 3: only level 0 was checked; these crashed scipy (SIGSEGV in `evaluate`),
+    # changed the network's output silently, or put a NaN in it
+    ("up_indices_1", _set(0, 10**6), True, r"up_indices_1 holds ids in \[.*1000000\]"),
+    ("up_indices_2", _set(1, -7), True, r"up_indices_2 holds ids in \[-7"),
+    ("up_data_1", lambda d: d.__imul__(0.5), True, r"up level 1: row \d+ sums to 0\.5"),
+    ("up_data_2", _set(0, np.nan), True, r"up_data_2 holds weights outside \[0, 1\]"),
+    ("up_data_2", lambda d: d.__imul__(0.5), False, r"digest does not match"),
+    ("up_data_1", "swap_in_row", False, r"digest does not match"),
+    ("up_indptr_1", lambda p: p.__setitem__(slice(-1, None), 10**6), True, r"up_indptr_1 must"),
+    ("kept_1", lambda k: k.__setitem__(1, k[0]), True, r"kept_1 must hold distinct ids"),
+    ("kept_2", _set(0, 10**6), True, r"kept_2 must hold distinct ids in \[0, \d+\)"),
+    ("vertices_3", lambda v: v.__iadd__(1.0), True, r"vertices_3 are not the kept vertices"),
+    ("faces_2", _set((0, 0), 10**6), True, r"faces_2: faces reference vertex ids"),
+    ("factors", lambda f: f.__imul__(1.5), True, r"built for factors"),
+    ("faces_4", "drop", False, r"missing arrays \['faces_4'\]"),
+])
+def test_cache_checks_every_level_and_rebuilds_a_planted_file_with_a_warning(
+        tmp_path, sphere, sphere_hier, key, how, redigest, reason):
+    mesh_hierarchy(*sphere, cache_dir=tmp_path)
+    (path,) = tmp_path.glob("hierarchy_*.npz")
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    np.savez(path, **_plant(arrays, key, how, redigest))
+    with pytest.warns(UserWarning, match=r"mesh-hierarchy cache .*hierarchy_\w+\.npz is not a "
+                                         r"valid hierarchy of this mesh \(.*" + reason):
+        h = mesh_hierarchy(*sphere, cache_dir=tmp_path)
+    for a, b in zip(h.up + h.down, sphere_hier.up + sphere_hier.down, strict=True):
+        assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+        assert np.array_equal(a.data, b.data)
+    for l in range(h.num_levels):
+        assert np.array_equal(h.faces[l], sphere_hier.faces[l])
+        assert np.array_equal(h.vertices[l], sphere_hier.vertices[l])
+    with np.load(path, allow_pickle=False) as z:  # the file was rebuilt and overwritten
+        assert np.array_equal(z["up_data_1"], sphere_hier.up[1].data)
+        assert np.array_equal(z["faces_4"], sphere_hier.faces[4])
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the rebuilt file loads without a warning
+        mesh_hierarchy(*sphere, cache_dir=tmp_path)
 
 
 def _no_cache_env(monkeypatch, home):

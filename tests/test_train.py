@@ -247,6 +247,7 @@ def test_resume_before_the_first_checkpoint_starts_afresh(samples, tmp_path):
     tr, _ = _data(samples, n_train=4)
     cfg = T.TrainConfig(out_dir=str(tmp_path / "run"), epochs=1, batch_size=2, **TINY)
     (tmp_path / "run").mkdir()
+    (tmp_path / "run" / ".handmesh-train").write_text("{}")  # the run's marker, then
     (tmp_path / "run" / "config.json").write_text("{}")  # killed before its first checkpoint
     (tmp_path / "run" / "metrics.csv").write_text("epoch\n1\n")
     with pytest.warns(UserWarning, match="no checkpoint_last.pt yet"):
@@ -502,7 +503,8 @@ def test_evaluate_out_without_matplotlib_writes_scores_and_names_the_extra(toy_r
         ev = T.evaluate(net, toy_root, image_size=32, progress=False, num_samples=2,
                         baseline=False, out_dir=tmp_path / "ev")
     assert sorted(ev["files"]) == ["json", "predictions"]
-    assert sorted(p.name for p in (tmp_path / "ev").iterdir()) == ["eval.json", "predictions.npz"]
+    assert sorted(p.name for p in (tmp_path / "ev").iterdir()) == [
+        ".handmesh-evaluate", "eval.json", "predictions.npz"]  # its marker, scores, predictions
 
 
 def test_evaluate_scores_the_rest_hand_baseline_beside_the_model(toy_root, tmp_path):

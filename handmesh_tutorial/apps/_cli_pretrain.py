@@ -36,7 +36,7 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
               "lr", "max_steps", "seed", "device", "workers", "precision")
     kw = {k: getattr(args, k) for k in fields if getattr(args, k) is not None}
     if args.image_sizes:
-        kw["image_sizes"] = tuple(int(s) for s in args.image_sizes.split(","))
+        kw["image_sizes"] = args.image_sizes
     if args.init is not None:
         kw["init"] = None if args.init == "none" else args.init
     res = build_pretrained_encoder(args.out, PosePretrainConfig(**kw),
@@ -52,12 +52,22 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sides(text: str) -> tuple[int, ...]:
+    """``"64,96,128"`` -> ``(64, 96, 128)``; argparse's error names the option and the form."""
+    try:
+        return tuple(int(s) for s in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be comma-separated crop sides in pixels (e.g. "
+                                         f"64,96,128), got {text!r}") from None
+
+
 def add_pretrain_commands(sub) -> None:
     """Add ``pretrain`` and ``pretrain-encoder`` to the ``handmesh`` sub-parsers."""
+    from ._cli_types import _out_folder
     from .cli import _DeprecatedAlias  # at call time: cli imports this module
     pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
                          "(a GPU when there is one), export a small int8 file (resumable)")
-    pre.add_argument("--out", default="runs/pretrained",
+    pre.add_argument("--out", type=_out_folder, default="runs/pretrained",
                      help="output folder (default: runs/pretrained)")
     pre.add_argument("--install", action="store_true",
                      help="copy the result into the package, where hmt.pretrained.pretrained() and "
@@ -94,7 +104,7 @@ def add_pretrain_commands(sub) -> None:
     pe = sub.add_parser("pretrain-encoder", help="make the pretrained hand image encoder: generate "
                         "scenes, train on 2D keypoints and 3D joints (no mesh decoder), export a "
                         "small int8 file (resumable)")
-    pe.add_argument("--out", default="runs/pretrained_encoder",
+    pe.add_argument("--out", type=_out_folder, default="runs/pretrained_encoder",
                     help="output folder (default: runs/pretrained_encoder)")
     pe.add_argument("--install", nargs="?", const="pretrained", default=False,
                     choices=("pretrained", "neutral"),
@@ -106,8 +116,8 @@ def add_pretrain_commands(sub) -> None:
     pe.add_argument("--data-seed", type=int, help="seed of the training scenes (default: 900; "
                     "validation: the next)")
     pe.add_argument("--render-size", type=int, help="scene image side (default: 224)")
-    pe.add_argument("--image-sizes", help="crop sides trained on, comma-separated (default: "
-                    "64,96,128)")
+    pe.add_argument("--image-sizes", type=_sides, help="crop sides trained on, "
+                    "comma-separated (default: 64,96,128)")
     pe.add_argument("--encoder", dest="backbone", help="image encoder, a ResNet (default: "
                     "resnet10)")
     pe.add_argument("--backbone", action=_DeprecatedAlias, dest="backbone", canonical="--encoder")

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import errno
 import pickle
-import re
 import sys
 import traceback
 import zipfile
@@ -31,6 +30,16 @@ from pathlib import Path
 
 from ..budget import budget
 from ._cli_pretrain import add_pretrain_commands
+from ._cli_types import (
+    _channels,
+    _degrees_or_none,
+    _device,
+    _out_folder,
+    _positive_int,
+    _shard,
+    _share,
+    _tolerant_output,
+)
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
@@ -65,7 +74,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     init = None if args.init_encoder == "none" else args.init_encoder
     cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe, init_encoder=init)
-    res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress)
+    res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress,
+                        overwrite=args.overwrite)
     print(f"handmesh demo: report written to {res.report} ({res.seconds['total'] / 60:.1f} min "
           f"this run; budget tier {cfg.budget})")
     print(f"held-out: {res.scores['num_samples']} scenes; '{demo.BASELINE_ROW}' = the "
@@ -81,36 +91,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         if name in res.files:
             print(f"{name}: {res.files[name]}")
     return 0
-
-
-def _two_numbers(text: str, sep: str, cast, form: str):
-    """``"a<sep>b"`` -> ``(cast(a), cast(b))``; argparse's error names the expected ``form``."""
-    try:
-        a, b = (cast(x) for x in text.split(sep))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{form}, got {text!r}") from None
-    return a, b
-
-
-def _share(text: str) -> tuple[float, float]:
-    return _two_numbers(text, ",", float, "--frame-share must look like MIN,MAX (e.g. 0.3,0.5)")
-
-
-def _degrees_or_none(text: str) -> float | None:
-    if text.lower() == "none":
-        return None
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--thumb-zero-elevation must be degrees or 'none', got "
-                                         f"{text!r}") from None
-
-
-def _shard(text: str) -> tuple[int, int]:
-    k, n = _two_numbers(text, "/", int, "--shard must look like K/N (e.g. 0/4)")
-    if n < 1 or not 0 <= k < n:
-        raise argparse.ArgumentTypeError(f"--shard K/N needs 0 <= K < N, got {text!r}")
-    return k, n
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
@@ -156,35 +136,6 @@ def _cmd_generate(args: argparse.Namespace) -> int:
               f"{s.vr_probe['candidates']} candidates, hits per bin {s.vr_probe['hits']}); "
               f"samples written outside their bin: {s.off_bin}")
     return 0
-
-
-def _channels(text: str) -> tuple[int, ...]:
-    try:
-        channels = tuple(int(x) for x in text.split(","))
-    except ValueError:
-        channels = ()
-    if not channels or min(channels) < 1:
-        raise argparse.ArgumentTypeError("--channels must be comma-separated positive integers "
-                                         f"(e.g. 16,24,32,48,64), got {text!r}")
-    return channels
-
-
-def _positive_int(text: str) -> int:
-    """An integer >= 1 (``--threads``, ``--batch-size``...); argparse names the option."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
-    return value
-
-
-def _device(text: str) -> str:
-    """``auto``, ``cpu``, ``cuda``, ``cuda:N`` or ``mps`` (other torch devices: not trained on)."""
-    if not re.fullmatch(r"auto|cpu|cuda(:\d+)?|mps", text):
-        raise argparse.ArgumentTypeError(f"must be auto, cpu, cuda, cuda:N or mps, got {text!r}")
-    return text
 
 
 _TRAIN_OPTIONS = ("data", "dataset", "val_data", "val_fraction", "epochs", "batch_size",
@@ -241,7 +192,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                         device=args.device, out_dir=args.out, num_samples=args.num,
                         template=args.template, progress=not args.no_progress,
                         threads=args.threads, camera_frame=not args.network_frame,
-                        skip_bad=args.skip_bad)
+                        skip_bad=args.skip_bad, overwrite=args.overwrite)
     from .demo import BASELINE_ROW, headline
 
     sc = ev["scores"]
@@ -269,7 +220,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     demo = sub.add_parser("demo", help="generate a VR-balanced INTER-SH set, train MSMR-Net on "
                           "CPU, evaluate on held-out scenes, write OUT/report.md (resumable)")
-    demo.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
+    demo.add_argument("--out", type=_out_folder, default="runs/demo",
+                      help="output folder (default: runs/demo); a folder holding files the demo "
+                      "did not write is refused unless --overwrite")
+    demo.add_argument("--overwrite", action="store_true",
+                      help="write into an --out that holds other files (the demo's files of "
+                      "the same names are replaced, the others left)")
     demo.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     demo.add_argument("--budget", choices=("smoke", "default", "full"), default=None,
                       help="size tier (default: HANDMESH_BUDGET, else default)")
@@ -294,7 +250,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="scene kind; mixed draws one per sample")
     gen.add_argument("--num", type=int, required=True, help="samples in the whole dataset")
     gen.add_argument("--seed", type=int, default=0, help="base seed (default: 0)")
-    gen.add_argument("--out", required=True, help="output folder (rerun to resume)")
+    gen.add_argument("--out", type=_out_folder, required=True,
+                     help="output folder (rerun to resume)")
     gen.add_argument("--image-size", type=int, default=224, help="image side in pixels "
                      "(default: 224)")
     gen.add_argument("--workers", type=int, default=1, help="worker processes (default: 1)")
@@ -349,7 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--val-data", help="separate validation root (default: hold out "
                     "--val-fraction of --data)")
     tr.add_argument("--val-fraction", type=float, help="held-out share (default: 0.1)")
-    tr.add_argument("--out", default="runs/train", help="output folder (default: runs/train)")
+    tr.add_argument("--out", type=_out_folder, default="runs/train",
+                    help="output folder (default: runs/train); a folder holding files train did "
+                    "not write is refused unless --overwrite")
     tr.add_argument("--budget", choices=("smoke", "default", "full"), default=None,
                     help="size tier for epochs / batch / image size / threads (default: "
                     "HANDMESH_BUDGET)")
@@ -391,8 +350,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--checkpoint-every", type=int, help="checkpoint every N epochs")
     tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint_last.pt")
     tr.add_argument("--overwrite", action="store_true",
-                    help="start afresh in an OUT that already holds a run (its checkpoints are "
-                    "replaced); without --resume or --overwrite such an OUT is refused")
+                    help="start afresh in an OUT that already holds a run (all its files are "
+                    "removed first: checkpoints, logs, config.json); without --resume or "
+                    "--overwrite such an OUT is refused. Also writes into an OUT holding files "
+                    "train did not write (those are left)")
     tr.add_argument("--skip-bad", action="store_true",
                     help="load every sample once first, leave out those that cannot be read and "
                     "list them at the end (default: the first bad sample stops the run, named)")
@@ -415,7 +376,13 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--kind", action=_DeprecatedAlias, dest="dataset", canonical="--dataset",
                     choices=("intersh", "freihand"))
     ev.add_argument("--split", default="evaluation", help="FreiHAND split (default: evaluation)")
-    ev.add_argument("--out", default=None, help="write eval.json, predictions.npz and figures")
+    ev.add_argument("--out", type=_out_folder, default=None,
+                    help="write eval.json, predictions.npz and figures (an earlier evaluation's "
+                    "files there are replaced as a set; a folder holding files evaluate did not "
+                    "write is refused unless --overwrite)")
+    ev.add_argument("--overwrite", action="store_true",
+                    help="write into an --out that holds other files (evaluate's files of the "
+                    "same names are replaced, the others left)")
     ev.add_argument("--image-size", type=int, default=None, help="default: the checkpoint's")
     ev.add_argument("--batch-size", type=_positive_int, default=16)
     ev.add_argument("--num", type=int, default=None, help="only the first N samples")
@@ -435,6 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``handmesh`` console script; returns the exit code."""
+    _tolerant_output()
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:

@@ -39,6 +39,7 @@ from ..nn.pose_encoder import (
     export_pose_encoder,
     pose_loss,
 )
+from .pretraining_data import check_device
 
 __all__ = ["PosePretrainConfig", "evaluate_pose", "pretrain_pose_encoder",
            "build_pretrained_encoder"]
@@ -102,6 +103,11 @@ class PosePretrainConfig:
     workers: int = 0
 
     def __post_init__(self):
+        check_device(self.device)  # before hours of scene generation (so are the checks below)
+        if isinstance(self.image_sizes, str) or not all(
+                hasattr(s, "__index__") and not isinstance(s, bool) for s in self.image_sizes):
+            raise ValueError(f"image_sizes must be integers (crop sides in pixels, e.g. "
+                             f"(64, 96, 128)), got {self.image_sizes!r}")
         self.image_sizes = tuple(int(s) for s in self.image_sizes)
         for name in ("train_scenes", "val_scenes", "batch_size", "max_steps", "render_size"):
             v = getattr(self, name)
@@ -257,6 +263,7 @@ def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.Path
         FloatingPointError: a non-finite loss (names the step).
     """
     config = config or PosePretrainConfig()
+    check_device(config.device, probe=True)  # a CUDA device asked for: before generating
     say = log or (lambda *_: None)
     out = Path(out)
     dev = torch.device("cuda" if config.device == "auto" and torch.cuda.is_available()
@@ -425,6 +432,7 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     from .pretrain_network import _commit, _hardware, generate_train_val
 
     config = config or PosePretrainConfig()
+    check_device(config.device, probe=True)  # a CUDA device asked for: before generating
     say = log or (lambda *_: None)
     out = Path(out)
     workers = config.workers or os.cpu_count() or 1

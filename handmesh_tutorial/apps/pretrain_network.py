@@ -27,7 +27,8 @@ from pathlib import Path
 
 from .. import _version
 from .._version import PRETRAINED_FILE, __version__
-from .pretraining_data import generate_train_val, generate_training_scenes
+from ..budget import check_image_size
+from .pretraining_data import check_device, generate_train_val, generate_training_scenes
 
 __all__ = ["PretrainedRecipe", "build_pretrained", "export_pretrained",
            "generate_training_scenes", "generate_train_val"]
@@ -94,6 +95,18 @@ class PretrainedRecipe:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+        # what training would refuse, refused before hours of scene generation
+        check_image_size(self.image_size)
+        check_image_size(self.render_size, "render_size")
+        for name, ok, want in (("lr", lambda x: 0 < x < math.inf, "a finite number > 0"),
+                               ("lr_gamma", lambda x: 0 < x <= 1, "in (0, 1]")):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not ok(v):
+                raise ValueError(f"{name} must be {want}, got {v!r}")
+        if self.precision not in ("float32", "bfloat16"):
+            raise ValueError(f"precision must be 'float32' or 'bfloat16', got "
+                             f"{self.precision!r}")
+        check_device(self.device)
 
     def train_config(self, data, val_data, out_dir, progress: bool = True):
         """The [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig] of the training run: the
@@ -265,6 +278,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
         ``history``.
     """
     recipe = recipe or PretrainedRecipe()
+    check_device(recipe.device, probe=True)  # a CUDA device asked for: before generating
     say = log or (lambda *_: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -11,10 +11,50 @@ docs pages "The pretrained model" and "Why the paper starts from pretrained weig
 from __future__ import annotations
 
 import os
+import re
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 __all__ = ["generate_training_scenes", "generate_train_val"]
+
+_DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?|mps")
+
+
+def check_device(device, *, probe: bool = False) -> str:
+    """Check a training device name before any scene is generated (``--device``).
+
+    Args:
+        device: ``"auto"``, ``"cpu"``, ``"cuda"``, ``"cuda:N"`` or ``"mps"``.
+        probe: also check that a CUDA device asked for exists (in a child process when torch is
+            not imported yet: importing it here would make the scene generator's workers start
+            by ``spawn`` instead of ``fork``).
+
+    Returns:
+        ``device``.
+
+    Raises:
+        ValueError: another name, or (``probe``) a CUDA device this machine does not have.
+    """
+    if not isinstance(device, str) or not _DEVICE.fullmatch(device):
+        raise ValueError(f"device must be 'auto', 'cpu', 'cuda', 'cuda:N' or 'mps', got "
+                         f"{device!r}")
+    if probe and device.startswith("cuda"):
+        code = "import torch; print(torch.cuda.device_count() if torch.cuda.is_available() else 0)"
+        if "torch" in sys.modules:
+            import torch
+
+            count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        else:
+            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                 timeout=600)
+            count = int(out.stdout.strip() or 0) if out.returncode == 0 else 0
+        want = int(device.split(":")[1]) if ":" in device else 0
+        if want >= count:
+            raise ValueError(f"device {device!r}: this machine has {count} CUDA device(s) "
+                             "(torch.cuda.is_available() says so); use --device cpu or auto")
+    return device
 
 
 def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,

@@ -25,7 +25,7 @@ import torch
 from torch import nn
 
 from .._io import atomic_write_bytes as _atomic_write_bytes
-from .._io import leftover_temporaries
+from .._io import claim_out_dir, json_record, leftover_temporaries, remove_outputs
 from .._untrusted import load_torch_file
 from .._version import PRETRAINED_FILE, __version__, shipped_file
 from ..nn.quantize import dequantize_state_dict, quantize_state_dict  # noqa: F401 - as in 0.1
@@ -218,6 +218,32 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
 RUN_CHECKPOINTS = ("checkpoint_last.pt", "checkpoint_best.pt")
 """Files of a run that a fresh start would replace ([`train`][handmesh_tutorial.train.loop.train]
 refuses them by default)."""
+RUN_OUTPUTS = (*RUN_CHECKPOINTS, "metrics.csv", "steps.csv", "skipped.json", "config.json")
+"""Every file a run writes in its ``out_dir``: ``overwrite=True`` removes them all before the new
+run starts, so none of an earlier run (a best checkpoint the new run never writes) is left."""
+
+
+def claim_run_dir(out_dir, *, overwrite: bool, lock: str, fresh: bool = False) -> Path:
+    """[`claim_out_dir`][handmesh_tutorial._io.claim_out_dir] for a training run: a folder
+    holding files ``train`` did not write is refused unless ``overwrite`` (a run of an older
+    version is recognised by `is_train_run`); ``fresh``: then remove every file of an earlier
+    run (``RUN_OUTPUTS``), so that none is taken for the new run's (a stale best checkpoint).
+
+    Raises:
+        ValueError, NotADirectoryError, FileExistsError, OSError: as ``claim_out_dir``.
+    """
+    out = claim_out_dir(out_dir, "train", RUN_OUTPUTS, overwrite=overwrite,
+                        recognise=is_train_run, hidden=(lock,))
+    if fresh:
+        remove_outputs(out, RUN_OUTPUTS)
+    return out
+
+
+def is_train_run(out_dir) -> bool:
+    """Whether ``out_dir`` holds a run of an older version (before the ``.handmesh-train``
+    marker): its ``config.json`` record (``config``, ``template_hash``) or a checkpoint."""
+    out = Path(out_dir)
+    return json_record(out / "config.json", "config", "template_hash") or bool(existing_run(out))
 
 
 def existing_run(out_dir) -> list[str]:
@@ -236,8 +262,7 @@ def _remove_stale_temp_files(out_dir) -> list[Path]:
         The removed paths.
     """
     out = Path(out_dir)
-    gone = [tmp for name in (*RUN_CHECKPOINTS, "metrics.csv", "steps.csv", "config.json")
-            for tmp in leftover_temporaries(out / name)]
+    gone = [tmp for name in RUN_OUTPUTS for tmp in leftover_temporaries(out / name)]
     for tmp in gone:
         tmp.unlink()
     return gone

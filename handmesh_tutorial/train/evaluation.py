@@ -20,7 +20,14 @@ from torch import nn
 
 from .. import metrics as M
 from .. import viz
-from .._io import atomic_savez, check_writable, write_json
+from .._io import (
+    atomic_savez,
+    check_writable,
+    claim_out_dir,
+    json_record,
+    remove_outputs,
+    write_json,
+)
 from .._optional import require
 from .._progress import progress_bar
 from ..budget import check_image_size
@@ -208,7 +215,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
              device: str = "auto", out_dir: str | os.PathLike | None = None,
              camera_frame: bool = True, num_samples: int | None = None, template=None,
              progress: bool = True, threads: int | None = None, baseline: bool = True,
-             mean_hand=None, skip_bad: bool = False) -> dict:
+             mean_hand=None, skip_bad: bool = False, overwrite: bool = False) -> dict:
     """Evaluate a trained network: FreiHAND-style scores, per-sample errors, VR table, figures.
 
     Every item is the deterministic crop of its target hand (no augmentation); errors are
@@ -235,7 +242,11 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             ``pred.json`` (the official submission format,
             [`write_predictions`][handmesh_tutorial.data.freihand.write_predictions]: camera frame,
             the evaluated items in order) when the network predicts MANO's 778 vertices; else
-            ``notes`` says why it was not written.
+            ``notes`` says why it was not written. The files are one evaluation's: those of an
+            earlier evaluation in ``out_dir`` are removed before the new ones are written,
+            ``eval.json`` last (an interrupted write leaves no ``eval.json``, never a mix). A
+            folder holding files ``evaluate`` did not write is refused before evaluating,
+            unless ``overwrite``.
         camera_frame: predictions un-mirrored and moved back to the source camera frame
             (ground-truth root added); ``False``: the network's root-centred right-hand frame.
         num_samples: evaluate only the first ``num_samples`` items.
@@ -254,6 +265,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             pose from its image.
         skip_bad: load every item once first and leave out those that cannot be read (listed
             in ``skipped``); ``False``: the first bad sample stops the evaluation, named.
+        overwrite: write into an ``out_dir`` that holds files ``evaluate`` did not write (files
+            of its output names are replaced, the others left).
 
     Returns:
         dict with ``scores`` ([`freihand_scores`][handmesh_tutorial.metrics.freihand_scores]: mm,
@@ -291,7 +304,9 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
         torch.set_num_threads(threads)
     dev = _resolve_device(device)
-    if out_dir is not None:  # a folder we cannot write is found now, not after evaluating
+    if out_dir is not None:  # a folder we may not or cannot write is found now, not after
+        claim_out_dir(out_dir, "evaluate", EVAL_OUTPUTS, overwrite=overwrite,
+                      recognise=lambda d: json_record(d / "eval.json", "scores", "num_samples"))
         check_writable(out_dir)
     source = None
     if isinstance(checkpoint_or_model, str | os.PathLike):
@@ -389,10 +404,14 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
             f"{ngt} (another mesh); joints only. To score vertices, train with the data's mesh "
             "(FreiHAND: handmesh train --template MANO_RIGHT.pkl)")
     if out_dir is not None:
-        result["files"] = _write_eval(Path(out_dir), result, source, errors)
-        if _is_freihand(dataset):
-            _write_freihand_submission(Path(out_dir), result)
+        result["files"] = _write_eval(Path(out_dir), result, source, errors,
+                                      _is_freihand(dataset))
     return result
+
+
+EVAL_OUTPUTS = ("eval.json", "predictions.npz", "pck.png", "vr.png", "pred.json")
+"""The files of one evaluation in its ``out_dir``, its record ``eval.json`` first: an evaluation
+removes them all before it writes (``eval.json`` then written last)."""
 
 
 def _is_freihand(dataset) -> bool:
@@ -402,7 +421,7 @@ def _is_freihand(dataset) -> bool:
     return isinstance(getattr(base, "source", None), FreiHAND)
 
 
-def _write_freihand_submission(out: Path, res: dict) -> None:
+def _write_freihand_submission(out: Path, res: dict, files: dict) -> None:
     """``pred.json`` of the predictions when FreiHAND's evaluation can score it, else a note."""
     p = res["predictions"]
     nv = p["vertices"].shape[1]
@@ -415,13 +434,19 @@ def _write_freihand_submission(out: Path, res: dict) -> None:
             f"compares MANO's {NUM_VERTICES} vertex by vertex; train with a MANO template "
             "(handmesh train --template MANO_RIGHT.pkl)")
     else:
-        res["files"]["pred_json"] = write_predictions(out / "pred.json", p["joints"],
-                                                      p["vertices"])
+        files["pred_json"] = write_predictions(out / "pred.json", p["joints"], p["vertices"])
 
 
-def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
+def _write_eval(out: Path, res: dict, source: str | None, errors: dict,
+                freihand: bool = False) -> dict:
+    """Write one evaluation's files: the old set removed first, ``eval.json`` (its record)
+    written last, so the folder never holds files of two evaluations."""
     out.mkdir(parents=True, exist_ok=True)
-    files = {}
+    remove_outputs(out, EVAL_OUTPUTS)
+    files = {"json": out / "eval.json"}
+    _write_eval_files(out, res, errors, files)
+    if freihand:
+        _write_freihand_submission(out, res, files)
     summary = {"checkpoint": source, "scores": res["scores"], "vr_table": res["vr_table"],
                "kind_table": res["kind_table"], "num_samples": res["num_samples"],
                "per_sample": {k: v.tolist() for k, v in res["per_sample"].items()},
@@ -438,8 +463,12 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
                "comparison": res["comparison"],
                "predictions_frame": res["predictions"]["frame"],
                "skipped": res.get("skipped", [])}
-    files["json"] = out / "eval.json"
     write_json(files["json"], summary)
+    return files
+
+
+def _write_eval_files(out: Path, res: dict, errors: dict, files: dict) -> None:
+    """``predictions.npz`` and the figures (into ``files``)."""
     p = res["predictions"]
     files["predictions"] = out / "predictions.npz"
     atomic_savez(files["predictions"], compressed=False,
@@ -450,8 +479,8 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
         plt = require("matplotlib.pyplot", "evaluate's figures (pck.png, vr.png)")
     except ModuleNotFoundError as err:
         warnings.warn(f"{err}; {out} holds eval.json and predictions.npz, without the figures",
-                      UserWarning, stacklevel=3)
-        return files
+                      UserWarning, stacklevel=4)
+        return
 
     fig, ax = plt.subplots(figsize=(5, 3.6))
     curves = {"joints (PA)": errors["joint_err_pa"], "vertices (PA)": errors.get("vert_err_pa"),
@@ -473,4 +502,3 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict) -> dict:
         axes[1].set_ylabel("PA-MPJPE (mm)")
         files["vr"] = viz.save_figure(fig, out / "vr.png", dpi=90)
         plt.close(fig)
-    return files

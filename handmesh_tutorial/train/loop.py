@@ -67,6 +67,7 @@ from .checkpoints import (
     _remove_stale_temp_files,
     _set_rng_state,
     _write_logs,
+    claim_run_dir,
     existing_run,
     save_checkpoint,
 )
@@ -219,9 +220,9 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         config: the run (see [`TrainConfig`][handmesh_tutorial.train.config.TrainConfig]).
         resume: continue from ``out_dir/checkpoint_last.pt`` (must exist); the architecture
             and template must match; ``epochs`` may be larger than before.
-        overwrite: start afresh in an ``out_dir`` that already holds a run's checkpoints
-            (they are replaced). Without ``resume`` or ``overwrite`` such a folder is refused,
-            so a forgotten ``--resume`` never destroys a run.
+        overwrite: start afresh in an ``out_dir`` holding a run (all its files are removed first)
+            or files ``train`` did not write (left); without it (or ``resume``) both are refused,
+            so a forgotten ``--resume`` never destroys a run nor a user's ``config.json``.
         dataset: a training dataset to use instead of ``config.data`` (items as
             [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset] returns;
             ``set_epoch`` is
@@ -236,8 +237,7 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
     Raises:
         FloatingPointError: the loss became NaN or infinite (message names epoch and step).
         FileNotFoundError: ``resume`` without a checkpoint, or missing data.
-        FileExistsError: ``out_dir`` holds a run's checkpoints and neither ``resume`` nor
-            ``overwrite`` was given.
+        FileExistsError: ``out_dir`` holds a run or files ``train`` did not write (listed).
         RuntimeError: another process is training into ``out_dir`` (it holds ``.train.lock``).
         ValueError: inconsistent config, template/data vertex counts that differ, a
             checkpoint of another architecture, or (``resume``) data that changed since the
@@ -254,7 +254,7 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
     try:
         lock = contextlib.nullcontext()
         if rank == 0:  # one writer per run folder: a second train() into it is refused
-            Path(config.out_dir).mkdir(parents=True, exist_ok=True)
+            claim_run_dir(config.out_dir, overwrite=overwrite, lock=TRAIN_LOCK)
             lock = single_writer(Path(config.out_dir) / TRAIN_LOCK, f"{config.out_dir} (training)")
         with lock:
             return _train(config, resume, overwrite, dataset, val_dataset, template, callback,
@@ -276,7 +276,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
             "(train(..., resume=True), handmesh train --resume), replace it (overwrite=True, "
             "--overwrite) or choose another out_dir")
     if is_main:
-        out.mkdir(parents=True, exist_ok=True)
+        claim_run_dir(out, overwrite=overwrite, lock=TRAIN_LOCK, fresh=overwrite and not resume)
         _remove_stale_temp_files(out)
     tmpl = resolve_template(config.template if template is None else template)
     t_id = template_hash(tmpl)

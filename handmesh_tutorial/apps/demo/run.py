@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..._io import write_json
+from ..._io import claim_out_dir, json_record, write_json
 from ..._optional import require
 from ...metrics.intervals import paired_difference
 from ...viz import plot_loss_curves, plot_overlays, save_figure
@@ -138,8 +138,19 @@ def generate_data(root: str | os.PathLike, config: DemoConfig | None = None, see
             "test_summary": te}
 
 
+DEMO_OUTPUTS = ("report.md", "demo.json", "overlays.png", "loss.png", "data", "train", "eval")
+"""What the demo writes in its folder (files and sub-folders)."""
+
+
+def _is_demo_folder(out: Path) -> bool:
+    """A demo folder of an older version (before the ``.handmesh-demo`` marker): its
+    ``demo.json`` record, or its generated training set."""
+    return (json_record(out / "demo.json", "config", "scores")
+            or json_record(out / "data" / "train" / "meta.json", "seed", "num_samples"))
+
+
 def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoConfig | None = None,
-             progress: bool = True, log=print) -> DemoResult:
+             progress: bool = True, log=print, overwrite: bool = False) -> DemoResult:
     """Generate data, train, evaluate and write the report (resumable; see the module docs).
 
     Args:
@@ -151,13 +162,18 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
             ``hmt.budget()``).
         progress: tqdm bars.
         log: called with one-line progress messages (``None``: silent).
+        overwrite: write into an ``out`` that holds files the demo did not write (the user's
+            ``report.md``...): files of the demo's names are then replaced, the others left.
+            Without it such a folder is refused before any work.
 
     Returns:
         A [`DemoResult`][handmesh_tutorial.apps.demo.run.DemoResult].
 
     Raises:
         ValueError: ``out`` holds a run of another configuration (the message says what
-            differs; delete the folder or pick another ``--out``).
+            differs; delete the folder or pick another ``--out``), or ``out`` is empty.
+        FileExistsError: ``out`` holds files the demo did not write (listed) and no
+            ``overwrite``.
     """
     plt = require("matplotlib.pyplot", "the demo (its figures)")
 
@@ -165,8 +181,8 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
 
     cfg = config or DemoConfig.from_budget()
     say = log or (lambda *_: None)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = claim_out_dir(out, "demo", DEMO_OUTPUTS, overwrite=overwrite,
+                        recognise=_is_demo_folder)
     t0 = time.perf_counter()
     seconds = {}
 

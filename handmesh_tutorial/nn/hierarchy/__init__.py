@@ -24,7 +24,8 @@ edge between two boundary vertices, no duplicate faces, no triangle that flips o
 
 The hierarchy depends only on the template and the factors, so it is cached on disk (``.npz``
 read with ``allow_pickle=False``) under a key that hashes the vertices, faces, factors and the
-algorithm version.
+algorithm version; every level of a cached file is checked before use, and a bad file is rebuilt
+with a warning.
 
 Taught in notebook 06 (mesh hierarchy and spiral convolution). Submodules (every public name is
 re-exported here, so ``hmt.nn.hierarchy.mesh_hierarchy`` and

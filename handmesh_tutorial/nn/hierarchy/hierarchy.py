@@ -12,6 +12,8 @@ import hashlib
 import math
 import os
 import warnings
+import zipfile
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,8 +29,9 @@ from .qslim import decimate
 
 __all__ = ["MeshHierarchy", "mesh_hierarchy"]
 
-ALGORITHM_VERSION = "2"
-"""Bumped whenever the decimation or the matrices change, so stale cache files are not reused."""
+ALGORITHM_VERSION = "3"
+"""Bumped whenever the decimation, the matrices or the cache file's format change, so stale cache
+files are not reused (3: the file holds a digest of its arrays)."""
 
 
 @dataclass
@@ -130,6 +133,16 @@ def _cache_key(v: np.ndarray, f: np.ndarray, factors: tuple[float, ...]) -> str:
     return h.hexdigest()[:24]
 
 
+def _digest(arrays: dict) -> str:
+    """SHA-256 of a cache file's arrays (names, dtypes, shapes, bytes), in name order."""
+    h = hashlib.sha256(f"handmesh_tutorial.nn.hierarchy v{ALGORITHM_VERSION};".encode())
+    for name in sorted(k for k in arrays if k != "digest"):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}:{a.dtype.str}:{a.shape};".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
 def _save(path: Path, hier: MeshHierarchy) -> None:
     arrays = {"factors": np.asarray(hier.factors, dtype=np.float64)}
     for l, (v, f) in enumerate(zip(hier.vertices, hier.faces, strict=True)):
@@ -140,20 +153,108 @@ def _save(path: Path, hier: MeshHierarchy) -> None:
         arrays[f"up_data_{l}"] = u.data
         arrays[f"up_indices_{l}"] = u.indices.astype(np.int64)
         arrays[f"up_indptr_{l}"] = u.indptr.astype(np.int64)
+    arrays["digest"] = np.asarray(_digest(arrays))
     atomic_savez(path, compressed=False, **arrays)
 
 
-def _load(path: Path) -> MeshHierarchy:
-    with open_npz(path) as z:
-        factors = tuple(float(x) for x in z["factors"])
-        n = len(factors) + 1
-        vertices = [z[f"vertices_{l}"] for l in range(n)]
-        faces = [z[f"faces_{l}"] for l in range(n)]
-        kept = [z[f"kept_{l}"] for l in range(n - 1)]
-        up = [sp.csr_matrix((z[f"up_data_{l}"], z[f"up_indices_{l}"], z[f"up_indptr_{l}"]),
-                            shape=(len(vertices[l]), len(vertices[l + 1]))) for l in range(n - 1)]
-    down = [selection_matrix(k, len(vertices[l])) for l, k in enumerate(kept)]
-    return MeshHierarchy(vertices, faces, down, up, kept, factors)
+class _BadCache(ValueError):
+    """A cache file that is not a valid hierarchy of the requested mesh (the reason)."""
+
+
+def _int_array(z: dict, name: str, ndim: int) -> np.ndarray:
+    a = z[name]
+    if a.ndim != ndim or (a.size and not np.issubdtype(a.dtype, np.integer)):
+        raise _BadCache(f"{name} must be a {ndim}-D integer array, got {a.dtype} {a.shape}")
+    return a.astype(np.int64)
+
+
+def _check_up(z: dict, l: int, n_fine: int, n_coarse: int, kept: np.ndarray):
+    """The CSR parts of up-matrix ``l`` checked before scipy sees them (bad ids crash it)."""
+    data = z[f"up_data_{l}"]
+    indices = _int_array(z, f"up_indices_{l}", 1)
+    indptr = _int_array(z, f"up_indptr_{l}", 1)
+    if data.ndim != 1 or not np.issubdtype(data.dtype, np.floating):
+        raise _BadCache(f"up_data_{l} must be a 1-D float array, got {data.dtype} {data.shape}")
+    if (len(indptr) != n_fine + 1 or indptr[0] != 0 or np.any(np.diff(indptr) < 1)
+            or np.any(np.diff(indptr) > 3)):
+        raise _BadCache(f"up_indptr_{l} must hold {n_fine + 1} offsets from 0 with 1 to 3 "
+                        "entries per row")
+    if not len(indices) == len(data) == indptr[-1]:
+        raise _BadCache(f"up level {l}: {len(indices)} indices, {len(data)} weights, "
+                        f"{indptr[-1]} announced by up_indptr_{l}")
+    if len(indices) and (indices.min() < 0 or indices.max() >= n_coarse):
+        raise _BadCache(f"up_indices_{l} holds ids in [{indices.min()}, {indices.max()}], "
+                        f"level {l + 1} has {n_coarse} vertices")
+    if not np.all(np.isfinite(data)) or np.any(data < 0) or np.any(data > 1 + 1e-9):
+        raise _BadCache(f"up_data_{l} holds weights outside [0, 1] (NaN, inf or out of range)")
+    rows = np.repeat(np.arange(n_fine), np.diff(indptr))
+    if np.any((rows[1:] == rows[:-1]) & (indices[1:] <= indices[:-1])):
+        raise _BadCache(f"up_indices_{l}: a row repeats or does not sort its column ids")
+    sums = np.bincount(rows, weights=data, minlength=n_fine)
+    if not np.allclose(sums, 1.0, rtol=0, atol=1e-9):
+        worst = int(np.argmax(np.abs(sums - 1.0)))
+        raise _BadCache(f"up level {l}: row {worst} sums to {sums[worst]:.6g}, not 1")
+    own = indptr[kept]  # a kept vertex maps to itself: one weight 1 at its coarse id
+    if (np.any(np.diff(indptr)[kept] != 1) or np.any(indices[own] != np.arange(len(kept)))
+            or np.any(data[own] != 1.0)):
+        raise _BadCache(f"up level {l}: a kept vertex is not its own coarse vertex")
+    return sp.csr_matrix((data.astype(np.float64), indices, indptr), shape=(n_fine, n_coarse))
+
+
+def _load(path: Path, v: np.ndarray, f: np.ndarray, factors: tuple[float, ...]) -> MeshHierarchy:
+    """Read a cache file and check every level against the mesh it must have been built from.
+
+    Raises:
+        _BadCache: a missing or malformed array, another mesh or factors, a digest that does not
+            match the arrays, a coarse level that is not a subset of the finer one, a face with a
+            bad id, an up matrix with ids out of range, weights that are not finite and in
+            [0, 1], rows that do not sum to 1, a kept vertex not mapped to itself.
+        OSError, ValueError: an unreadable or refused file (`open_npz`).
+    """
+    try:
+        with open_npz(path) as z:
+            z = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, EOFError, zlib.error) as e:  # a member that fails its CRC...
+        raise _BadCache(f"unreadable ({type(e).__name__}: {e})") from None
+    n = len(factors) + 1
+    names = ["factors", "digest", *(f"{a}_{l}" for l in range(n) for a in ("vertices", "faces")),
+             *(f"{a}_{l}" for l in range(n - 1)
+               for a in ("kept", "up_data", "up_indices", "up_indptr"))]
+    missing = [k for k in names if k not in z]
+    if missing:
+        raise _BadCache(f"missing arrays {missing[:4]}")
+    if str(z["digest"]) != _digest({k: z[k] for k in names}):
+        raise _BadCache("its digest does not match its arrays (edited or from another version)")
+    stored = z["factors"]
+    if stored.shape != (n - 1,) or tuple(float(x) for x in stored) != factors:
+        raise _BadCache(f"built for factors {stored.tolist()}, not {list(factors)}")
+    if (z["vertices_0"].shape != v.shape or not np.array_equal(z["vertices_0"], v)
+            or z["faces_0"].shape != f.shape or not np.array_equal(z["faces_0"], f)):
+        raise _BadCache("built from another mesh (level 0 differs)")
+    vertices, faces, kept_all, down, up = [v], [f], [], [], []
+    for l, factor in enumerate(factors):
+        n_fine = len(vertices[l])
+        kept = _int_array(z, f"kept_{l}", 1)
+        if len(kept) != math.ceil(n_fine / factor) or len(kept) == 0:
+            raise _BadCache(f"kept_{l} has {len(kept)} ids, level {l + 1} needs "
+                            f"{math.ceil(n_fine / factor)}")
+        if kept.min() < 0 or kept.max() >= n_fine or len(np.unique(kept)) != len(kept):
+            raise _BadCache(f"kept_{l} must hold distinct ids in [0, {n_fine})")
+        cv = z[f"vertices_{l + 1}"]
+        if cv.shape != (len(kept), 3) or not np.array_equal(cv, vertices[l][kept]):
+            raise _BadCache(f"vertices_{l + 1} are not the kept vertices of level {l}")
+        try:
+            _, cf = _check_mesh(vertices[l][kept], z[f"faces_{l + 1}"])
+        except ValueError as e:
+            raise _BadCache(f"faces_{l + 1}: {e}") from None
+        if len(np.unique(cf)) != len(kept):
+            raise _BadCache(f"faces_{l + 1} leave vertices of level {l + 1} unused")
+        up.append(_check_up(z, l, n_fine, len(kept), kept))
+        down.append(selection_matrix(kept, n_fine))
+        vertices.append(vertices[l][kept])
+        faces.append(cf)
+        kept_all.append(kept)
+    return MeshHierarchy(vertices, faces, down, up, kept_all, factors)
 
 
 def _build(v: np.ndarray, f: np.ndarray, factors: tuple[float, ...]) -> MeshHierarchy:
@@ -189,6 +290,11 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
             ``~/.cache/handmesh_tutorial``). A folder that cannot be created or written is no
             error: the hierarchy is computed in memory and a ``UserWarning`` names the folder.
         use_cache: read and write the cache (``False`` always recomputes and writes nothing).
+            A cache file is trusted only after every level is checked against this mesh (its
+            digest, the kept ids, coarse vertices and faces, the up matrices' ids, finite
+            weights in [0, 1] and rows summing to 1): a file that fails is rebuilt and
+            overwritten, with a ``UserWarning`` naming it and the reason (an edited cache would
+            otherwise crash scipy or silently change the network's output).
 
     Returns:
         A [`MeshHierarchy`][handmesh_tutorial.nn.hierarchy.hierarchy.MeshHierarchy] with
@@ -238,12 +344,11 @@ def mesh_hierarchy(vertices, faces, factors: Sequence[float] = (2, 2, 2, 2), *,
         found = False
     if found:
         try:
-            hier = _load(path)
-            if (hier.factors == factors and np.array_equal(hier.vertices[0], v)
-                    and np.array_equal(hier.faces[0], f)):
-                return hier
-        except (OSError, KeyError, ValueError):
-            pass  # unreadable or foreign file: rebuild and overwrite it
+            return _load(path, v, f, factors)
+        except (OSError, ValueError) as e:  # unreadable, foreign or edited: rebuild, overwrite it
+            why = str(e).removeprefix(f"{path}: ")
+            warnings.warn(f"the mesh-hierarchy cache {path} is not a valid hierarchy of this "
+                          f"mesh ({why}); rebuilding it", UserWarning, stacklevel=2)
     hier = _build(v, f, factors)
     try:
         _save(path, hier)
