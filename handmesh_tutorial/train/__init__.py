@@ -22,7 +22,7 @@ Every public name below is importable from ``handmesh_tutorial.train`` itself; t
 * [`evaluation`][handmesh_tutorial.train.evaluation]: `predict`, `validate` and `evaluate`
   (notebook 09, "Evaluation").
 * [`baselines`][handmesh_tutorial.train.baselines]: the constant rest-hand and mean-hand baselines
-  (notebooks 08 and 09).
+  and the frozen encoder's linear read-out (notebooks 08 and 09).
 * [`fit_probe`][handmesh_tutorial.train.fit_probe]: the decoder fit probe, an auto-decoder on
   known hands with no image and no encoder (notebook 07); its names stay in the submodule
   (``hmt.train.fit_probe.fit_decoder``).
@@ -38,10 +38,13 @@ from __future__ import annotations
 from ..nn.losses import vertex_loss  # noqa: F401
 from . import fit_probe  # noqa: F401 - hmt.train.fit_probe (notebook 07); its names stay there
 from .baselines import (
+    LINEAR_READOUT,
     MEAN_HAND,
     REST_HAND,
     constant_hand_predictions,
     constant_hand_scores,
+    fit_linear_readout,
+    linear_readout,
     mean_hand,
 )
 from .checkpoints import (  # noqa: F401
@@ -68,6 +71,7 @@ __all__ = [
     "save_checkpoint", "build_model_from_config", "make_datasets", "resolve_template",
     "save_template", "training_loss", "constant_hand_predictions", "constant_hand_scores",
     "mean_hand", "REST_HAND", "MEAN_HAND", "METRIC_COLUMNS", "RESUMABLE_KEYS",
+    "linear_readout", "fit_linear_readout", "LINEAR_READOUT",
 ]
 
 
