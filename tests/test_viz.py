@@ -167,3 +167,21 @@ def test_overlay_titles_stay_clear_of_the_row_above():
             above = axes[r - 1, c].get_window_extent(renderer)
             assert title.y1 > title.y0 and title.y1 <= above.y0 + 0.5, (r, c)
     plt.close(fig)
+
+
+def test_loss_curves_legend_covers_none_of_the_baseline_lines():
+    # notebook 08's loss figure: the validation legend sat on the rest / mean hand lines
+    history = [{"epoch": e, "step": 10 * e, "train_loss": 0.01 / e, "val_pa_mpjpe": 9.0 - e,
+                "val_pa_mpvpe": 8.5 - e, "val_mpjpe": 14.0 - e} for e in range(1, 6)]
+    base = {"rest hand": {"pa_mpjpe": 11.2, "pa_mpvpe": 10.3},
+            "mean hand": {"pa_mpjpe": 8.2, "pa_mpvpe": 7.6}}
+    fig = viz.plot_loss_curves(history, np.linspace(0.04, 0.005, 50), base)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax = fig.axes[1]
+    legend = ax.get_legend().get_window_extent(renderer)
+    panel = ax.get_window_extent(renderer)
+    assert legend.x0 >= panel.x1, "the legend lies on the panel, over its lines"
+    assert legend.x1 <= fig.bbox.x1 + 0.5, "the legend runs off the figure"
+    assert len(ax.get_legend().get_texts()) == 7  # 3 curves, 2 baselines each for PA- errors
+    plt.close(fig)

@@ -136,7 +136,8 @@ def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = 
         baselines: ``{name: scores}`` of constant baselines on the validation scenes
             ([`constant_hand_scores`][handmesh_tutorial.train.baselines.constant_hand_scores]: the
             rest hand, the mean training hand): dashed / dotted lines at their PA-MPJPE and
-            PA-MPVPE, the bars the curves must go under.
+            PA-MPVPE, the bars the curves must go under. The validation legend sits outside the
+            panel, right of it, so that it covers none of these lines.
 
     Returns:
         The matplotlib figure.
@@ -146,7 +147,7 @@ def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = 
     """
     plt = require("matplotlib.pyplot", "hmt.viz figures")
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.4))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 3.4), width_ratios=(1, 1.05))
     sl = 1000 * np.asarray(step_losses, dtype=float)
     if len(sl):
         a.plot(np.arange(1, len(sl) + 1), sl, lw=0.6, alpha=0.5, label="per step")
@@ -174,6 +175,7 @@ def plot_loss_curves(history: list, step_losses: list, baselines: dict | None = 
     b.set_ylabel("validation error (mm)")
     b.set_title("validation (10% of the training scenes)")
     b.grid(alpha=0.3)
-    b.legend(fontsize="small")
+    # outside, to the right: inside, the legend covered the baselines' horizontal lines
+    b.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     fig.tight_layout()
     return fig
