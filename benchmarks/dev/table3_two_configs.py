@@ -21,7 +21,6 @@ import json
 import platform
 import sys
 import time
-from pathlib import Path
 
 
 def main(argv=None) -> dict:
@@ -31,7 +30,7 @@ def main(argv=None) -> dict:
     from handmesh_tutorial.apps.demo.table3 import run_table3, summarise_table3
     from handmesh_tutorial.nn.pose_encoder import (
         encoder_lineage,
-        pretrained_encoder_info,
+        encoder_source_path,
         read_pose_encoder,
     )
 
@@ -39,7 +38,8 @@ def main(argv=None) -> dict:
     p.add_argument("--data", required=True, help="demo data root (train/ and test/; made if "
                    "missing with the demo's default sizes)")
     p.add_argument("--data-seed", type=int, default=0)
-    p.add_argument("--encoder", default="pretrained", help="pose-encoder file or 'pretrained'")
+    p.add_argument("--encoder", default="neutral",
+                   help="'neutral' (default), 'pretrained' or a pose-encoder file")
     p.add_argument("--out", required=True, help="folder of the runs")
     p.add_argument("--results", default=None, help="summary JSON to write")
     p.add_argument("--seeds", default="0,1,2")
@@ -67,14 +67,15 @@ def main(argv=None) -> dict:
                          configurations=tuple(args.configurations.split(",")), seeds=seeds,
                          epochs=args.epochs, train_overrides={"device": args.device})
     summary = summarise_table3(results)
-    meta = (pretrained_encoder_info() if args.encoder == "pretrained"
-            else read_pose_encoder(args.encoder)[1])
+    enc_path = encoder_source_path(args.encoder)
+    meta = read_pose_encoder(enc_path)[1]
     lineage = encoder_lineage(meta)
     provenance = {
         "command": "python benchmarks/dev/table3_two_configs.py " + " ".join(
             a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("/")),
-        "encoder": {"file": Path(args.encoder).name, "lineage": lineage,
-                    "weights_sha256": meta.get("weights", {}).get("sha256")},
+        "encoder": {"name": args.encoder, "file": enc_path.name, "lineage": lineage,
+                    "sha256": __import__("hashlib").sha256(enc_path.read_bytes()).hexdigest(),
+                    "validation": (meta.get("history") or [{}])[-1]},
         "data": {"train_seed": args.data_seed, "test_seed": args.data_seed + 1,
                  "train_scenes": cfg.train_samples, "test_scenes": cfg.test_samples,
                  "render_size": cfg.render_size, "image_size": cfg.image_size,
