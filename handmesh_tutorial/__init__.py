@@ -21,7 +21,7 @@ _SUBMODULES = (
 
 __all__ = ["Budget", "budget", "__version__", *(m for m in _SUBMODULES if m != "budget")]
 
-_aliases.install()  # the module paths of 0.1 (``hmt.spiral``, ``hmt.dataset``...) until 0.3
+_aliases.install()  # the module paths of 0.1 (``hmt.spiral``, ``hmt.dataset``...) until 0.4
 
 
 def __getattr__(name: str):

@@ -3,7 +3,7 @@
 ``import handmesh_tutorial.spiral``, ``hmt.dataset.InterSHDataset`` or
 ``from handmesh_tutorial.interact import build_scene`` keep working: an old path is a stand-in
 module that hands out the names of its new home, with a ``FutureWarning`` naming that home. The
-stand-ins go in 0.3 (``CHANGELOG.md``). New code uses the new paths (docs page "The pipeline").
+stand-ins go in 0.4 (``CHANGELOG.md``). New code uses the new paths (docs page "The pipeline").
 The same holds for a public name of 0.1 that is plumbing and private since 0.2 (`RENAMED`,
 ``hmt.data.TMP_PREFIX`` -> ``hmt.data.schema._TMP_PREFIX``), through its module's ``__getattr__``.
 
@@ -77,7 +77,7 @@ RENAMED: dict[str, dict[str, str]] = {
     "train.checkpoints": {"remove_stale_temp_files": _STALE},
 }
 """Names made private (``_``-prefixed): module -> {old name: ``module._new_name``}. The old name
-keeps working until 0.3 through the module's ``__getattr__`` (`moved_attribute`)."""
+keeps working until 0.4 through the module's ``__getattr__`` (`moved_attribute`)."""
 
 
 def _targets(old: str) -> tuple[str, ...] | None:
@@ -103,13 +103,13 @@ def moved_attribute(module: str, name: str):
     if private is not None:
         home, new_name = private.rsplit(".", 1)
         warnings.warn(f"{_P}{rel}.{name} is private since 0.2 ({_P}{private}: plumbing, not "
-                      "part of the public surface); the old name goes in 0.3",
+                      "part of the public surface); the old name goes in 0.4",
                       FutureWarning, stacklevel=3)
         return getattr(importlib.import_module(_P + home), new_name)
     new = MOVED_NAMES.get(rel, {}).get(name)
     if new is None:
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
-    warnings.warn(f"{module}.{name} is now {_P}{new}.{name}; the old name goes in 0.3",
+    warnings.warn(f"{module}.{name} is now {_P}{new}.{name}; the old name goes in 0.4",
                   FutureWarning, stacklevel=3)
     return getattr(importlib.import_module(_P + new), name)
 
@@ -174,7 +174,7 @@ class _Finder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
     def create_module(self, spec):
         targets = _targets(spec.name)
-        warnings.warn(f"{spec.name} is now {' and '.join(targets)}; the old path goes in 0.3",
+        warnings.warn(f"{spec.name} is now {' and '.join(targets)}; the old path goes in 0.4",
                       FutureWarning, stacklevel=2)
         return _Moved(spec.name, targets)
 

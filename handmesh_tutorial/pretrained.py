@@ -75,7 +75,7 @@ def pretrained_info() -> dict:
 
 
 def __getattr__(name: str):
-    # the recipe's names moved to the apps layer in 0.2: the old path works until 0.3
+    # the recipe's names moved to the apps layer in 0.2: the old path works until 0.4
     from ._aliases import moved_attribute
 
     return moved_attribute(__name__, name)

@@ -97,7 +97,7 @@ def test_plumbing_made_private_keeps_its_old_name_for_one_version():
         for old, new in names.items():
             home, private = new.rsplit(".", 1)
             assert old not in mod.__all__ and private.startswith("_"), (module, old)
-            with pytest.warns(FutureWarning, match=f"{module}.{old} is private since 0.2.*0.3"):
+            with pytest.warns(FutureWarning, match=f"{module}.{old} is private since 0.2.*0.4"):
                 value = getattr(mod, old)
             assert value is getattr(importlib.import_module(f"handmesh_tutorial.{home}"), private)
     with pytest.raises(AttributeError, match="no attribute 'NO_SUCH_NAME'"):
@@ -260,7 +260,7 @@ def test_the_old_module_paths_still_work_for_one_version(monkeypatch):
         full = f"handmesh_tutorial.{old}"  # a stand-in imported by an earlier test warned then
         for name in [m for m in sys.modules if m == full or m.startswith(full + ".")]:
             monkeypatch.delitem(sys.modules, name)
-        with pytest.warns(FutureWarning, match="goes in 0.3"):
+        with pytest.warns(FutureWarning, match="goes in 0.4"):
             mod = importlib.import_module(f"handmesh_tutorial.{old}")
         target = importlib.import_module(f"handmesh_tutorial.{new[0]}")
         name = next(iter(getattr(target, "__all__", ())), None)

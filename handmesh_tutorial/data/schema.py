@@ -274,7 +274,7 @@ def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
     return s
 
 
-def __getattr__(name: str):  # 0.1's public names of plumbing (``TMP_PREFIX``...), until 0.3
+def __getattr__(name: str):  # 0.1's public names of plumbing (``TMP_PREFIX``...), until 0.4
     from .._aliases import moved_attribute
 
     return moved_attribute(__name__, name)

@@ -290,7 +290,7 @@ def _write_logs(out: Path, history: list[dict], step_losses: list[float], durabl
                ("step", "loss"), durable)
 
 
-def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.3
+def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.4
     from .._aliases import moved_attribute
 
     return moved_attribute(__name__, name)
