@@ -17,6 +17,9 @@ Inputs it cannot interpret are refused with a message that says what to do
 ([`check_image`][handmesh_tutorial.inference.check_image]): these mistakes run without error
 otherwise and only give worse hands. Measured errors with right and wrong inputs: docs page
 "Your own image".
+
+Why one file: every check of a user's image, box, side and camera sits beside the one call
+that uses it, so that a refusal and what it protects read together.
 """
 
 from __future__ import annotations

@@ -288,7 +288,7 @@ def test_the_0_1_name_hmt_model_pretrained_still_works(monkeypatch):
 
     for name in [m for m in sys.modules if m == "handmesh_tutorial.model"]:
         monkeypatch.delitem(sys.modules, name)
-    with pytest.warns(FutureWarning, match=r"handmesh_tutorial\.pretrained\.pretrained.*0\.3"):
+    with pytest.warns(FutureWarning, match=r"handmesh_tutorial\.pretrained\.pretrained.*0\.4"):
         old = hmt.model.pretrained
     assert old is hmt.pretrained.pretrained
     with pytest.raises(AttributeError, match="no attribute 'nope'"):

@@ -6,6 +6,9 @@ and per scene kind, the constant baselines on the same items, and (with ``out_di
 ``predictions.npz`` and the figures. Errors are computed in millimetres from metre inputs.
 
 Taught in notebook 09 ("Evaluation").
+
+Why one file: prediction, validation and evaluation share the batching, scoring and file
+writing here; split, each part would import the others.
 """
 
 from __future__ import annotations
