@@ -26,7 +26,7 @@ SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
     "hand_encoder_pretrained.pt": (
         "24efdbb4d848cd637662faaefd80ee449bd1e33b8022e6ba21b7b18f90f43325", "0.2.0"),
     "table3_results.json": (
-        "f27f96744178c1d4d8c0bdc4d6a5b8ac855b70d192064e056130b1f17ffbf977", "0.3.0"),
+        "2486fad9d7ff7d758523a1dc148ac5300b9836559537b3616483b6f210fa9ba8", "0.3.0"),
     "makehuman_hand.npz": (
         "7ec92e1e3c99b0d6cedef1209e2cd6ade09b5e4ce2abb04c17c1713b08e1a739", "0.2.0"),
     "msmr_net_pretrained.pt": (

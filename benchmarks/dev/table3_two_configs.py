@@ -91,7 +91,7 @@ def main(argv=None) -> dict:
     }
     doc = {"provenance": provenance, "summary": summary}
     if args.results:
-        write_json(args.results, doc)
+        write_json(args.results, doc, sort_keys=False)  # Table 3's row order
     for conf, c in summary["configurations"].items():
         print(f"== {conf}: mean hand {c['mean_hand']:.2f}, rest hand {c['rest_hand']:.2f} mm")
         for name, r in c["variants"].items():
