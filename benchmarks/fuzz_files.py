@@ -632,6 +632,8 @@ def _untouched(case_root: Path) -> list[str]:
     if not path.exists():
         return []
     rec = json.loads(path.read_text())
+    if "planted" not in rec:  # the --out and cache targets keep their own record (see below)
+        return []
     out = []
     for rel, digest in rec["planted"].items():
         p = case_root / rel

@@ -73,9 +73,8 @@ class PosePretrainConfig:
         aligned_weight: weight of its aligned-joint term.
         seed: initialisation, order and augmentation seed.
         device: ``"auto"``, ``"cuda"`` or ``"cpu"``.
-        precision: ``"bfloat16"`` (autocast on either device; about 2x faster than float32 on
-            CPUs with bfloat16 units, which the docs page "Why the paper starts from pretrained
-            weights" measures) or ``"float32"``.
+        precision: ``"bfloat16"`` (autocast on either device; its speed on a CPU: docs page
+            "Why the paper starts from pretrained weights") or ``"float32"``.
         workers: scene-generator processes (0: one per CPU).
     """
 
