@@ -719,7 +719,8 @@ def test_a_bad_sample_stops_train_and_evaluate_named_and_skip_bad_lists_it(toy_r
 
     # the same run on the 7 good samples, given as a dataset, reaches the same weights
     good = A.InterSHTorchDataset(root, 32, train=True, indices=[0, 1, 2, 4, 5, 6, 7])
-    cfg = T.TrainConfig(out_dir=str(tmp_path / "ref"), epochs=1, batch_size=4, **TINY)
+    cfg = T.TrainConfig.preset("paper", out_dir=str(tmp_path / "ref"), epochs=1, batch_size=4,
+                               **TINY)  # `handmesh train` defaults to the paper recipe
     ref = T.train(cfg, dataset=good)
     for k, v in ref.model.state_dict().items():
         torch.testing.assert_close(ck["model"][k], v, msg=k)

@@ -378,7 +378,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
         ValueError: ``meta.json`` itself is unreadable, or with ``remove``, ``samples`` is a
             symbolic link (nothing is removed).
         RuntimeError: with ``remove``, another process writes into the root
-            ([`EnvironmentFailure`][handmesh_tutorial._io.EnvironmentFailure]).
+            (`EnvironmentFailure`).
     """
     from .._io import single_writer
     from .._progress import progress_bar

@@ -224,7 +224,7 @@ run starts, so none of an earlier run (a best checkpoint the new run never write
 
 
 def claim_run_dir(out_dir, *, overwrite: bool, lock: str, fresh: bool = False) -> Path:
-    """[`claim_out_dir`][handmesh_tutorial._io.claim_out_dir] for a training run: a folder
+    """``_io.claim_out_dir`` for a training run: a folder
     holding files ``train`` did not write is refused unless ``overwrite`` (a run of an older
     version is recognised by `is_train_run`); ``fresh``: then remove every file of an earlier
     run (``RUN_OUTPUTS``), so that none is taken for the new run's (a stale best checkpoint).

@@ -59,8 +59,7 @@ class FitResult:
             coordinates, as the paper's loss, whatever loss was optimised).
         error_mm: final mean vertex error ``mean ||pred - target||``, millimetres.
         roughness_deg: final mean
-        [`roughness_deg`][handmesh_tutorial.metrics.surface.roughness_deg],
-            degrees.
+            [`roughness_deg`][handmesh_tutorial.metrics.surface.roughness_deg], degrees.
         flipped: final mean
             [`flipped_face_fraction`][handmesh_tutorial.metrics.surface.flipped_face_fraction].
         init_error_mm: mean vertex error of the model at initialisation (before any step), mm.
