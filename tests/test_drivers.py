@@ -24,7 +24,9 @@ from handmesh_tutorial.budget import TIERS
 
 _CPU = {"model_kwargs": {"keypoints": True, "global_rotation": True, "output": "skinned"},
         "keypoint_weight": 0.5, "aligned_weight": 1.0}
-_BEFORE_RECIPES = {"paper": {}, "cpu": _CPU}
+# 0.3.0 changed the paper recipe on purpose: its decoder regresses the coordinates (xyz)
+_BEFORE_RECIPES = {"paper": {"model_kwargs": {"output": "xyz", "smoothing_length": 0.0}},
+                   "cpu": _CPU}
 
 
 def _before_demo_train_config(config, data, out_dir, seed=0, progress=True, **overrides):
@@ -39,6 +41,8 @@ def _before_demo_train_config(config, data, out_dir, seed=0, progress=True, **ov
               freeze_encoder=config.freeze_encoder if config.init_encoder else 0,
               encoder_lr_scale=config.encoder_lr_scale if config.init_encoder else 1.0,
               **_BEFORE_RECIPES[config.recipe])
+    if config.recipe == "paper" and config.init_encoder:  # 0.3.0: read as the encoder was trained
+        kw["model_kwargs"] = {**kw["model_kwargs"], "keypoints": True}
     kw.update(overrides)
     return TrainConfig(**kw)
 
@@ -193,7 +197,8 @@ def test_the_table_of_the_presets_says_what_each_sets():
     table = {}
     for field, *cells in rows:
         field = field.strip().strip("`")
-        table[field] = [heads if c.strip() == "cpu_heads" else ast.literal_eval(c.strip())
+        named = {"cpu_heads": heads, "xyz": PRESETS["paper"]["model_kwargs"]}
+        table[field] = [named[c.strip()] if c.strip() in named else ast.literal_eval(c.strip())
                         for c in cells]
     assert set(table) == {k for v in PRESETS.values() for k in v}  # every field a preset sets
     for k, name in enumerate(names):
