@@ -1,14 +1,11 @@
 """The frozen-encoder baseline: a closed-form ridge read-out from features to vertices."""
 
-import functools
 
 import numpy as np
 import pytest
 import torch
 
 from handmesh_tutorial import train as T
-from handmesh_tutorial.data import generate_dataset
-from handmesh_tutorial.testing import toy_sample
 from handmesh_tutorial.train import baselines as Bl
 
 torch.set_num_threads(1)
@@ -84,13 +81,6 @@ def test_predict_refuses_features_of_another_width():
     with pytest.raises(ValueError, match=r"features must be \(N, 6\), got \(3, 5\)"):
         Bl.fit_linear_readout(x, y, 1.0).predict(np.zeros((3, 5)))
 
-
-@pytest.fixture(scope="module")
-def toy_root(tmp_path_factory):
-    root = tmp_path_factory.mktemp("toy_intersh")
-    generate_dataset(root, functools.partial(toy_sample, image_size=64), num=8, seed=11,
-                     kind="hand-hand", progress=False, durable=False)
-    return root
 
 
 def test_linear_readout_is_a_network_evaluate_scores(toy_root, tmp_path):

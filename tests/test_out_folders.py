@@ -9,7 +9,6 @@ evaluation's files are one evaluation's.
 from __future__ import annotations
 
 import errno
-import functools
 import json
 
 import pytest
@@ -18,21 +17,12 @@ import torch
 from handmesh_tutorial import train as T
 from handmesh_tutorial._io import claim_out_dir
 from handmesh_tutorial.apps.cli import main as cli_main
-from handmesh_tutorial.data import generate_dataset
-from handmesh_tutorial.testing import toy_sample
 from handmesh_tutorial.train.checkpoints import RUN_OUTPUTS, is_train_run
 
 TRAIN = ["--epochs", "1", "--batch-size", "4", "--image-size", "32", "--channels", "4,4,8,8,8",
          "--latent-channels", "8", "--threads", "1", "--no-progress", "--no-fsync"]
 TINY = dict(image_size=32, channels=(4, 4, 8, 8, 8), latent_channels=8)
 
-
-@pytest.fixture(scope="module")
-def toy_root(tmp_path_factory):
-    root = tmp_path_factory.mktemp("toy_intersh")
-    generate_dataset(root, functools.partial(toy_sample, image_size=64), num=8, seed=11,
-                     kind="hand-hand", progress=False, durable=False)
-    return root
 
 
 def _user_files(folder, names):

@@ -40,14 +40,6 @@ def samples():
     return [toy_sample(i, image_size=64) for i in range(8)]
 
 
-@pytest.fixture(scope="module")
-def toy_root(tmp_path_factory):
-    root = tmp_path_factory.mktemp("toy_intersh")
-    generate_dataset(root, functools.partial(toy_sample, image_size=64), num=8, seed=11,
-                     kind="hand-hand", progress=False, durable=False)
-    return root
-
-
 def _data(samples, n_train=4, n_val=2, augment=False):
     tr = A.InterSHTorchDataset(samples[:n_train], 32, train=True, augment=augment)
     va = A.InterSHTorchDataset(samples[n_train:n_train + n_val], 32, train=False)
