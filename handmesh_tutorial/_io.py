@@ -26,7 +26,7 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
            "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer",
            "EnvironmentFailure", "names_path", "check_writable", "claim_out_dir", "out_marker",
-           "json_record", "remove_outputs"]
+           "json_record", "remove_outputs", "file_identity"]
 
 
 _TMP_SUFFIX = ".tmp"
@@ -275,6 +275,19 @@ def write_json(path: str | os.PathLike, obj: Any, *, indent: int = 1, sort_keys:
     text = json.dumps(json_safe(obj, Path(path).name), indent=indent, sort_keys=sort_keys,
                       allow_nan=False)
     return atomic_write_text(path, text + "\n", durable)
+
+
+def file_identity(path: str | os.PathLike) -> dict:
+    """``{"name", "sha256", "bytes"}`` of a file: how a weight file's metadata names the file it
+    started from, portably (no folder of the machine that made it)."""
+    import hashlib
+
+    path = Path(path)
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return {"name": path.name, "sha256": h.hexdigest(), "bytes": path.stat().st_size}
 
 
 # ------------------------------------------------------------------ output folders

@@ -14,7 +14,8 @@ def _cmd_pretrain(args: argparse.Namespace) -> int:
 
     fields = ("train_scenes", "val_scenes", "data_seed", "render_size", "image_size", "encoder",
               "recipe", "epochs", "batch_size", "lr", "workers", "loader_workers", "seed",
-              "device", "precision", "init")
+              "device", "precision", "init", "init_encoder", "freeze_encoder", "encoder_lr_scale",
+              "augment")
     recipe = PretrainedRecipe(**{k: getattr(args, k) for k in fields
                                  if getattr(args, k) is not None})
     res = build_pretrained(args.out, recipe, max_generate_seconds=args.max_generate_seconds,
@@ -92,6 +93,15 @@ def add_pretrain_commands(sub) -> None:
                      help="autocast precision (default: bfloat16)")
     pre.add_argument("--init", help="start from these weights: 'pretrained' (the shipped network; "
                      "use new --data-seed values so each run adds scenes) or a checkpoint")
+    pre.add_argument("--init-encoder", help="start only the encoder from a pose-encoder file "
+                     "(handmesh pretrain-encoder) or a shipped one: neutral, pretrained")
+    pre.add_argument("--freeze-encoder", type=int, help="epochs at the start with the encoder "
+                     "fixed (>= --epochs without augmentation: each crop encoded once)")
+    pre.add_argument("--encoder-lr-scale", type=float,
+                     help="the encoder's learning rate as a share of --lr once unfrozen")
+    pre.add_argument("--no-augment", dest="augment", action="store_false", default=None,
+                     help="no random crop rotation, scale, shift or colour (with a frozen "
+                     "encoder: features computed once)")
     pre.add_argument("--max-generate-seconds", type=float, default=None,
                      help="stop generating training scenes when the next shard would end past "
                      "this budget")

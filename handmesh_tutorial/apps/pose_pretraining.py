@@ -25,7 +25,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._io import atomic_write_bytes, atomic_write_with, single_writer, write_json
+from .._io import (
+    atomic_write_bytes,
+    atomic_write_with,
+    file_identity,
+    single_writer,
+    write_json,
+)
 from .._progress import progress_bar
 from .._untrusted import load_torch_file
 from ..budget import check_image_size
@@ -331,7 +337,7 @@ def pretrain_pose_encoder(train_cache: dict, val_cache: dict, out: str | os.Path
                 f"{row['mean training hand']['pa_mpjpe']:.2f}, rest hand "
                 f"{row['rest hand']['pa_mpjpe']:.2f}); MPJPE {row['64']['mpjpe']:.1f} mm")
             export_pose_encoder(net, out / ENCODER_FILE, info={**(info or {}), "steps": step,
-                                                              "config": asdict(config)},
+                                                              "config": _portable(config)},
                                 backbone=config.backbone, history=history,
                                 preprocessing=_preprocessing(config))
 
@@ -404,6 +410,14 @@ def _preprocessing(config: PosePretrainConfig) -> dict:
             "dataset": "InterSHTorchDataset(root, image_size=S, train=False) gives such crops"}
 
 
+def _portable(config: PosePretrainConfig) -> dict:
+    """The config as a weight file records it: a starting file by its name, not its path."""
+    d = asdict(config)
+    if d["init"] not in (None, "network"):
+        d["init"] = Path(d["init"]).name
+    return d
+
+
 def _jsonable(d: dict) -> dict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
 
@@ -470,6 +484,9 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
         from ..nn.pose_encoder import read_pose_encoder
 
         info["init_from"] = read_pose_encoder(config.init)[1].get("pretrained")
+        # the starting file by name and hash, never by this machine's path
+        info["recipe"]["init"] = Path(config.init).name
+        info["init_file"] = file_identity(config.init)
     say(f"[2/3] training ({config.backbone}, batch {config.batch_size}, crops "
         f"{'/'.join(map(str, config.image_sizes))} px, init {config.init or 'random'}) in {out}")
     res = pretrain_pose_encoder(caches["train"], caches["val"], out, config,

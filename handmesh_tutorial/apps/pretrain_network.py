@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from .. import _version
+from .._io import file_identity
 from .._version import PRETRAINED_FILE, __version__
 from ..budget import check_image_size
 from .pretraining_data import check_device, generate_train_val, generate_training_scenes
@@ -60,6 +61,12 @@ class PretrainedRecipe:
         init: start from these weights instead of random ones (``"pretrained"``: the shipped
             network, so that each run on new seeds adds to the last; or a checkpoint path). The
             architecture fields above must then be the file's.
+        init_encoder: start only the encoder from a pose-encoder file (``handmesh
+            pretrain-encoder``) or a shipped one (``"neutral"``, ``"pretrained"``); the paper's
+            protocol. Excludes ``init``.
+        freeze_encoder: epochs at the start with the encoder fixed; with ``augment=False`` and
+            ``freeze_encoder >= epochs`` each crop is encoded once and only the decoder trains.
+        encoder_lr_scale: the encoder's learning rate as a share of ``lr`` once unfrozen.
     """
 
     train_scenes: int = 20_000
@@ -80,6 +87,9 @@ class PretrainedRecipe:
     seed: int = 0
     device: str = "auto"
     init: str | None = None
+    init_encoder: str | None = None
+    freeze_encoder: int = 0
+    encoder_lr_scale: float = 1.0
 
     def __post_init__(self):
         from .demo.config import RECIPES  # the names only: no torch before the generator
@@ -91,7 +101,10 @@ class PretrainedRecipe:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        for name in ("workers", "loader_workers"):
+        if self.init is not None and self.init_encoder is not None:
+            raise ValueError("init and init_encoder exclude each other: init starts the whole "
+                             "network from a checkpoint, init_encoder only its encoder")
+        for name in ("workers", "loader_workers", "freeze_encoder"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
@@ -99,7 +112,9 @@ class PretrainedRecipe:
         check_image_size(self.image_size)
         check_image_size(self.render_size, "render_size")
         for name, ok, want in (("lr", lambda x: 0 < x < math.inf, "a finite number > 0"),
-                               ("lr_gamma", lambda x: 0 < x <= 1, "in (0, 1]")):
+                               ("lr_gamma", lambda x: 0 < x <= 1, "in (0, 1]"),
+                               ("encoder_lr_scale", lambda x: 0 <= x < math.inf,
+                                "a finite number >= 0")):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not ok(v):
                 raise ValueError(f"{name} must be {want}, got {v!r}")
@@ -118,6 +133,10 @@ class PretrainedRecipe:
         from .demo.config import _recipe_fields
 
         cpus = os.cpu_count() or 1
+        fields = _recipe_fields(self.recipe)
+        if self.recipe == "paper" and self.init_encoder is not None:
+            # the pretrained encoder read as it was trained: pooled at its own 2D joints
+            fields["model_kwargs"] = {**fields["model_kwargs"], "keypoints": True}
         return TrainConfig.preset(
             "pretraining", data=str(data), val_data=str(val_data), image_size=self.image_size,
             epochs=self.epochs, batch_size=self.batch_size, lr=self.lr,
@@ -125,7 +144,8 @@ class PretrainedRecipe:
             augment=self.augment, encoder=self.encoder, seed=self.seed, device=self.device,
             num_workers=self.loader_workers or max(0, cpus - 1), precision=self.precision,
             out_dir=str(out_dir), progress=progress, init=self.init,
-            **_recipe_fields(self.recipe))
+            init_encoder=self.init_encoder, freeze_encoder=self.freeze_encoder,
+            encoder_lr_scale=self.encoder_lr_scale, **fields)
 
 
 def _resumed_plan(saved: dict, history: list, epochs: int,
@@ -224,6 +244,10 @@ def export_pretrained(checkpoint: str | os.PathLike, out: str | os.PathLike, *,
         scales = {}
     small = {k: ck[k] for k in ("format", "config", "template_hash", "num_vertices", "epoch",
                                 "step", "history", "best", "torch_version")}
+    # a shipped file names the data and starting files it was made from, not this machine's
+    # folders: absolute paths keep their last part
+    small["config"] = {k: (Path(v).name if k in _FILE_KEYS and isinstance(v, str)
+                           and os.path.isabs(v) else v) for k, v in small["config"].items()}
     small.update(model=model, scales=scales, weights=weights, optimizer=None, scheduler=None,
                  pretrained=dict(info or {}), library_version=__version__)
     buf = io.BytesIO()
@@ -232,6 +256,9 @@ def export_pretrained(checkpoint: str | os.PathLike, out: str | os.PathLike, *,
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out, buf.getvalue(), True)
     return out
+
+
+_FILE_KEYS = ("data", "val_data", "out_dir", "init", "init_encoder")
 
 
 class _OutOfTime(Exception):
@@ -305,6 +332,19 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
             "commit": _commit(), "date": datetime.date.today().isoformat()}
     if recipe.init is not None:  # the chain of runs: what the starting weights were made of
         info["init_from"] = _read_checkpoint(recipe.init).get("pretrained") or str(recipe.init)
+        if recipe.init != "pretrained":
+            info["recipe"]["init"] = Path(recipe.init).name  # no machine paths in the file
+            info["init_file"] = file_identity(recipe.init)
+    if recipe.init_encoder is not None:  # the encoder's chain, from its own file
+        from ..nn.pose_encoder import encoder_lineage, encoder_source_path, read_pose_encoder
+
+        source = encoder_source_path(recipe.init_encoder)
+        meta = read_pose_encoder(source)[1]
+        info["init_encoder_from"] = {"file": file_identity(source),
+                                     "lineage": encoder_lineage(meta)["sentence"],
+                                     "made_by": meta.get("pretrained")}
+        if recipe.init_encoder not in ("neutral", "pretrained"):
+            info["recipe"]["init_encoder"] = source.name
     files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
     plan = {"config": config}  # the run's config; its epochs may be fitted to the time budget
     t_train = time.perf_counter()
