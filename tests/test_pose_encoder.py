@@ -193,6 +193,20 @@ def test_pretraining_learns_resumes_and_refuses_other_configs(cache, tmp_path):
                                  progress=False, log=None)
 
 
+def test_a_chained_run_records_its_start_by_name_and_hash_not_by_path(cache, tmp_path):
+    tr = {k: v[:8] for k, v in cache.items()}
+    va = {k: v[8:] for k, v in cache.items()}
+    first = PP.pretrain_pose_encoder(tr, va, tmp_path / "one", PP.PosePretrainConfig(
+        batch_size=4, max_steps=2, warmup_steps=1, image_sizes=(32,)), progress=False, log=None)
+    cfg = PP.PosePretrainConfig(batch_size=4, max_steps=2, warmup_steps=1, image_sizes=(32,),
+                                init=str(first["file"]))
+    second = PP.pretrain_pose_encoder(tr, va, tmp_path / "two", cfg, progress=False, log=None)
+    meta = PE.read_pose_encoder(second["file"])[1]["pretrained"]
+    assert meta["config"]["init"] == first["file"].name
+    assert str(tmp_path) not in repr(meta)
+    assert PP._portable(PP.PosePretrainConfig(init="network"))["init"] == "network"
+
+
 def test_a_second_writer_is_refused(tmp_path):
     with PP._lock(tmp_path), pytest.raises(RuntimeError, match="another process"):
         with PP._lock(tmp_path):

@@ -267,6 +267,59 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     assert second["info"]["data"]["train_seed"] == 200
 
 
+def test_the_network_on_the_papers_protocol_records_its_encoders_chain(tmp_path, monkeypatch):
+    """init_encoder: the encoder starts from a pose-encoder file and stays frozen; the file is
+    named by name and sha256, and no absolute path of this machine reaches the weight file."""
+    import hashlib
+
+    from handmesh_tutorial.nn import pose_encoder as PE
+
+    _toy_driver(monkeypatch)
+    torch.manual_seed(0)
+    enc_file = PE.export_pose_encoder(PE.build_pose_net("resnet10"), tmp_path / "enc" / "e.pt",
+                                      info={"command": "test", "recipe": {"init": None}},
+                                      weights="float32")
+    recipe = P.PretrainedRecipe(train_scenes=6, val_scenes=3, render_size=64, image_size=32,
+                                epochs=1, batch_size=3, workers=1, loader_workers=0,
+                                device="cpu", precision="float32", augment=False,
+                                init_encoder=str(enc_file), freeze_encoder=1)
+    res = P.build_pretrained(tmp_path / "net", recipe, progress=False, log=None)
+    made = res["info"]["init_encoder_from"]
+    assert made["file"] == {"name": "e.pt", "bytes": enc_file.stat().st_size,
+                            "sha256": hashlib.sha256(enc_file.read_bytes()).hexdigest()}
+    assert "from random weights" in made["lineage"] and made["made_by"]["command"] == "test"
+    net, ck = T.load_checkpoint(res["float16"])
+    want = PE.read_pose_encoder(enc_file)[0].encoder.state_dict()
+    got = net.encoder.state_dict()
+    for k, v in want.items():  # frozen: the file's weights (float16 storage: to its precision)
+        if v.is_floating_point():
+            assert torch.allclose(got[k], v, rtol=1e-3, atol=1e-3), k
+    raw = res["file"].read_bytes() + res["float16"].read_bytes()
+    assert str(tmp_path).encode() not in raw  # no folder of this machine in either file
+    assert ck["config"]["data"] == "train" and ck["pretrained"]["recipe"]["init_encoder"] == "e.pt"
+    paper = P.PretrainedRecipe(recipe="paper", init_encoder="neutral").train_config("a", "b", "c")
+    assert paper.model_kwargs == {"output": "xyz", "smoothing_length": 0.0, "keypoints": True}
+    for bad, match in (({"init": "x.pt", "init_encoder": "neutral"}, "exclude each other"),
+                       ({"encoder_lr_scale": -1.0}, "encoder_lr_scale"),
+                       ({"freeze_encoder": -2}, "freeze_encoder")):
+        with pytest.raises(ValueError, match=match):
+            P.PretrainedRecipe(**bad)
+
+
+def test_file_identity_names_a_file_by_name_hash_and_size(tmp_path):
+    import hashlib
+
+    from handmesh_tutorial._io import file_identity
+
+    f = tmp_path / "sub" / "w.bin"
+    f.parent.mkdir()
+    f.write_bytes(b"\x00weights" * 300_000)  # over one read block
+    assert file_identity(f) == {"name": "w.bin", "bytes": 2_400_000,
+                                "sha256": hashlib.sha256(f.read_bytes()).hexdigest()}
+    with pytest.raises(FileNotFoundError):
+        file_identity(tmp_path / "missing.pt")
+
+
 def test_a_resumed_run_keeps_its_plan_or_makes_it_from_the_first_epoch():
     # a checkpoint after the plan: its epochs and schedule stay, whatever the budget now
     assert P._resumed_plan({"epochs": 8, "lr_step": 2}, [{"seconds": 30.0}], 16, 1.0) == (8, 2)

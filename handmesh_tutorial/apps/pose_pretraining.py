@@ -25,13 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._io import (
-    atomic_write_bytes,
-    atomic_write_with,
-    file_identity,
-    single_writer,
-    write_json,
-)
+from .._io import atomic_write_bytes, atomic_write_with, file_identity, single_writer, write_json
 from .._progress import progress_bar
 from .._untrusted import load_torch_file
 from ..budget import check_image_size
@@ -412,10 +406,8 @@ def _preprocessing(config: PosePretrainConfig) -> dict:
 
 def _portable(config: PosePretrainConfig) -> dict:
     """The config as a weight file records it: a starting file by its name, not its path."""
-    d = asdict(config)
-    if d["init"] not in (None, "network"):
-        d["init"] = Path(d["init"]).name
-    return d
+    init = config.init if config.init in (None, "network") else Path(config.init).name
+    return {**asdict(config), "init": init}
 
 
 def _jsonable(d: dict) -> dict:
@@ -484,8 +476,7 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
         from ..nn.pose_encoder import read_pose_encoder
 
         info["init_from"] = read_pose_encoder(config.init)[1].get("pretrained")
-        # the starting file by name and hash, never by this machine's path
-        info["recipe"]["init"] = Path(config.init).name
+        info["recipe"]["init"] = Path(config.init).name  # by name and hash, not by path
         info["init_file"] = file_identity(config.init)
     say(f"[2/3] training ({config.backbone}, batch {config.batch_size}, crops "
         f"{'/'.join(map(str, config.image_sizes))} px, init {config.init or 'random'}) in {out}")
