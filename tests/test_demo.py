@@ -254,3 +254,22 @@ def test_recipes_reach_the_training_config(smoke_run, tmp_path):
         demo.train_config(demo.DemoConfig(pooling="global"), tmp_path, tmp_path / "t")
     with pytest.raises(ValueError, match=r"recipe must be one of \['cpu', 'paper'\], got 'x'"):
         demo.train_config(demo.DemoConfig(recipe="x"), tmp_path, tmp_path / "t")
+
+
+def test_demo_cli_pooling_reaches_the_config_and_is_refused_before_any_scene(tmp_path, capsys,
+                                                                             monkeypatch):
+    seen = []
+
+    def fake_run_demo(out, seed, config, progress, overwrite):
+        seen.append(config)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(demo, "run_demo", fake_run_demo)
+    with pytest.raises(SystemExit):
+        cli.main(["demo", "--out", str(tmp_path / "a"), "--recipe", "paper", "--pooling",
+                  "global", "--budget", "smoke"])
+    assert seen[-1].pooling == "global" and seen[-1].recipe == "paper"
+    code = cli.main(["demo", "--out", str(tmp_path / "b"), "--pooling", "global", "--budget",
+                     "smoke"])
+    assert code == 3 and len(seen) == 1 and not (tmp_path / "b").exists()
+    assert "--pooling global is a choice of --recipe paper" in capsys.readouterr().err

@@ -73,7 +73,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from . import demo
 
     init = None if args.init_encoder == "none" else args.init_encoder
-    cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe, init_encoder=init)
+    if args.pooling == "global" and args.recipe != "paper":  # before minutes of scenes
+        raise ValueError("--pooling global is a choice of --recipe paper; the CPU recipe pools "
+                         "at the joints")
+    cfg = demo.DemoConfig.from_budget(budget(args.budget), recipe=args.recipe, init_encoder=init,
+                                      pooling=args.pooling)
     res = demo.run_demo(args.out, seed=args.seed, config=cfg, progress=not args.no_progress,
                         overwrite=args.overwrite)
     print(f"handmesh demo: report written to {res.report} ({res.seconds['total'] / 60:.1f} min "
@@ -234,6 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
                       "head, skinned output, keypoint and aligned-joint losses beside L1) or "
                       "'paper' (the paper's network and loss: the decoder regresses the vertex "
                       "coordinates, one L1 loss on them)")
+    demo.add_argument("--pooling", choices=("joints", "global"), default="joints",
+                      help="--recipe paper only: read the pretrained encoder at its own 2D joints "
+                      "(default) or its ResNet part globally pooled, as the paper's encoder")
     demo.add_argument("--init-encoder", default="pretrained",
                       metavar="pretrained|neutral|none|FILE",
                       help="where the encoder starts: the shipped pretrained hand encoder "
