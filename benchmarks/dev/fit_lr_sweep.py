@@ -17,7 +17,10 @@ smoothing) and ``skinned`` (16 joint rotations and a shape, skinned), all multi-
 attention. Each row: final vertex error (mm), roughness (degrees), flipped faces, seconds.
 Rows are written to ``--out`` (JSON) as they finish; a rerun skips the rows already there.
 
-Run: ``python benchmarks/dev/fit_lr_sweep.py [--out runs/fit_lr_sweep.json] [--threads 1]``.
+Run: ``python benchmarks/dev/fit_lr_sweep.py [--out runs/fit_lr_sweep.json] [--threads 1]``
+(one process per output with ``--outputs`` runs them side by side). ``--install A.json B.json
+...`` merges such files into the package's ``assets/fit_sweep_results.json`` with their
+provenance (``hmt.train.fit_probe.shipped_fit_sweep`` reads it; notebook 07 prints it).
 """
 
 from __future__ import annotations
@@ -39,6 +42,54 @@ OUTPUTS = {
 }
 
 
+def summarise(rows: list[dict], base_steps: int, stop: float) -> dict:
+    """Per output: the best rate at ``base_steps`` and the run where doubling stopped paying."""
+    best = {}
+    for name in dict.fromkeys(r["output"] for r in rows):
+        sweep = [r for r in rows if r["output"] == name and r["steps"] == base_steps]
+        top = min(sweep, key=lambda r: r["error_mm"])
+        chain = sorted((r for r in rows if r["output"] == name and r["lr"] == top["lr"]),
+                       key=lambda r: r["steps"])
+        last = chain[0]
+        for row in chain[1:]:
+            gain = (last["error_mm"] - row["error_mm"]) / last["error_mm"]
+            last = row
+            if gain < stop:
+                break
+        best[name] = {"lr": top["lr"], "swept": sorted(r["lr"] for r in sweep),
+                      "converged": last, "converged_by_stop_rule": len(chain) > 1 and gain < stop}
+    return best
+
+
+def install(files: list[Path]) -> Path:
+    """Merge sweep files into ``assets/fit_sweep_results.json`` with their provenance."""
+    import datetime
+    import sys
+
+    from handmesh_tutorial import _version
+    from handmesh_tutorial._io import atomic_write_text
+    from handmesh_tutorial.apps.pretrain_network import _commit, _hardware
+
+    rows, settings = [], {}
+    for f in files:
+        d = json.loads(Path(f).read_text())
+        rows += d["rows"]
+        settings = {**d["settings"], "outputs": sorted({r["output"] for r in rows})}
+    settings.pop("out", None)
+    doc = {"rows": rows, "best": summarise(rows, settings["steps"], settings["stop"]),
+           "settings": settings,
+           "provenance": {"command": "python benchmarks/dev/fit_lr_sweep.py (one process per "
+                                     "output) then --install", "commit": _commit(),
+                          "date": datetime.date.today().isoformat(), "hardware": _hardware("cpu"),
+                          "torch": torch.__version__, "python": sys.version.split()[0],
+                          "hands": f"{settings['num']} posed hands of the MakeHuman right hand "
+                                   "(fit_probe.posed_hands, seed 0), batch "
+                                   f"{settings['batch']}, multi-path decoder with attention"}}
+    target = _version.ASSET_DIR / fit_probe.SWEEP_FILE
+    atomic_write_text(target, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    return target
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("runs/fit_lr_sweep.json"))
@@ -50,7 +101,12 @@ def main(argv=None) -> None:
     ap.add_argument("--num", type=int, default=32)
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--install", type=Path, nargs="+", help="merge these sweep files into the "
+                    "package's assets/fit_sweep_results.json and stop")
     args = ap.parse_args(argv)
+    if args.install:
+        print(f"wrote {install(args.install)}")
+        return
     torch.set_num_threads(args.threads)
     hand = hmt.hand.HandModel("right")
     hier = hmt.nn.hierarchy.mesh_hierarchy(hand.template_vertices, hand.faces)

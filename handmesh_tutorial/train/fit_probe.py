@@ -32,7 +32,11 @@ from torch import nn
 from handmesh_tutorial.metrics.surface import flipped_face_fraction, roughness_deg
 from handmesh_tutorial.nn.losses import normal_loss
 
-__all__ = ["CodeEncoder", "FitResult", "fit_decoder", "posed_hands"]
+__all__ = ["CodeEncoder", "FitResult", "fit_decoder", "posed_hands", "shipped_fit_sweep",
+           "SWEEP_FILE"]
+
+SWEEP_FILE = "fit_sweep_results.json"
+"""The shipped learning-rate sweep of the fit test (``assets/``; `shipped_fit_sweep`)."""
 
 
 class CodeEncoder(nn.Identity):
@@ -251,3 +255,26 @@ def fit_decoder(model_or_config: nn.Module | Mapping | None, vertices, steps: in
         init_error_mm=init_err, init_roughness_deg=init_rough, seconds=seconds,
         cpu_seconds=cpu,
         predictions=pred.numpy(), model=net, codes=codes.detach())
+
+
+def shipped_fit_sweep() -> dict:
+    """The shipped fair fit test (``assets/fit_sweep_results.json``, made by
+    ``benchmarks/dev/fit_lr_sweep.py``): for each decoder output a learning-rate sweep at a fixed
+    number of steps, then its best rate with the steps doubled until the error gains less than the
+    stop share.
+
+    Returns:
+        ``{"rows", "best", "settings", "provenance"}``: ``rows`` one dict per fit (``output``,
+        ``lr``, ``steps``, ``error_mm``, ``roughness_deg``, ``flipped``, ``seconds``);
+        ``best`` per output its best rate and the row where its fit stopped improving;
+        ``settings`` the sweep's arguments; ``provenance`` command, commit, date, hardware.
+
+    Raises:
+        FileNotFoundError: this installation has no such file.
+    """
+    import json
+
+    from .. import _version
+
+    path = _version.shipped_file(SWEEP_FILE, "python benchmarks/dev/fit_lr_sweep.py --install")
+    return json.loads(path.read_text())
