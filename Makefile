@@ -65,7 +65,7 @@ execute-notebooks: setup
 
 # Make the pretrained network and install it into the package (handmesh pretrain; docs page "The
 # pretrained model"): scenes, training (CUDA when there is a GPU), int8 export. The two budgets
-# keep it under 3 h on any machine; the shipped file came from a GPU run and a CPU run (that page).
+# keep it under 3 h on any machine; the shipped file came from seven chained runs (that page).
 pretrained: setup
 	$(VENV)/bin/handmesh pretrain --out runs/pretrained --install \
 	  --max-generate-seconds 3600 --max-train-seconds 7200
