@@ -28,6 +28,7 @@ from handmesh_tutorial.testing import (
     write_freihand_root,
     write_mano_pickle,
 )
+from handmesh_tutorial.train import config as C
 
 torch.set_num_threads(1)
 
@@ -140,6 +141,26 @@ def test_resume_continues_exactly(samples, tmp_path):
     with pytest.raises(FileNotFoundError, match="checkpoint not found"):
         T.train(T.TrainConfig(out_dir=str(tmp_path / "none"), epochs=1, **kw), resume=True,
                 dataset=tr)
+
+
+def test_a_run_started_in_one_folder_resumes_from_another(tmp_path, monkeypatch):
+    """Relative paths are recorded as given; a run made from the repository root resumes from
+    notebooks/ (and a run of another data folder is still refused)."""
+    root = tmp_path / "repo"
+    for name, seed in (("data", 11), ("other", 12)):
+        generate_dataset(root / "nb" / name, functools.partial(toy_sample, image_size=64), num=8,
+                         seed=seed, kind="hand-hand", progress=False, durable=False)
+    monkeypatch.chdir(root)
+    T.train(T.TrainConfig(data="nb/data", out_dir="nb/runs/r", epochs=1, batch_size=4, **TINY))
+    monkeypatch.chdir(root / "nb")
+    kw = dict(out_dir="runs/r", epochs=2, batch_size=4, **TINY)
+    res = T.train(T.TrainConfig(data="data", **kw), resume=True)
+    assert res.history[-1]["epoch"] == 2
+    with pytest.raises(ValueError, match="other settings.*'data'"):
+        T.train(T.TrainConfig(data="other", **{**kw, "epochs": 3}), resume=True)
+    assert C._saved_folder(root / "nb" / "runs" / "r", "nb/runs/r") == str(root.resolve())
+    assert C._saved_folder(root / "nb" / "runs" / "r", "elsewhere/r") is None
+    assert C._saved_folder(root / "nb" / "runs" / "r", str(root / "nb" / "runs" / "r")) is None
 
 
 def test_resume_refuses_data_replaced_at_the_same_path(tmp_path):

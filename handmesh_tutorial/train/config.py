@@ -22,6 +22,7 @@ import os
 import textwrap
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
 
 from ..budget import budget as _budget
 from ..budget import check_image_size
@@ -347,23 +348,43 @@ class TrainConfig:
         return {k: d[k] for k in _ARCH_KEYS}
 
 
-def changed_settings(saved: Mapping, config: TrainConfig) -> dict:
+def _saved_folder(run_dir: str | os.PathLike, saved_out_dir: str) -> str | None:
+    """The folder a run's relative paths were written from: ``run_dir`` (where its checkpoint
+    is now) less the trailing parts of the ``out_dir`` it recorded; ``None`` when they do not
+    match or ``saved_out_dir`` is absolute. Lets a run made from the repository root resume from
+    ``notebooks/`` and back."""
+    parts, where = Path(saved_out_dir).parts, Path(os.path.realpath(run_dir))
+    clean = [p for p in parts if p not in ("", ".")]
+    if Path(saved_out_dir).is_absolute() or not clean or ".." in clean \
+            or len(where.parts) <= len(clean) or list(where.parts[-len(clean):]) != clean:
+        return None
+    return str(Path(*where.parts[:-len(clean)]))
+
+
+def changed_settings(saved: Mapping, config: TrainConfig,
+                     run_dir: str | os.PathLike | None = None) -> dict:
     """Fields of ``config`` that differ from a checkpoint's ``saved`` config and may not.
 
     Fields in [`RESUMABLE_KEYS`][handmesh_tutorial.train.config.RESUMABLE_KEYS] may change; paths
-    (``data``, ``val_data``, ``template``) count as equal when they name the same file or folder.
+    (``data``, ``val_data``, ``template``, ``init``, ``init_encoder``) count as equal when they
+    name the same file or folder, read from the current folder or, for the saved ones, from the
+    folder the run was started in (found from ``run_dir``, where its checkpoint is now, and the
+    ``out_dir`` it recorded).
 
     Returns:
         ``{field: (saved value, new value)}``, empty when the run can resume.
     """
     now = config.to_dict()
+    saved_from = None if run_dir is None else _saved_folder(run_dir, saved.get("out_dir") or "")
     diff = {}
     for k, v in now.items():
         if k in RESUMABLE_KEYS or k in _ARCH_KEYS:
             continue
         old = saved.get(k, TrainConfig.__dataclass_fields__[k].default)
-        if k in _PATH_KEYS and old is not None and v is not None \
-                and os.path.realpath(old) == os.path.realpath(v):
+        if k in _PATH_KEYS and old is not None and v is not None and (
+                os.path.realpath(old) == os.path.realpath(v) or (
+                    saved_from is not None and
+                    os.path.realpath(os.path.join(saved_from, old)) == os.path.realpath(v))):
             continue
         if old != v:
             diff[k] = (old, v)

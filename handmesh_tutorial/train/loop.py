@@ -291,7 +291,7 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
     if resume:  # check before building anything
         ck = _read_checkpoint(last, map_location=device)
         _check_same_network(ck, config, t_id, str(last), "checkpoint")
-        changed = changed_settings(ck["config"], config)
+        changed = changed_settings(ck["config"], config, run_dir=out)
         if changed:
             raise ValueError(
                 f"{last}: cannot resume with other settings (checkpoint, now): {changed}. "
