@@ -26,7 +26,7 @@ SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
     "hand_encoder_pretrained.pt": (
         "24efdbb4d848cd637662faaefd80ee449bd1e33b8022e6ba21b7b18f90f43325", "0.2.0"),
     "table3_results.json": (
-        "2486fad9d7ff7d758523a1dc148ac5300b9836559537b3616483b6f210fa9ba8", "0.3.0"),
+        "6fef0c9376dd478af175d513483320a30577d993e0762092f5d4cbff31819e07", "0.3.0"),
     "makehuman_hand.npz": (
         "7ec92e1e3c99b0d6cedef1209e2cd6ade09b5e4ce2abb04c17c1713b08e1a739", "0.2.0"),
     "msmr_net_pretrained.pt": (

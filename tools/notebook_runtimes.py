@@ -85,7 +85,7 @@ TRAINED = {
     "08_training": "trains it (this is the training notebook)",
     "09_evaluation": "yes: notebook 08's checkpoint (`runs/train08_<budget>/`; trains it if "
                      "absent), and the shipped pretrained network",
-    "10_ablation": "trains 12 runs (3 variants x 2 seeds x 2 configurations) from the "
+    "10_ablation": "trains 18 runs (3 variants x 3 seeds x 2 configurations) from the "
                    "decoder-neutral encoder",
     "11_your_own_data": "the shipped pretrained network; trains a tiny one on a MANO-format "
                         "template",
@@ -100,10 +100,10 @@ REUSED = {
                    "total); a later run reuses it from `notebooks/runs/` and only trains",
     "09_evaluation": "reuses notebook 08's data set and checkpoint; it made section 5's 300 "
                      "test scenes and 600 training-set scenes itself",
-    "10_ablation": "reuses notebook 08's data set; the committed run read back the 12 runs "
+    "10_ablation": "reuses notebook 08's data set; the committed run read back the 18 runs "
                    "that `benchmarks/dev/table3_two_configs.py` had trained into "
-                   "`notebooks/runs/` (the same calls, 17 minutes on the shared 2-core "
-                   "machine), and only evaluated them",
+                   "`notebooks/runs/` (the same calls: 17 minutes for seeds 0-1 and "
+                   "28 for seed 2 on the shared 2-core machine), and only evaluated them",
 }
 
 
