@@ -113,7 +113,7 @@ TRAINED_SHORT = {
     "07_multi_path_decoder": "the pretrained one",
     "08_training": "trains it",
     "09_evaluation": "08's checkpoint; the pretrained one",
-    "10_ablation": "trains 12",
+    "10_ablation": "trains 18",
     "11_your_own_data": "the pretrained one; trains a tiny one",
 }
 
