@@ -135,7 +135,9 @@ PAGE_PROBE = r"""
 (async () => {
   const problems = [];
   const root = document.querySelector("article") || document.body;
-  const SKIP = "pre, code, script, style, textarea, mjx-container, .MathJax, .highlight, svg";
+  // .clipboard-copy-txt: the hidden plain-text copy of a notebook cell (what the copy button copies)
+  const SKIP = "pre, code, script, style, textarea, mjx-container, .MathJax, .highlight, svg, " +
+    ".clipboard-copy-txt";
   const walker = document.createTreeWalker(root, NodeFilter.SHOW_TEXT, {
     acceptNode: (n) => (n.parentElement && n.parentElement.closest(SKIP))
       ? NodeFilter.FILTER_REJECT : NodeFilter.FILTER_ACCEPT,
