@@ -25,6 +25,8 @@ SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
         "069afa10e4cf433fd1b9dcce7d5289413890f811cd4608b5bd0a76486fe5aabe", "0.3.0"),
     "hand_encoder_pretrained.pt": (
         "24efdbb4d848cd637662faaefd80ee449bd1e33b8022e6ba21b7b18f90f43325", "0.2.0"),
+    "fit_sweep_results.json": (
+        "cc9747770695d84c371596f37857aa4e8dd57142b07f43d45800b963ed6741f7", "0.3.0"),
     "table3_results.json": (
         "6fef0c9376dd478af175d513483320a30577d993e0762092f5d4cbff31819e07", "0.3.0"),
     "makehuman_hand.npz": (

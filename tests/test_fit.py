@@ -111,3 +111,28 @@ def test_the_normal_loss_smooths_the_fitted_surface(small_hand):
     assert smooth.error_mm < 1.2 * plain.error_mm, (plain.summary(), smooth.summary())
     with pytest.raises(ValueError, match="normal_weight"):
         fit.fit_decoder({}, small_hand[2], steps=1, normal_weight=-1.0)
+
+
+def test_the_shipped_sweep_agrees_with_its_rows_and_its_stop_rule():
+    """The fair fit test's summary (best rate, where doubling ended) recomputed from its rows."""
+    sweep = fit.shipped_fit_sweep()
+    rows, st = sweep["rows"], sweep["settings"]
+    assert set(sweep["best"]) == {"xyz", "affine", "skinned"} == set(st["outputs"])
+    for out, b in sweep["best"].items():
+        base = [r for r in rows if r["output"] == out and r["steps"] == st["steps"]]
+        assert sorted(r["lr"] for r in base) == b["swept"] and len(base) >= 3
+        best = min(base, key=lambda r: r["error_mm"])
+        assert best["lr"] == b["lr"]
+        # the best rate is inside the swept range, not at its edge: the optimum is bracketed
+        assert min(b["swept"]) < b["lr"] < max(b["swept"])
+        chain = sorted((r for r in rows if r["output"] == out and r["lr"] == b["lr"]),
+                       key=lambda r: r["steps"])
+        assert [r["steps"] for r in chain] == [st["steps"] * 2 ** k for k in range(len(chain))]
+        gains = [(a["error_mm"] - c["error_mm"]) / a["error_mm"]
+                 for a, c in zip(chain, chain[1:], strict=False)]
+        stopped = next((k + 1 for k, g in enumerate(gains) if g < st["stop"]), len(chain) - 1)
+        assert b["converged"] == chain[stopped]
+        assert b["converged_by_stop_rule"] == any(g < st["stop"] for g in gains)
+        assert chain[-1]["steps"] <= st["max_steps"]
+    prov = sweep["provenance"]
+    assert prov["commit"] and prov["hardware"] and "posed_hands" in prov["hands"]

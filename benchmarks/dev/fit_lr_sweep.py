@@ -75,7 +75,8 @@ def install(files: list[Path]) -> Path:
         d = json.loads(Path(f).read_text())
         rows += d["rows"]
         settings = {**d["settings"], "outputs": sorted({r["output"] for r in rows})}
-    settings.pop("out", None)
+    for key in ("out", "install", "lrs"):  # the rates swept are per output, in "best"
+        settings.pop(key, None)
     doc = {"rows": rows, "best": summarise(rows, settings["steps"], settings["stop"]),
            "settings": settings,
            "provenance": {"command": "python benchmarks/dev/fit_lr_sweep.py (one process per "
