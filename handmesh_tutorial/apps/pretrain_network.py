@@ -331,7 +331,8 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
             "seconds": {"generate": round(t_gen, 1)}, "torch": str(torch.__version__),
             "commit": _commit(), "date": datetime.date.today().isoformat()}
     if recipe.init is not None:  # the chain of runs: what the starting weights were made of
-        info["init_from"] = _read_checkpoint(recipe.init).get("pretrained") or str(recipe.init)
+        info["init_from"] = (_read_checkpoint(recipe.init).get("pretrained")
+                             or Path(str(recipe.init)).name)
         if recipe.init != "pretrained":
             info["recipe"]["init"] = Path(recipe.init).name  # no machine paths in the file
             info["init_file"] = file_identity(recipe.init)

@@ -266,7 +266,9 @@ def shipped_fit_sweep() -> dict:
     Returns:
         ``{"rows", "best", "settings", "provenance"}``: ``rows`` one dict per fit (``output``,
         ``lr``, ``steps``, ``error_mm``, ``roughness_deg``, ``flipped``, ``seconds``);
-        ``best`` per output its best rate and the row where its fit stopped improving;
+        ``best`` per output its best rate, the rates swept, and the row where the doubling
+        ended (``converged_by_stop_rule``: a doubling gained under the stop share; else the
+        step cap ended it);
         ``settings`` the sweep's arguments; ``provenance`` command, commit, date, hardware.
 
     Raises:
