@@ -7,14 +7,7 @@
 #     "--init none --max-train-seconds 140" "--init network --lr 1e-3 --max-train-seconds 140"
 # The arguments both runs share (scenes, seeds, the generation's budget) come from $COMMON.
 set -e
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-  --target /tmp/site .whl/*.whl
-export PYTHONPATH=/tmp/site:$PWD PYOPENGL_PLATFORM=egl PYGLET_HEADLESS=1 PYTHONUNBUFFERED=1
-vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
-if [ -f "$vendor" ]; then export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor; fi
-nvidia-smi -L || true
+. "$(dirname "$0")/device_setup.sh"
 OUT=${OUT:-/tmp/pe_out}
 COMMON=${COMMON:---train-scenes 40000 --val-scenes 400 --max-generate-seconds 240}
 mkdir -p "$OUT/peA" "$OUT/peB"

@@ -23,15 +23,7 @@
 # On a machine that stays warm between calls, /tmp/pt survives: running the same line again
 # resumes (the scenes are kept, training continues from its last checkpoint).
 set -e
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-  --target /tmp/site .whl/*.whl
-# PYGLET_HEADLESS: pyrender imports pyglet's window module, which otherwise needs X11 libraries
-export PYTHONPATH=/tmp/site:$PWD PYOPENGL_PLATFORM=egl PYGLET_HEADLESS=1 PYTHONUNBUFFERED=1
-vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
-if [ -f "$vendor" ]; then export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor; fi
-nvidia-smi -L || true
+. "$(dirname "$0")/device_setup.sh"
 python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"
 OUT=${OUT:-/tmp/pt_out}
 mkdir -p "$OUT"

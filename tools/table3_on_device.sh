@@ -8,14 +8,7 @@
 # tools/pretrain_on_device.sh's header says and name both in `carry`; results land in $OUT:
 #   tools/table3_on_device.sh            # then commit $OUT/table3_gpu.json with the log
 set -e
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-  --target /tmp/site .whl/*.whl
-export PYTHONPATH=/tmp/site:$PWD PYOPENGL_PLATFORM=egl PYGLET_HEADLESS=1 PYTHONUNBUFFERED=1
-vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
-if [ -f "$vendor" ]; then export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor; fi
-nvidia-smi -L || true
+. "$(dirname "$0")/device_setup.sh"
 OUT=${OUT:-/tmp/table3_out}
 mkdir -p "$OUT"
 EXTRA=""

@@ -25,7 +25,7 @@ import time
 
 def main(argv=None) -> dict:
     import handmesh_tutorial as hmt
-    from handmesh_tutorial._io import write_json
+    from handmesh_tutorial._io import file_identity, write_json
     from handmesh_tutorial.apps.demo import DemoConfig, generate_data
     from handmesh_tutorial.apps.demo.table3 import run_table3, summarise_table3
     from handmesh_tutorial.nn.pose_encoder import (
@@ -74,7 +74,7 @@ def main(argv=None) -> dict:
         "command": "python benchmarks/dev/table3_two_configs.py " + " ".join(
             a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("/")),
         "encoder": {"name": args.encoder, "file": enc_path.name, "lineage": lineage,
-                    "sha256": __import__("hashlib").sha256(enc_path.read_bytes()).hexdigest(),
+                    "sha256": file_identity(enc_path)["sha256"],
                     "validation": (meta.get("history") or [{}])[-1]},
         "data": {"train_seed": args.data_seed, "test_seed": args.data_seed + 1,
                  "train_scenes": cfg.train_samples, "test_scenes": cfg.test_samples,

@@ -457,7 +457,7 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
         _save(path, caches[split])
     t_crop = time.perf_counter() - t0 - t_gen
     dev = "cuda" if config.device == "auto" and torch.cuda.is_available() else config.device
-    info = {"command": "handmesh pretrain-encoder", "recipe": _jsonable(asdict(config)),
+    info = {"command": "handmesh pretrain-encoder", "recipe": _jsonable(_portable(config)),
             "max_generate_seconds": max_generate_seconds, "max_train_seconds": max_train_seconds,
             "stop_after": stop_after,
             "data": {"train_seed": config.data_seed, "train_scenes": tr["scenes"],
@@ -476,8 +476,7 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
         from ..nn.pose_encoder import read_pose_encoder
 
         info["init_from"] = read_pose_encoder(config.init)[1].get("pretrained")
-        info["recipe"]["init"] = Path(config.init).name  # by name and hash, not by path
-        info["init_file"] = file_identity(config.init)
+        info["init_file"] = file_identity(config.init)  # by name and hash, not by path
     say(f"[2/3] training ({config.backbone}, batch {config.batch_size}, crops "
         f"{'/'.join(map(str, config.image_sizes))} px, init {config.init or 'random'}) in {out}")
     res = pretrain_pose_encoder(caches["train"], caches["val"], out, config,
