@@ -334,3 +334,43 @@ def test_a_bad_freihand_sample_is_not_sent_to_verify(tmp_path):
     with pytest.raises(BadSampleError, match="--skip-bad lists each one") as err:
         FreiHANDTorchDataset(root, "training", image_size=32, train=False)[0]
     assert "handmesh verify" not in str(err.value)
+
+
+# ------------------------------------------------------------------ a run in parts (fresh probe)
+
+
+def test_a_run_in_parts_writes_and_deletes_only_its_own_shards(tmp_path):
+    """The shards of ``generate_dataset(parts=...)`` live in ``.<root>-shards/`` beside the root
+    until they are merged; that folder used to be removed whole (a user's file in it deleted)
+    and written through when it was a link (shards created outside)."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    shards = tmp_path / ".r-shards"
+    shards.symlink_to(outside, target_is_directory=True)
+    with pytest.raises(ValueError, match=r"\.r-shards is a symbolic link"):
+        gen(tmp_path / "r", num=4, parts=2)
+    assert list(outside.iterdir()) == [] and not (tmp_path / "r").exists()
+    shards.unlink()
+    shards.mkdir()
+    (shards / "notes.txt").write_text("the user's")
+    with pytest.raises(ValueError, match=r"holds what a run in parts did not write \(notes.txt\)"):
+        gen(tmp_path / "r", num=4, parts=2)
+    assert (shards / "notes.txt").read_text() == "the user's" and not (tmp_path / "r").exists()
+    (shards / "notes.txt").unlink()
+    gen(tmp_path / "r", num=4, parts=2)  # the folder holds nothing else: runs, then removed
+    assert not shards.exists() and D.InterSHDataset(tmp_path / "r").indices.tolist() == [0, 1, 2, 3]
+    gen(tmp_path / "ref", num=4)
+    assert tree(tmp_path / "r" / "samples") == tree(tmp_path / "ref" / "samples")
+
+
+def test_removing_merged_shards_leaves_what_no_shard_wrote(tmp_path):
+    from handmesh_tutorial.data.root import _remove_shards
+
+    shards = tmp_path / ".r-shards"
+    gen(shards / "0000", num=2)
+    (shards / "0000" / "samples" / "000001" / "photo.jpg").write_bytes(b"the user's")
+    (shards / "0000" / "mine.txt").write_text("the user's")
+    left = _remove_shards(shards)
+    assert sorted(left) == [".r-shards/0000/mine.txt", ".r-shards/0000/samples/000001/photo.jpg"]
+    assert sorted(str(p.relative_to(shards)) for p in shards.rglob("*") if p.is_file()) == \
+        ["0000/mine.txt", "0000/samples/000001/photo.jpg"]

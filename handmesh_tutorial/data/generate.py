@@ -14,7 +14,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import shutil
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -25,7 +24,17 @@ from typing import Any
 from .candidates import _probe, _probe_summary, _Task
 from .files import read_annotation
 from .reader import _disagreements, _planned, _present, read_meta
-from .root import _check_root, _coalesce, _diff, _diff_message, _lock, _open_root, merge_shards
+from .root import (
+    _check_root,
+    _check_shards_folder,
+    _coalesce,
+    _diff,
+    _diff_message,
+    _lock,
+    _open_root,
+    _remove_shards,
+    merge_shards,
+)
 from .schema import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -197,7 +206,9 @@ def generate_dataset(
         parts: make the set as this many shards (``shard=(k, parts)``, in
             ``.<root name>-shards/`` beside ``root``), then hard-link them into ``root``
             ([`merge_shards`][handmesh_tutorial.data.root.merge_shards]): the same files as one
-            run. With a time budget, a set cut short is still a valid root of the scenes it has.
+            run. That folder must hold nothing but these shards (a link there, or another
+            entry, is refused before anything is written); after the merge only the shards'
+            own files are deleted. With a time budget, a set cut short is still a valid root of the scenes it has.
             A rerun after the merge keeps the root as it is (a budget decides how many shards a
             run makes, so a rerun under another budget could not merge with the first).
         max_seconds: time budget of a run in ``parts``: no new shard starts when the mean
@@ -348,8 +359,9 @@ def _generate_in_parts(root: Path, meta: dict, one: Callable[[int], GenerationSu
                        parts: int, max_seconds: float | None, bins, durable: bool,
                        t0: float) -> GenerationSummary:
     """``generate_dataset(parts=...)``: the shards that fit the budget, merged into ``root``."""
-    if (root / META_FILE).exists() and not _shards_folder(root).exists():
+    if (root / META_FILE).exists() and not os.path.lexists(_shards_folder(root)):
         return _kept_parts(root, meta, parts, bins, t0)
+    _check_shards_folder(_shards_folder(root))  # no link, nothing but shard roots
     made: list[GenerationSummary] = []
     for k in range(parts):
         spent = time.perf_counter() - t0
@@ -357,7 +369,10 @@ def _generate_in_parts(root: Path, meta: dict, one: Callable[[int], GenerationSu
             break
         made.append(one(k))
     merge_shards([s.root for s in made], root, link=True, progress=False, durable=durable)
-    shutil.rmtree(_shards_folder(root))
+    left = _remove_shards(_shards_folder(root))  # only the shards' own files
+    if left:
+        warnings.warn(f"{_shards_folder(root)}: left {', '.join(left[:8])} (not written by this "
+                      f"run); the merged set in {root} is complete", UserWarning, stacklevel=3)
     hist = [sum(h) for h in zip(*(s.vr_histogram for s in made), strict=True)]
     return GenerationSummary(
         str(root), read_meta(root)["ranges"], sum(s.written for s in made),

@@ -80,6 +80,73 @@ def _remove_sample_folder(folder: Path) -> list[str]:
     return left
 
 
+_SHARD_ROOT = re.compile(r"[0-9]{4}")
+"""Names of the shard roots a run in parts makes (`generate._shards_folder`): ``0000``..."""
+
+
+def _check_shards_folder(folder: Path) -> None:
+    """Refuse a shards folder (where a run in parts keeps its shards until they are merged)
+    that is a symbolic link or holds anything but shard roots (``NNNN`` folders): such a run
+    writes, and after the merge deletes, only its own shards.
+
+    Raises:
+        ValueError: a link, a file, or foreign entries (listed); nothing was written.
+    """
+    if folder.is_symlink():
+        raise ValueError(f"{folder} is a symbolic link (to {os.readlink(folder)}): the shards of "
+                         "a run in parts are never written through a link; remove the link "
+                         "and rerun")
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{folder} is a file: a run in parts keeps its shards there; move it "
+                         "away and rerun")
+    foreign = sorted(p.name for p in folder.iterdir() if not (
+        _SHARD_ROOT.fullmatch(p.name) and p.is_dir() and not p.is_symlink())) \
+        if folder.is_dir() else []
+    if foreign:
+        shown = ", ".join(foreign[:8]) + (f" and {len(foreign) - 8} more" if len(foreign) > 8
+                                          else "")
+        raise ValueError(f"{folder} holds what a run in parts did not write ({shown}): it keeps "
+                         "its shards there and deletes them after merging; move these away "
+                         "and rerun (nothing was written)")
+
+
+def _remove_shards(folder: Path) -> list[str]:
+    """Delete the merged shard roots of a run in parts, touching nothing else: in each
+    ``NNNN`` root its sample folders (`_remove_sample_folder`), ``meta.json``, the writer lock
+    and this module's temporaries; then every folder that this left empty.
+
+    Returns:
+        The entries left (relative to ``folder``'s parent), e.g. a user's file put into a shard
+        while it ran; empty when ``folder`` is gone.
+    """
+    left: list[str] = []
+    for shard in sorted(folder.iterdir()):
+        if not (_SHARD_ROOT.fullmatch(shard.name) and shard.is_dir()
+                and not shard.is_symlink()):
+            left.append(f"{folder.name}/{shard.name}")
+            continue
+        samples = shard / SAMPLES_DIR
+        if samples.is_dir() and not samples.is_symlink():
+            for p in sorted(samples.iterdir()):
+                if _sample_index(p.name) is not None and (p.is_dir() or p.is_symlink()):
+                    _remove_sample_folder(p)  # what it leaves is listed below
+            _clean_stale(samples)
+        for name in (META_FILE, _LOCK_FILE):
+            p = shard / name
+            if p.is_file() or p.is_symlink():
+                p.unlink()
+        _clean_stale(shard)
+        for d in (samples, shard):
+            if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
+                d.rmdir()
+        if shard.exists():
+            left += [f"{folder.name}/{p.relative_to(folder)}" for p in sorted(shard.rglob("*"))
+                     if not p.is_dir() or p.is_symlink()]
+    if not any(folder.iterdir()):
+        folder.rmdir()
+    return left
+
+
 def _coalesce(ranges: Sequence[Sequence[int]]) -> list[list[int]]:
     out: list[list[int]] = []
     for a, b in sorted((int(a), int(b)) for a, b in ranges if b > a):
