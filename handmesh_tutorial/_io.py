@@ -63,7 +63,7 @@ def single_writer(lock_file: str | os.PathLike, what: str):
 
     The lock is opened with ``O_NOFOLLOW``: a symbolic link in its place is refused, never
     followed (a planted ``.generate.lock -> /etc/nologin`` would otherwise create the link's
-    target), and anything but a regular file there (a folder, a FIFO) is refused too.
+    target), and anything but a regular file there (a folder, a FIFO, a socket) is refused too.
 
     Args:
         lock_file: the lock's path (created if missing; its folder must exist).
@@ -92,6 +92,9 @@ def single_writer(lock_file: str | os.PathLike, what: str):
         if os.path.isdir(lock_file):
             raise EnvironmentFailure(f"{lock_file} is a folder: it cannot serve as the writer "
                                      f"lock of {what}; move it away and rerun") from None
+        if os.path.exists(lock_file) and not os.path.isfile(lock_file):  # a socket: ENXIO
+            raise EnvironmentFailure(f"{lock_file} is not a regular file: it cannot serve as "
+                                     f"the writer lock of {what}; remove it and rerun") from None
         raise OSError(err.errno, err.strerror, os.fspath(lock_file)) from err
     try:
         if not stat.S_ISREG(os.fstat(fd).st_mode):

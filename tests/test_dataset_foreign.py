@@ -183,12 +183,17 @@ def test_a_lock_file_that_is_a_link_is_refused_and_its_target_never_created(tmp_
 
 
 def test_a_fifo_or_folder_in_place_of_the_lock_is_refused(tmp_path):
+    import socket
+
     os.mkfifo(tmp_path / "fifo.lock")
     (tmp_path / "dir.lock").mkdir()
-    for name in ("fifo.lock", "dir.lock"):
+    sock = socket.socket(socket.AF_UNIX)  # fresh probe: a socket was exit 1 (ENXIO), unnamed
+    sock.bind(str(tmp_path / "sock.lock"))
+    for name in ("fifo.lock", "dir.lock", "sock.lock"):
         with pytest.raises(EnvironmentFailure, match="regular file|is a folder"), \
                 single_writer(tmp_path / name, "x"):
             pass
+    sock.close()
 
 
 # ------------------------------------------------------------------ item 11: verify's messages
@@ -234,6 +239,35 @@ def test_verify_remove_bad_says_what_writes_the_removed_samples_again(tmp_path, 
     assert cli.main(["verify", str(root), "--remove-bad", "--no-progress"]) == 0
     assert "rerun the `handmesh generate` command that made it" in capsys.readouterr().out
     assert gen(root, num=3).written == 1 and tree(root) == before  # and it does
+
+
+def test_generate_verify_repairs_beside_entries_the_set_does_not_plan(tmp_path, capsys):
+    """Fresh probe of issue 43: a user's ``samples/99`` or ``samples/2024/`` made ``generate
+    --verify`` stop (exit 3, "fix their permissions") with the planned sample removed and not
+    written again; only a bad entry where a planned sample belongs stops it now."""
+    argv = ["generate", "--kind", "hand-hand", "--num", "3", "--seed", "4", "--out",
+            str(tmp_path / "r"), "--image-size", "32", "--no-progress", "--no-fsync"]
+    assert cli.main(argv) == 0
+    s = tmp_path / "r" / "samples"
+    ref = tree(s)
+    damage(s / "000001")
+    (s / "99").write_text("the user's")
+    (s / "2024").mkdir()
+    (s / "2024" / "notes.txt").write_text("the user's")
+    capsys.readouterr()
+    assert cli.main([*argv, "--verify"]) == 0
+    out = capsys.readouterr().out
+    assert "1 removed" in out and "1 samples written, 2 already present" in out
+    assert "99: not removed: meta.json plans no sample 99" in out
+    after = tree(s)
+    assert {k: after[k] for k in ref} == ref  # 000001 written again, byte for byte
+    assert (s / "99").read_text() == (s / "2024" / "notes.txt").read_text() == "the user's"
+    shutil.rmtree(s / "000002")
+    (s / "000002").write_text("a file where a planned sample belongs")
+    assert cli.main([*argv, "--verify"]) == cli.EXIT_CODES["bad-input"]
+    err = capsys.readouterr().err
+    assert "000002 could not be removed (see above), where samples this set plans belong" in err
+    assert (s / "000002").read_text() == "a file where a planned sample belongs"
 
 
 # ------------------------------------------------------------------ item 4: extra fields

@@ -116,10 +116,13 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     if args.verify and (Path(args.out) / META_FILE).exists():
         report = verify_dataset(args.out, remove=True, progress=not args.no_progress)
         print(f"handmesh generate --verify: {report}")
-        if not report.ok:  # nothing generated: the samples left would count as done
-            raise report.error or ValueError(report.advice() or "some bad samples could not "
-                                             "be removed (see above): move them away, or fix "
-                                             "their permissions, then rerun this command")
+        # nothing generated while a bad entry is left where a planned sample belongs (it would
+        # count as done); entries of indices the set does not plan are listed and left
+        in_the_way = [n for n, _ in report.kept if n not in report.unplanned]
+        if report.error or report.disagree or in_the_way:
+            raise report.error or ValueError(report.advice() or (
+                f"{', '.join(in_the_way[:8])} could not be removed (see above), where samples "
+                "this set plans belong: move them away, then rerun this command"))
 
     s = interact.generate_interactions(
         args.out, args.kind, args.num, args.seed, image_size=args.image_size,

@@ -267,6 +267,9 @@ class VerifyReport:
         error: the first ``OSError`` that kept a bad sample from being removed (a read-only
             root: ``handmesh verify`` prints the report, then exits 6 naming the file), else
             ``None``.
+        unplanned: the names in ``kept`` that are no sample ``meta.json`` plans (``2024`` or
+            ``99`` beside 6-digit names, ``000007`` of a 7-sample set): ``generate`` neither
+            counts them as done nor writes them, so a repair may go on beside them.
     """
 
     root: Path
@@ -277,6 +280,7 @@ class VerifyReport:
     kept: list[tuple[str, str]] = field(default_factory=list)
     foreign: list[tuple[str, str]] = field(default_factory=list)
     error: OSError | None = field(default=None, repr=False, compare=False)
+    unplanned: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -398,6 +402,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
     kept: list[tuple[str, str]] = []
     foreign: list[tuple[str, str]] = []
     removable: list[str] = []
+    unplanned: list[str] = []
     error: OSError | None = None
     with contextlib.ExitStack() as stack:
         if remove:
@@ -424,6 +429,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                                          "generator's; move it away"))
                 else:
                     kept.append((p.name, f"meta.json plans no sample {p.name}"))
+                    unplanned.append(p.name)
                 continue
             try:
                 s = read_sample(p)
@@ -435,6 +441,7 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                 elif not planned:
                     kept.append((p.name, f"meta.json plans no sample {p.name} (index_width "
                                          f"{width}, ranges {str(meta['ranges'])[:60]})"))
+                    unplanned.append(p.name)
                 else:
                     removable.append(p.name)
                 continue
@@ -458,4 +465,5 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
             else:
                 removed.append(name)
     return VerifyReport(root=root, checked=len(entries), bad=bad, removed=removed,
-                        disagree=disagree, kept=kept, foreign=foreign, error=error)
+                        disagree=disagree, kept=kept, foreign=foreign, error=error,
+                        unplanned=unplanned)
