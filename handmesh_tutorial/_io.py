@@ -330,6 +330,11 @@ def claim_out_dir(out: str | os.PathLike, command: str, outputs: tuple[str, ...]
     the user then gives it to the command, whose outputs of the same names are replaced and
     whose other files are left. Nothing is written in a refused folder.
 
+    A command never writes through a symbolic link inside ``out``: a link at the marker's
+    name, at a name of ``outputs``, or directly inside an output that is a folder (a run's
+    ``data/train``) is refused, ``overwrite`` or not (``out`` itself may be a link: the user
+    named it).
+
     Args:
         out: the folder (``--out``); ``""`` is refused (it would mean the current folder).
         command: the command's name (``"train"``, ``"evaluate"``, ``"demo"``).
@@ -347,7 +352,8 @@ def claim_out_dir(out: str | os.PathLike, command: str, outputs: tuple[str, ...]
         ValueError: ``out`` is empty.
         NotADirectoryError: ``out`` is a file.
         FileExistsError: ``out`` holds files the command did not write (the message lists up to
-            eight and says what to do) and ``overwrite`` is false.
+            eight and says what to do) and ``overwrite`` is false; or a symbolic link where the
+            command writes (named, with its target).
         OSError: the folder or the marker cannot be written (the error names it).
     """
     raw = os.fspath(out)
@@ -358,6 +364,8 @@ def claim_out_dir(out: str | os.PathLike, command: str, outputs: tuple[str, ...]
     marker = out_marker(folder, command)
     if folder.exists() and not folder.is_dir():
         raise NotADirectoryError(f"{folder} is a file, not a folder: choose another --out")
+    if folder.is_dir():
+        _refuse_links(folder, command, (marker.name, *outputs))
     own = folder.is_dir() and (marker.is_file() or (recognise is not None and recognise(folder)))
     if folder.is_dir() and not own:
         ours = {marker.name, *hidden}
@@ -378,6 +386,19 @@ def claim_out_dir(out: str | os.PathLike, command: str, outputs: tuple[str, ...]
             atomic_write_text(marker, json.dumps({"command": command, "written_by":
                                                   "handmesh_tutorial"}) + "\n", durable=False)
     return folder
+
+
+def _refuse_links(folder: Path, command: str, names: tuple[str, ...]) -> None:
+    """Raise ``FileExistsError`` naming the first symbolic link at ``folder/name`` or directly
+    inside such a name that is a real folder (links not followed)."""
+    for name in names:
+        path = folder / name
+        inside = (sorted(path.iterdir()) if path.is_dir() and not path.is_symlink() else [])
+        for p in (path, *inside):
+            if p.is_symlink():
+                raise FileExistsError(
+                    f"{p} is a symbolic link (to {os.readlink(p)}): {command} never writes "
+                    f"through a link nor over one; remove it, or choose another --out")
 
 
 def remove_outputs(folder: str | os.PathLike, names: tuple[str, ...]) -> list[Path]:

@@ -189,3 +189,82 @@ def test_a_run_folder_of_an_older_version_is_still_the_runs_own(tmp_path):
     (new / "a_file").write_text("")
     with pytest.raises(NotADirectoryError, match="is a file"):
         claim_out_dir(new / "a_file", "train")
+
+
+def _tree(folder):
+    return {p.relative_to(folder).as_posix(): (p.read_bytes() if p.is_file() else None)
+            for p in sorted(folder.rglob("*"))}
+
+
+@pytest.mark.parametrize("link", ["eval", "data/train", "report.md", ".handmesh-demo"])
+def test_a_link_where_a_command_writes_is_refused_never_written_through(tmp_path, link):
+    """Fresh probe of issue 43: in the demo's own folder, ``eval`` a link to a folder outside
+    made the demo's evaluation write eval.json, predictions.npz and figures there."""
+    outside = tmp_path / "outside"
+    (outside / "dir").mkdir(parents=True)
+    (outside / "file").write_text("the user's")
+    before = _tree(outside)
+    out = tmp_path / "run"
+    (out / "data").mkdir(parents=True)
+    (out / ".handmesh-demo").write_text("{}")
+    (out / link).unlink(missing_ok=True)
+    target = outside / ("file" if "." in link else "dir")
+    (out / link).symlink_to(target, target_is_directory=target.is_dir())
+    outputs = ("report.md", "data", "train", "eval")
+    for overwrite in (False, True):
+        with pytest.raises(FileExistsError, match=rf"run/{link} is a symbolic link \(to "
+                                                  rf".*outside/(file|dir)\): demo never writes "
+                                                  "through a link nor over one"):
+            claim_out_dir(out, "demo", outputs, overwrite=overwrite)
+    assert _tree(outside) == before and (out / link).is_symlink()
+    (out / link).unlink()  # the user removes it: the folder is the demo's own again
+    (out / ".handmesh-demo").write_text("{}")
+    claim_out_dir(out, "demo", outputs)
+
+
+def test_evaluate_refuses_a_link_at_one_of_its_files(toy_root, tmp_path, net, capsys):
+    out = tmp_path / "ev"
+    T.evaluate(net, toy_root, image_size=32, out_dir=out, progress=False, num_samples=2,
+               baseline=False)
+    (tmp_path / "y").write_text("outside")
+    (out / "pred.json").symlink_to(tmp_path / "y")
+    with pytest.raises(FileExistsError, match="pred.json is a symbolic link"):
+        T.evaluate(net, toy_root, image_size=32, out_dir=out, progress=False, num_samples=2,
+                   baseline=False, overwrite=True)
+    assert (tmp_path / "y").read_text() == "outside"
+
+
+@pytest.mark.parametrize("command", ["pretrain", "pretrain-encoder"])
+def test_pretraining_refuses_the_users_files_and_links_before_any_scene(tmp_path, capsys,
+                                                                        monkeypatch, command):
+    """Fresh probe of issue 43: ``pretrain`` and ``pretrain-encoder`` took any --out: a user's
+    ``history.json`` or weight file was overwritten, a ``data`` link was generated through."""
+    from handmesh_tutorial._version import PRETRAINED_FILE
+    from handmesh_tutorial.apps import pretrain_network, pretraining_data
+    from handmesh_tutorial.nn.pose_encoder import ENCODER_FILE
+
+    assert PRETRAINED_FILE in pretraining_data.PRETRAINING_OUTPUTS["pretrain"]
+    assert ENCODER_FILE in pretraining_data.PRETRAINING_OUTPUTS["pretrain-encoder"]
+
+    def never(*a, **k):
+        raise AssertionError("generated scenes before claiming --out")
+
+    monkeypatch.setattr(pretrain_network, "generate_train_val", never)
+    mine = "history.json" if command == "pretrain-encoder" else "msmr_net_float16.pt"
+    out = tmp_path / "run"
+    before = _user_files(out, [mine, "notes.txt"])
+    argv = [command, "--out", str(out), "--device", "cpu", "--no-progress"]
+    assert cli_main(argv) == 5
+    assert f"did not write ({', '.join(sorted(before))})" in capsys.readouterr().err
+    assert {n: (out / n).read_text() for n in before} == before
+    assert sorted(p.name for p in out.iterdir()) == sorted(before)
+    (out / "data").symlink_to(tmp_path, target_is_directory=True)
+    assert cli_main([*argv, "--overwrite"]) == 5
+    assert "data is a symbolic link" in capsys.readouterr().err
+    (out / "data").unlink()
+    # an older version's run folder (no marker) is recognised by its scenes, and resumes
+    old = tmp_path / "old"
+    (old / "data" / "val").mkdir(parents=True)
+    (old / "data" / "val" / "meta.json").write_text(json.dumps({"seed": 1, "num_samples": 2}))
+    (old / "crops_val.pt").write_text("")
+    assert pretraining_data.claim_pretraining_dir(old, command) == old

@@ -20,7 +20,7 @@ def _cmd_pretrain(args: argparse.Namespace) -> int:
                                  if getattr(args, k) is not None})
     res = build_pretrained(args.out, recipe, max_generate_seconds=args.max_generate_seconds,
                            max_train_seconds=args.max_train_seconds, install=args.install,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, overwrite=args.overwrite)
     info = res["info"]
     print(f"handmesh pretrain: {info['data']['train_scenes']} training scenes, "
           f"{info['epochs_done']} of {info.get('epochs_planned', recipe.epochs)} epochs on "
@@ -44,7 +44,8 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
                                    max_generate_seconds=args.max_generate_seconds,
                                    max_train_seconds=args.max_train_seconds,
                                    stop_after=args.stop_after_steps,
-                                   install=args.install, progress=not args.no_progress)
+                                   install=args.install, progress=not args.no_progress,
+                                   overwrite=args.overwrite)
     last = res["history"][-1]
     print(f"handmesh pretrain-encoder: {res['info']['data']['train_scenes']} training scenes, "
           f"{last['step']} steps on {res['info']['hardware']}; val PA-MPJPE "
@@ -69,7 +70,11 @@ def add_pretrain_commands(sub) -> None:
     pre = sub.add_parser("pretrain", help="make the pretrained MSMR-Net: generate scenes, train "
                          "(a GPU when there is one), export a small int8 file (resumable)")
     pre.add_argument("--out", type=_out_folder, default="runs/pretrained",
-                     help="output folder (default: runs/pretrained)")
+                     help="output folder (default: runs/pretrained; rerun to resume); a folder "
+                     "holding other files is refused unless --overwrite")
+    pre.add_argument("--overwrite", action="store_true",
+                     help="write into an --out that holds other files (pretrain's files of the "
+                     "same names are then replaced, the others left)")
     pre.add_argument("--install", action="store_true",
                      help="copy the result into the package, where hmt.pretrained.pretrained() and "
                      "--checkpoint pretrained find it")
@@ -115,7 +120,11 @@ def add_pretrain_commands(sub) -> None:
                         "scenes, train on 2D keypoints and 3D joints (no mesh decoder), export a "
                         "small int8 file (resumable)")
     pe.add_argument("--out", type=_out_folder, default="runs/pretrained_encoder",
-                    help="output folder (default: runs/pretrained_encoder)")
+                    help="output folder (default: runs/pretrained_encoder; rerun to resume); a "
+                    "folder holding other files is refused unless --overwrite")
+    pe.add_argument("--overwrite", action="store_true",
+                    help="write into an --out that holds other files (pretrain-encoder's files "
+                    "of the same names are then replaced, the others left)")
     pe.add_argument("--install", nargs="?", const="pretrained", default=False,
                     choices=("pretrained", "neutral"),
                     help="copy the result into the package: as the demo's encoder "

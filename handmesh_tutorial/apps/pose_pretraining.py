@@ -39,7 +39,7 @@ from ..nn.pose_encoder import (
     export_pose_encoder,
     pose_loss,
 )
-from .pretraining_data import check_device
+from .pretraining_data import check_device, claim_pretraining_dir
 
 __all__ = ["PosePretrainConfig", "evaluate_pose", "pretrain_pose_encoder",
            "build_pretrained_encoder"]
@@ -419,9 +419,10 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
                              max_generate_seconds: float | None = None,
                              max_train_seconds: float | None = None,
                              stop_after: int | None = None, install: bool | str = False,
-                             progress: bool = True, log=print) -> dict:
+                             progress: bool = True, log=print, overwrite: bool = False) -> dict:
     """Make the pretrained encoder: scenes, crops, training, int8 file (``handmesh
-    pretrain-encoder``).
+    pretrain-encoder``). ``out`` is claimed first (``claim_pretraining_dir``: files it did not
+    write refused unless ``overwrite``).
 
     ``out/data/train`` (seed ``data_seed``) and ``out/data/val`` (``data_seed + 1``) are generated
     as [`build_pretrained`][handmesh_tutorial.apps.pretrain_network.build_pretrained] does
@@ -439,7 +440,7 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     config = config or PosePretrainConfig()
     check_device(config.device, probe=True)  # a CUDA device asked for: before generating
     say = log or (lambda *_: None)
-    out = Path(out)
+    out = claim_pretraining_dir(out, "pretrain-encoder", overwrite)
     workers = config.workers or os.cpu_count() or 1
     t0 = time.perf_counter()
     tr, val, t_gen = generate_train_val(out / "data", config.train_scenes, config.val_scenes,

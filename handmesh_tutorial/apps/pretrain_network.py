@@ -29,7 +29,12 @@ from .. import _version
 from .._io import file_identity
 from .._version import PRETRAINED_FILE, __version__
 from ..budget import check_image_size
-from .pretraining_data import check_device, generate_train_val, generate_training_scenes
+from .pretraining_data import (
+    check_device,
+    claim_pretraining_dir,
+    generate_train_val,
+    generate_training_scenes,
+)
 
 __all__ = ["PretrainedRecipe", "build_pretrained", "export_pretrained",
            "generate_training_scenes", "generate_train_val"]
@@ -269,7 +274,8 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
                      recipe: PretrainedRecipe | None = None, *,
                      max_generate_seconds: float | None = None,
                      max_train_seconds: float | None = None, install: bool = False,
-                     export_every: float = 60.0, progress: bool = True, log=print) -> dict:
+                     export_every: float = 60.0, progress: bool = True, log=print,
+                     overwrite: bool = False) -> dict:
     """Make the pretrained MSMR-Net: generate the scenes, train, export (``handmesh pretrain``).
 
     Steps: ``out/data/train`` (``recipe.train_scenes``, seed ``data_seed``) and ``out/data/val``
@@ -299,6 +305,8 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
         export_every: seconds between exports while training (they cost seconds each).
         progress: tqdm bars.
         log: one-line messages (``None``: silent).
+        overwrite: write into an ``out`` holding files this command did not write
+            (``claim_pretraining_dir``, before any scene; a link where it writes is refused).
 
     Returns:
         dict with ``file`` (the int8 export), ``float16``, ``info`` (what the file records) and
@@ -307,8 +315,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     recipe = recipe or PretrainedRecipe()
     check_device(recipe.device, probe=True)  # a CUDA device asked for: before generating
     say = log or (lambda *_: None)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = claim_pretraining_dir(out, "pretrain", overwrite)
     tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
                                         recipe.data_seed, render_size=recipe.render_size,
                                         workers=recipe.workers,

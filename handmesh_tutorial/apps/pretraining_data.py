@@ -19,6 +19,14 @@ from pathlib import Path
 
 __all__ = ["generate_training_scenes", "generate_train_val"]
 
+PRETRAINING_OUTPUTS = {
+    "pretrain": ("data", "train", "msmr_net_pretrained.pt", "msmr_net_float16.pt"),
+    "pretrain-encoder": ("data", "checkpoint.pt", "crops_train.pt", "crops_val.pt",
+                         "history.json", "hand_encoder_pretrained.pt"),
+}
+"""What each pretraining command writes in its ``--out`` (the weight files are
+``_version.PRETRAINED_FILE`` and ``nn.pose_encoder.ENCODER_FILE``; tested)."""
+
 _DEVICE = re.compile(r"auto|cpu|cuda(:\d+)?|mps")
 
 
@@ -55,6 +63,26 @@ def check_device(device, *, probe: bool = False) -> str:
             raise ValueError(f"device {device!r}: this machine has {count} CUDA device(s) "
                              "(torch.cuda.is_available() says so); use --device cpu or auto")
     return device
+
+
+def claim_pretraining_dir(out: str | os.PathLike, command: str,
+                          overwrite: bool = False) -> Path:
+    """``_io.claim_out_dir`` for ``handmesh pretrain`` / ``pretrain-encoder`` (before any scene):
+    a folder holding files the command did not write is refused unless ``overwrite``, a link
+    where it writes always; a run folder of an older version (no marker) is recognised by its
+    scenes' ``meta.json``, so it resumes.
+
+    Raises:
+        ValueError, NotADirectoryError, FileExistsError, OSError: as ``claim_out_dir``.
+    """
+    from .._io import claim_out_dir, json_record
+
+    def older(folder: Path) -> bool:
+        return any(json_record(folder / "data" / split / "meta.json", "seed", "num_samples")
+                   for split in ("val", "train"))
+
+    return claim_out_dir(out, command, PRETRAINING_OUTPUTS[command], overwrite=overwrite,
+                         recognise=older, hidden=(".pretrain.lock",))
 
 
 def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, render_size: int,
