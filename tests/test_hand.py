@@ -598,3 +598,25 @@ def test_the_asset_recipe_imports_from_the_package_without_anny():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+@pytest.mark.parametrize("kwargs, says", [
+    ({"side": "middle"}, "side must be 'right' or 'left', got 'middle'"),
+    ({"side": "Right"}, "side must be 'right' or 'left', got 'Right'"),
+    ({"max_spread_deg": float("nan")}, r"max_spread_deg must be a number of degrees in \[0, 180\]"),
+    ({"max_flexion_deg": float("nan")}, "max_flexion_deg must be"),
+    ({"max_flexion_deg": -30}, r"max_flexion_deg .* got -30"),
+    ({"max_flexion_deg": 1e308}, "max_flexion_deg must be"),
+    ({"batch": -1}, "batch must be an integer >= 0"),
+    ({"batch": 2.5}, "batch must be an integer >= 0"),
+])
+def test_random_pose_refuses_arguments_out_of_range(kwargs, says):
+    """Fresh probe of issue 43 (its item 10 for a function it did not list): any side but
+    'right' gave a left hand, a NaN spread NaN poses, a NaN or negative flexion numpy's
+    'high - low' errors that named no argument; its siblings refuse them."""
+    with pytest.raises(ValueError, match=says):
+        H.random_pose(0, **kwargs)
+    with pytest.raises(ValueError, match="side must be"):
+        H.flexion_axes("middle")
+    assert H.random_pose(0, 0).shape == (0, 15, 3)
+    assert np.isfinite(H.random_pose(0, 2, "left", 180, 0)).all()

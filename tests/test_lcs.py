@@ -170,6 +170,18 @@ def test_clip_and_within_limits():
     clipped = L.clip_angles(a, lower, upper)
     assert L.within_limits(clipped, lower, upper).all()
     np.testing.assert_allclose(np.rad2deg(clipped[0, 0]), [10, 0, 0])
+    # fresh probe of issue 43: swapped limits clipped everything to `upper`, a negative or NaN
+    # tolerance narrowed or emptied the test silently (Articulation.with_limits refuses them)
+    for lo, hi in ((upper, lower), (lower * np.nan, upper)):
+        with pytest.raises(ValueError, match="limits must be lower <= upper"):
+            L.clip_angles(a, lo, hi)
+        with pytest.raises(ValueError, match="limits must be lower <= upper"):
+            L.within_limits(a, lo, hi)
+    for atol in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match=f"atol must be a finite number of radians >= 0, "
+                                             f"got {atol}"):
+            L.within_limits(a, lower, upper, atol)
+    assert not L.within_limits(a * np.nan, lower, upper).any()
 
 
 def make_articulation(limits=None):

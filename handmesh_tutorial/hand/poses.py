@@ -34,7 +34,11 @@ def flexion_axes(side: str = "right") -> np.ndarray:
 
     Returns:
         (15,3) float64, MANO order of the articulated joints (index1..thumb3).
+
+    Raises:
+        ValueError: ``side`` is not ``"right"`` or ``"left"``.
     """
+    _check_side(side)
     kp = np.asarray(load_template().keypoints, float)
     axes = np.zeros((15, 3))
     palm_normal = np.array([0.0, -1.0, 0.0])
@@ -119,14 +123,25 @@ def random_pose(rng: np.random.Generator | int | None = None, batch: int = 1,
 
     Args:
         rng: generator or seed.
-        batch: number of poses B.
+        batch: number of poses B, an integer >= 0.
         side: ``"right"`` or ``"left"``.
-        max_flexion_deg: largest flexion per joint, degrees.
-        max_spread_deg: largest sideways rotation of the MCP joints, degrees.
+        max_flexion_deg: largest flexion per joint, degrees in [0, 180].
+        max_spread_deg: largest sideways rotation of the MCP joints, degrees in [0, 180].
 
     Returns:
         (B,15,3) float32 axis-angle poses, MANO order.
+
+    Raises:
+        ValueError: an argument outside its range (a NaN angle gave NaN poses, another side
+            a left hand).
     """
+    _check_side(side)
+    if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 0:
+        raise ValueError(f"batch must be an integer >= 0 (poses), got {batch!r}")
+    for name, deg in (("max_flexion_deg", max_flexion_deg), ("max_spread_deg", max_spread_deg)):
+        if isinstance(deg, bool) or not isinstance(deg, (int, float, np.number)) \
+                or not 0 <= deg <= 180:
+            raise ValueError(f"{name} must be a number of degrees in [0, 180], got {deg!r}")
     gen = np.random.default_rng(rng)
     axes = flexion_axes("right")
     flex = gen.uniform(0.0, np.deg2rad(max_flexion_deg), size=(batch, 15))

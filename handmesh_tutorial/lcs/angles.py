@@ -160,8 +160,27 @@ def mirror_angles(angles) -> np.ndarray:
     return out
 
 
+def _limits(lower, upper, atol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """``lower``, ``upper`` as float arrays, checked as `Articulation.with_limits` checks them:
+    no NaN, ``lower <= upper``; ``atol`` a finite number >= 0."""
+    lo, hi = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+    if np.isnan(lo).any() or np.isnan(hi).any() or np.any(lo > hi):
+        raise ValueError(f"limits must be lower <= upper (radians, no NaN), got lower "
+                         f"{np.array2string(lo.ravel()[:6], precision=3)}..., upper "
+                         f"{np.array2string(hi.ravel()[:6], precision=3)}...")
+    if isinstance(atol, bool) or not isinstance(atol, (int, float, np.number)) \
+            or not 0 <= atol < np.inf:
+        raise ValueError(f"atol must be a finite number of radians >= 0, got {atol!r}")
+    return lo, hi
+
+
 def clip_angles(angles, lower, upper) -> np.ndarray:
-    """Clip angles (..., J, 3) to per-joint, per-axis limits ``lower``/``upper`` (J,3), radians."""
+    """Clip angles (..., J, 3) to per-joint, per-axis limits ``lower``/``upper`` (J,3), radians.
+
+    Raises:
+        ValueError: a NaN limit or ``lower > upper`` somewhere (numpy would return ``upper``).
+    """
+    lower, upper = _limits(lower, upper)
     return np.clip(np.asarray(angles, dtype=np.float64), lower, upper)
 
 
@@ -178,14 +197,19 @@ def within_limits(angles, lower, upper, atol: float = _LIMITS_ATOL) -> np.ndarra
         angles: (..., J, 3) radians.
         lower: (J,3) radians.
         upper: (J,3) radians.
-        atol: tolerance in radians; the default 1e-5 accepts angles recovered from a float32
-            pose (``from_pose(to_pose(a))``, error ~1e-7 rad); ``0`` = the exact test.
+        atol: tolerance in radians, a finite number >= 0; the default 1e-5 accepts angles
+            recovered from a float32 pose (``from_pose(to_pose(a))``, error ~1e-7 rad); ``0`` =
+            the exact test.
 
     Returns:
-        bool array of shape ``angles.shape[:-2]``.
+        bool array of shape ``angles.shape[:-2]`` (``False`` where an angle is NaN).
+
+    Raises:
+        ValueError: a NaN limit, ``lower > upper`` somewhere, or a negative or NaN ``atol``.
     """
+    lower, upper = _limits(lower, upper, atol)
     a = np.asarray(angles, dtype=np.float64)
-    ok = (a >= np.asarray(lower) - atol) & (a <= np.asarray(upper) + atol)
+    ok = (a >= lower - atol) & (a <= upper + atol)
     return ok.all(axis=(-2, -1))
 
 
