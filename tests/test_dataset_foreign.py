@@ -119,8 +119,8 @@ def test_generate_refuses_a_foreign_folder_before_writing_meta_json(tmp_path, pl
         gen(out, num=3)
     assert not (out / "meta.json").exists()
     assert (out / plant).read_bytes() == b"the user's"
-    assert sorted(p.name for p in out.rglob("*") if p.is_file()) == \
-        sorted([Path(plant).name, ".generate.lock"])
+    # not even its lock is left there (fresh probe: a refused folder kept .generate.lock)
+    assert [p.name for p in out.rglob("*") if p.is_file()] == [Path(plant).name]
 
 
 # ------------------------------------------------------------------ item 17: a lost meta.json

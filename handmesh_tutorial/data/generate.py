@@ -36,6 +36,7 @@ from .root import (
     merge_shards,
 )
 from .schema import (
+    _LOCK_FILE,
     FORMAT_NAME,
     FORMAT_VERSION,
     KINDS,
@@ -208,9 +209,10 @@ def generate_dataset(
             ([`merge_shards`][handmesh_tutorial.data.root.merge_shards]): the same files as one
             run. That folder must hold nothing but these shards (a link there, or another
             entry, is refused before anything is written); after the merge only the shards'
-            own files are deleted. With a time budget, a set cut short is still a valid root of the scenes it has.
-            A rerun after the merge keeps the root as it is (a budget decides how many shards a
-            run makes, so a rerun under another budget could not merge with the first).
+            own files are deleted. With a time budget, a set cut short is still a valid root
+            of the scenes it has. A rerun after the merge keeps the root as it is (a budget
+            decides how many shards a run makes, so a rerun under another budget could not
+            merge with the first).
         max_seconds: time budget of a run in ``parts``: no new shard starts when the mean
             time of the shards so far would end it past the budget (the first always runs).
             ``None``: all parts.
@@ -288,8 +290,14 @@ def generate_dataset(
                  tuple(image_size) if image_size else None, int(max_attempts),
                  str(root / SAMPLES_DIR), width, durable)
     probe, probe_calls, pool = None, 0, None
+    new_lock = not os.path.lexists(root / _LOCK_FILE)
     with _lock(root), contextlib.ExitStack() as stack:
-        _check_root(root, meta)  # before the probe: a folder that is not this set's is refused
+        try:  # before the probe: a folder that is not this set's is refused, left as it was
+            _check_root(root, meta)
+        except ValueError:
+            if new_lock:
+                (root / _LOCK_FILE).unlink(missing_ok=True)
+            raise
         if balance_vr:
             old = read_meta(root) if (root / META_FILE).exists() else {}
             probe = old.get("vr_probe")
