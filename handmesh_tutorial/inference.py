@@ -333,6 +333,10 @@ def root_from_keypoints(joints, keypoints_2d, K) -> np.ndarray:
     Returns:
         ``(B, 3)`` or ``(3,)`` float64 translations ``t``, metres (the root in that camera's
         frame).
+
+    Raises:
+        ValueError: shapes that do not match, or NaN or infinite values (lstsq's "SVD did not
+            converge" named nothing).
     """
     j = np.asarray(joints, dtype=np.float64)
     single = j.ndim == 2
@@ -341,6 +345,9 @@ def root_from_keypoints(joints, keypoints_2d, K) -> np.ndarray:
     k = np.broadcast_to(np.asarray(K, dtype=np.float64), (j.shape[0], 3, 3))
     if uv.shape[1] != j.shape[1] or j.shape[-1] != 3:
         raise ValueError(f"joints {j.shape} and keypoints_2d {uv.shape} do not match")
+    for name, a in (("joints", j), ("keypoints_2d", uv), ("K", k)):
+        if not np.isfinite(a).all():
+            raise ValueError(f"{name} contains NaN or inf")
     ray = np.concatenate([uv, np.ones_like(uv[..., :1])], -1) @ np.linalg.inv(k).transpose(0, 2, 1)
     out = []
     for p, r in zip(j, ray, strict=True):

@@ -223,15 +223,22 @@ def coverage(vertices, body: Cylinders, *, tol: float = 1e-6) -> dict:
         vertices: (V, 3) mesh vertices, metres.
         body: the [`Cylinders`][handmesh_tutorial.collision.cylinders.Cylinders] meant to cover
             them.
-        tol: a vertex counts as outside when it is further than this from every cylinder, metres.
+        tol: a vertex counts as outside when it is further than this from every cylinder, metres
+            (a finite number >= 0).
 
     Returns:
         dict with ``fraction_outside`` (of the vertices), ``max_outside_mm``, ``mean_outside_mm``
         (over the outside vertices, 0 when none) and ``distance`` ((V,) metres, 0 when covered).
 
+    Raises:
+        ValueError: ``tol`` negative, NaN or infinite (a NaN counted every vertex as covered).
+
     Shapes:
         ``vertices (V, 3)`` -> ``distance (V,)`` metres (and scalars).
     """
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.number)) \
+            or not 0 <= tol < np.inf:
+        raise ValueError(f"tol must be a finite distance >= 0 (metres), got {tol!r}")
     v = _pts(_to_numpy(vertices, "vertices"), "vertices")
     d = point_cylinder_distance(v[:, None], body.p0[None], body.p1[None], body.radius[None])
     d = d.min(1)

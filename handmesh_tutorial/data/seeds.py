@@ -80,6 +80,11 @@ def vr_bins(bins: Sequence | None = None) -> tuple[tuple[float, float], ...]:
     """VR bins as ``((lo, hi), ...)``: ``bins`` if given, else the paper's ``visibility.VR_BINS``.
 
     Accepts pairs ``[(lo, hi), ...]`` or bin edges ``[e0, e1, ..., en]``.
+
+    Raises:
+        ValueError: no bin, a pair outside ``0 <= lo < hi <= 1``, or bins that are not
+            increasing and non-overlapping (the bin rule, ``visibility.vr_bin_index``, needs
+            them so: an overlap was counted in the first bin only).
     """
     seq = list(VR_BINS if bins is None else bins)
     if seq and all(np.ndim(b) == 0 for b in seq):  # edges
@@ -87,6 +92,8 @@ def vr_bins(bins: Sequence | None = None) -> tuple[tuple[float, float], ...]:
     out = tuple((float(lo), float(hi)) for lo, hi in seq)
     if not out or any(not 0.0 <= lo < hi <= 1.0 for lo, hi in out):
         raise ValueError(f"VR bins must be non-empty pairs 0 <= lo < hi <= 1, got {bins!r}")
+    if any(b[0] < a[1] for a, b in zip(out[:-1], out[1:], strict=True)):
+        raise ValueError(f"VR bins must be increasing and non-overlapping, got {bins!r}")
     return out
 
 

@@ -172,13 +172,21 @@ def random_shape(rng: np.random.Generator | int | None = None, batch: int = 1,
 
     Args:
         rng: generator or seed.
-        batch: number of shapes B.
-        scale: multiplies each range (0 = always the average hand).
+        batch: number of shapes B, an integer >= 0.
+        scale: multiplies each range, a finite number >= 0 (0 = always the average hand).
 
     Returns:
         (B,6) float32 shape parameters
         ([`SHAPE_PARAM_NAMES`][handmesh_tutorial.hand.template.SHAPE_PARAM_NAMES]).
+
+    Raises:
+        ValueError: ``batch`` or ``scale`` out of range (a NaN scale gave NaN shapes).
     """
+    if isinstance(batch, bool) or not isinstance(batch, (int, np.integer)) or batch < 0:
+        raise ValueError(f"batch must be an integer >= 0 (shapes), got {batch!r}")
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.number)) \
+            or not 0 <= scale < np.inf:
+        raise ValueError(f"scale must be a finite number >= 0, got {scale!r}")
     gen = np.random.default_rng(rng)
     lo, hi = np.asarray(SHAPE_SAMPLE_RANGES, float).T
     return (gen.uniform(lo, hi, size=(batch, len(lo))) * scale).astype(np.float32)

@@ -70,9 +70,17 @@ def intrinsics(fx: float, fy: float | None = None, cx: float = 0.0, cy: float = 
 
     Returns:
         ``K`` (3, 3) float64.
+
+    Raises:
+        ValueError: ``fx`` or ``fy`` not a finite number > 0, ``cx`` or ``cy`` not finite (as
+            `check_intrinsics` refuses such a ``K``).
     """
     fy = fx if fy is None else fy
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float64)
+    if not np.isfinite(K).all():
+        raise ValueError(f"fx, fy, cx, cy must be finite numbers (pixels), got {fx}, {fy}, "
+                         f"{cx}, {cy}")
+    return check_intrinsics(K)
 
 
 def check_intrinsics(K: Any) -> np.ndarray:
@@ -111,12 +119,15 @@ def project_checked(points: Any, K: Any) -> np.ndarray:
         (N, 2) float64 pixel coordinates ``(u = column, v = row)``, pixel centres at integers.
 
     Raises:
-        ValueError: bad shapes, ``K`` not of pinhole form, or a point with ``Z <= 0``.
+        ValueError: bad shapes, ``K`` not of pinhole form, a NaN or infinite point, or a point
+            with ``Z <= 0``.
     """
     K = check_intrinsics(K)
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise ValueError(f"points must have shape (N, 3), got {P.shape}")
+    if not np.isfinite(P).all():
+        raise ValueError("points contains NaN or inf")
     if np.any(P[:, 2] <= 0):
         raise ValueError("points must lie in front of the camera (Z > 0)")
     return project(P, K)
@@ -145,12 +156,15 @@ def crop_camera(points3d: Any, image_size: int, margin: float = 0.1, focal: floa
         ``K`` (3, 3) float64 with ``fx = fy``.
 
     Raises:
-        ValueError: bad shapes, ``Z <= 0``, a margin outside ``[0, 0.5)``, or a fixed ``focal``
-            too long to keep all points inside (the message gives the largest focal that fits).
+        ValueError: bad shapes, NaN or infinite points, ``Z <= 0``, a margin outside
+            ``[0, 0.5)``, or a fixed ``focal`` too long to keep all points inside (the message
+            gives the largest focal that fits).
     """
     P = np.asarray(points3d, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3 or len(P) == 0:
         raise ValueError(f"points3d must have shape (N, 3) with N >= 1, got {P.shape}")
+    if not np.isfinite(P).all():
+        raise ValueError("points3d contains NaN or inf")
     if np.any(P[:, 2] <= 0):
         raise ValueError("points3d must lie in front of the camera (Z > 0)")
     if not 0.0 <= margin < 0.5:

@@ -113,12 +113,17 @@ def frame_camera(target_vertices, rng, image_size: int = 224, *, toward=None,
         ``(R, t, K)``: world -> OpenCV camera frame ``X_cam = R @ X + t``, and (3, 3) intrinsics.
 
     Raises:
-        ValueError: a share, focal or margin range that cannot be met.
+        ValueError: a share, focal or margin range that cannot be met, an image side outside
+            [32, 4096] pixels, or vertices that are not a finite (N, 3) array.
     """
+    from ..budget import check_image_size
     from ..render import intrinsics
 
     V = np.asarray(target_vertices, float)
-    S = int(image_size)
+    if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0 or not np.isfinite(V).all():
+        raise ValueError(f"target_vertices must be a finite (N, 3) array with N >= 1, got "
+                         f"shape {V.shape}")
+    S = check_image_size(image_size)
     rng = np.random.default_rng(rng)
     if not 0 <= margin < 0.5:
         raise ValueError(f"need 0 <= margin < 0.5, got {margin}")

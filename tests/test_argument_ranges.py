@@ -1,0 +1,66 @@
+"""Public functions refuse arguments outside their documented ranges, as their siblings do
+(issue 43, item 10; the fresh probe of functions the issue did not list). Each case below
+returned NaN or garbage, or failed deep inside without naming the argument."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from handmesh_tutorial import collision, data, inference, render, scenes
+from handmesh_tutorial.hand import HandModel, random_shape
+
+NAN, INF = float("nan"), float("inf")
+
+
+def _hand_points():
+    return np.random.default_rng(0).normal(size=(21, 3)) * 0.03 + [0.0, 0.0, 0.5]
+
+
+CASES = [
+    # a NaN K, a zero focal length
+    (lambda: render.intrinsics(NAN), "fx, fy, cx, cy must be finite numbers"),
+    (lambda: render.intrinsics(0.0), r"fx, fy > 0"),
+    (lambda: render.intrinsics(500.0, cx=INF), "must be finite numbers"),
+    # a K of NaN from NaN points
+    (lambda: render.crop_camera(_hand_points() * NAN, 64), "points3d contains NaN or inf"),
+    (lambda: render.camera.project_checked(_hand_points() * NAN, np.eye(3)),
+     "points contains NaN or inf"),
+    # a camera of NaN for a 0-px image
+    (lambda: scenes.frame_camera(_hand_points(), 0, 0),
+     r"image_size must be an integer in \[32, 4096\] pixels, got 0"),
+    (lambda: scenes.frame_camera(_hand_points() * NAN, 0, 64), "finite \\(N, 3\\) array"),
+    # NaN shapes; numpy's 'negative dimensions'
+    (lambda: random_shape(0, 1, scale=NAN), "scale must be a finite number >= 0, got nan"),
+    (lambda: random_shape(0, -1), "batch must be an integer >= 0"),
+    # overlapping bins: a value in both counted in the first only
+    (lambda: data.vr_bins([(0.4, 0.7), (0.6, 0.9)]), "increasing and non-overlapping"),
+    # 'SVD did not converge'
+    (lambda: inference.root_from_keypoints(_hand_points(), np.full((21, 2), NAN), np.eye(3)),
+     "keypoints_2d contains NaN or inf"),
+]
+
+
+@pytest.mark.parametrize("call, says", CASES)
+def test_out_of_range_arguments_are_refused_naming_them(call, says):
+    with pytest.raises(ValueError, match=says):
+        call()
+
+
+def test_coverage_refuses_a_tolerance_that_counts_every_vertex_as_covered():
+    out = HandModel()()
+    body = collision.hand_cylinders(out)
+    far = out.vertices[0].numpy() + 1.0  # every vertex a metre away from the hand
+    assert collision.coverage(far, body)["fraction_outside"] == 1.0
+    for tol in (NAN, -1e-3, INF):
+        with pytest.raises(ValueError, match="tol must be a finite distance >= 0"):
+            collision.coverage(far, body, tol=tol)  # NaN said 0.0 outside
+
+
+def test_the_values_inside_the_ranges_still_work():
+    assert render.intrinsics(500.0, 400.0, 32.0, 31.5).tolist() == [[500, 0, 32], [0, 400, 31.5],
+                                                                    [0, 0, 1]]
+    assert random_shape(0, 0).shape == (0, 6) and not random_shape(0, 2, scale=0).any()
+    assert data.vr_bins([(0.4, 0.6), (0.6, 1.0)]) == data.vr_bins([0.4, 0.6, 1.0])
+    R, t, K = scenes.frame_camera(_hand_points(), 0, 64)
+    assert np.isfinite(K).all() and K[0, 0] > 0
