@@ -11,26 +11,34 @@ process under a memory cap (``RLIMIT_AS``) and a timeout. The outcome is classif
   leaves out) whose message names the damaged file or sample;
 * a failure: ``crash`` (a signal), ``timeout``, ``memory``, ``exception`` (another type, or
   exit code 1 "a bug"), ``unnamed`` (refused without naming the file), ``implausible`` (accepted
-  with absurd values).
+  with absurd values), ``touched`` (a planted file of the user's, or anything outside the root,
+  written, moved or deleted), ``clobbered`` (a file of the user's in ``--out`` changed).
 
 Targets and readers: ``intersh-verify`` (``handmesh verify``), ``intersh-evaluate``
 (``handmesh evaluate --skip-bad``), ``checkpoint`` (``load_checkpoint``, then ``evaluate`` on
 the pristine root), ``template`` (``resolve_template`` + ``build_model_from_config``), ``mano``
 (``load_mano`` + a forward pass), ``freihand-read`` (every item and mask of both splits),
-``freihand-evaluate`` (``handmesh evaluate --dataset freihand --skip-bad``). Mutations:
-``bitflip``, ``truncate``, ``insert``, ``zero`` (a range), ``swap`` (a file swapped between
-samples or splits, or replaced by another target's file), ``value`` (a JSON value, a pickled or
-saved array or tensor edited: types, huge numbers, NaN, nesting, shapes), ``header`` (an
-``.npy`` member header, a zip header field, or an image's width and height in a PNG's IHDR or a
-JPEG's SOF). Byte positions are drawn half uniformly, half in a file's structure (zip headers
-and directory, ``.npy`` headers, pickle opcodes).
+``freihand-evaluate`` (``handmesh evaluate --dataset freihand --skip-bad``), ``intersh-repair``
+(``handmesh verify --remove-bad``, then the ``generate`` that made the root), and the planted
+targets of issue 43 (section at the end): ``hierarchy-cache`` (a damaged ``hierarchy_*.npz``
+read by ``mesh_hierarchy``) and ``out-folder`` (the user's files in the ``--out`` of ``train``,
+``evaluate`` or ``demo``). Mutations: ``bitflip``, ``truncate``, ``insert``, ``zero`` (a range),
+``swap`` (a file swapped between samples or splits, or replaced by another target's file),
+``value`` (a JSON value, a pickled or saved array or tensor edited: types, huge numbers, NaN,
+nesting, shapes), ``header`` (an ``.npy`` member header, a zip header field, or an image's width
+and height in a PNG's IHDR or a JPEG's SOF), and for INTER-SH roots ``foreign`` (a user's files,
+links to outside, non-ASCII names, a sample of another set) and ``extra`` (``annotation.json``
+``extra`` fields). Byte positions are drawn half uniformly, half in a file's structure (zip
+headers and directory, ``.npy`` headers, pickle opcodes).
 
     python benchmarks/fuzz_files.py [--cases 980] [--seed 0] [--timeout 60] [--mem-gb 2]
                                     [--targets a,b] [--mutations a,b] [--work DIR]
-                                    [--case TARGET:MUTATION:N]
+                                    [--case TARGET:MUTATION:N] [--nice 19] [--json FILE]
 
 ``--case`` reruns one case in this process (the reproducer printed for each failure) and shows
-the traceback. Prints a table of outcomes per target and mutation; exits 1 on any failure. Docs
+the traceback. Prints a table of outcomes per target and mutation; exits 1 on any failure.
+A progress line every 250 cases; SIGINT or SIGTERM stops the run with the table of the cases
+done. ``--nice`` is the reading child's niceness increment (default 19). Docs
 page *Reliability*; ``tests/test_fuzz.py`` runs a small seeded subset.
 """
 
@@ -49,6 +57,7 @@ import re
 import resource
 import select
 import shutil
+import signal
 import struct
 import subprocess
 import sys
@@ -74,9 +83,12 @@ IMAGE = 32  # pixels, corpus images and crops
 
 
 def build_corpus(work: Path) -> Path:
-    """Write the pristine files under ``work/base`` once (reused when present)."""
+    """Write the pristine files under ``work/base`` once (reused when present and made by this
+    version of the library: a corpus of another version's ``meta.json`` reads as foreign)."""
+    from handmesh_tutorial import __version__
+
     base = work / "base"
-    if (base / "done").exists():
+    if (base / "done").exists() and (base / "done").read_text() == __version__:
         return base
     import torch
 
@@ -103,7 +115,7 @@ def build_corpus(work: Path) -> Path:
         T.save_checkpoint(base / name, model=net, config=cfg,
                           template_id=T.template_hash(cfg.template), durable=False)
     _other_set(base)
-    (base / "done").touch()
+    (base / "done").write_text(__version__)
     return base
 
 
@@ -821,16 +833,16 @@ class Child:
     """One child process reading cases from stdin under a memory cap; restarted after a
     crash or a timeout."""
 
-    def __init__(self, base: Path, scratch: Path, mem_bytes: int):
-        self.args = (base, scratch, mem_bytes)
+    def __init__(self, base: Path, scratch: Path, mem_bytes: int, nice: int = 19):
+        self.args = (base, scratch, mem_bytes, nice)
         self.proc = None
 
     def _start(self):
-        base, scratch, mem = self.args
+        base, scratch, mem, nice = self.args
 
         def limit():
             resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
-            os.nice(19)
+            os.nice(nice)
 
         env = dict(os.environ, OMP_NUM_THREADS="1", HANDMESH_BUDGET="smoke")
         code = _CHILD.format(here=str(Path(__file__).resolve().parent))
@@ -878,11 +890,12 @@ def cases(n: int, seed: int, targets, mutations=MUTATIONS) -> list[tuple[str, st
 
 
 def fuzz(base: Path, todo, timeout: float = 60, mem_bytes: int = 2 * 2**30,
-         progress=None) -> list[dict]:
-    """Run ``todo`` cases in a capped child; returns the results in order."""
+         progress=None, nice: int = 19) -> list[dict]:
+    """Run ``todo`` cases in a capped child (``nice``: its niceness increment); returns the
+    results in order. A ``KeyboardInterrupt`` (SIGINT) ends the run early with the cases done."""
     results = []
     with tempfile.TemporaryDirectory(prefix="fuzz-") as scratch:
-        child = Child(base, Path(scratch), mem_bytes)
+        child = Child(base, Path(scratch), mem_bytes, nice)
         try:
             for case in todo:
                 r = child.run(case, timeout)
@@ -890,6 +903,8 @@ def fuzz(base: Path, todo, timeout: float = 60, mem_bytes: int = 2 * 2**30,
                 results.append(r)
                 if progress:
                     progress(r)
+        except KeyboardInterrupt:
+            print(f"interrupted: {len(results)} of {len(todo)} cases done", flush=True)
         finally:
             child.close()
     return results
@@ -924,6 +939,8 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default=None, help="folder of the corpus (kept; default a temp)")
     ap.add_argument("--case", default=None, help="TARGET:MUTATION:N: rerun one case here")
     ap.add_argument("--json", default=None, help="write every result to this file")
+    ap.add_argument("--nice", type=int, default=19,
+                    help="niceness increment of the reading child (default 19)")
     args = ap.parse_args(argv)
     work = Path(args.work or tempfile.mkdtemp(prefix="fuzz-corpus-"))
     base = build_corpus(work)
@@ -946,12 +963,23 @@ def main(argv=None) -> int:
     todo = cases(args.cases, args.seed, targets, args.mutations.split(","))
     t0 = time.perf_counter()
 
+    seen = Counter()
+
     def show(r):
+        seen[r["outcome"]] += 1
         if r["outcome"] not in ("clean", "refused"):
             print(f"{r['outcome']}: {r['target']} {r['mutation']} ({r.get('what', '?')[:100]})"
                   f": {r.get('error', '')} {r.get('message', '')[-300:]!r}", flush=True)
+        if seen.total() % 250 == 0:  # a progress line (SIGINT stops with a table of these)
+            print(f"{seen.total()} of {len(todo)} cases, {time.perf_counter() - t0:.0f} s: "
+                  f"{dict(seen)}", flush=True)
 
-    results = fuzz(base, todo, args.timeout, int(args.mem_gb * 2**30), show)
+    def stop(signum, frame):  # SIGINT or SIGTERM: stop, then the table of the cases done
+        raise KeyboardInterrupt
+
+    for sig in (signal.SIGINT, signal.SIGTERM):  # also when started with SIGINT ignored (&)
+        signal.signal(sig, stop)
+    results = fuzz(base, todo, args.timeout, int(args.mem_gb * 2**30), show, args.nice)
     print(f"\n{len(results)} cases in {time.perf_counter() - t0:.0f} s (seed {args.seed}, "
           f"cap {args.mem_gb:g} GB, timeout {args.timeout:g} s)\n")
     print(table(results))
@@ -965,9 +993,6 @@ def main(argv=None) -> int:
     return 1 if failed else 0
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
 
 # ------------------------------------------------------------------ issue 43: planted caches and
 # files of the user's in --out. Appended as its own section: it extends TARGETS, FAILURES and the
@@ -980,7 +1005,8 @@ if __name__ == "__main__":
 # ``out-folder``: files of the user's (named like the command's outputs or not, a symlink to a
 # file outside, a sub-folder) planted in the ``--out`` of ``train``, ``evaluate`` or ``demo``; the
 # command must refuse the folder naming them (exit 5) or, in a folder that is its own, leave
-# them. A planted file changed, removed or written through is the failure ``clobbered``.
+# them (a link named like one of its outputs there is refused, exit 5, named). A planted file
+# changed, removed or written through is the failure ``clobbered``.
 
 PLANTED_TARGETS = ("hierarchy-cache", "out-folder")
 TARGETS = (*TARGETS, *PLANTED_TARGETS)
@@ -1048,6 +1074,10 @@ def _plant_user_files(rng: random.Random, mutation: str, case_root: Path) -> tup
         names.append("sub")
     if own:  # the command's own folder (its marker): the user's other files are left there
         (out / ".handmesh-evaluate").write_text("{}")
+        if rng.random() < 0.5:  # ... but a link where it writes is refused, never written over
+            link = rng.choice(_OUT_NAMES["evaluate"])
+            (out / link).symlink_to(outside)
+            names.append(link)
     record = {"command": command.removesuffix("-own"), "own": own,
               "files": {str(p.relative_to(case_root)): _digest_file(p)
                         for p in [outside, *sorted(out.rglob("*"))]
@@ -1134,3 +1164,7 @@ def classify(r: dict) -> str:  # noqa: F811 - extended
         named = any(n and n in r.get("message", "") for n in r["names"])
         return "refused" if named else "unnamed"
     return _base_classify(r)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
