@@ -30,6 +30,11 @@ CASES = [
     (lambda: scenes.frame_camera(_hand_points(), 0, 0),
      r"image_size must be an integer in \[32, 4096\] pixels, got 0"),
     (lambda: scenes.frame_camera(_hand_points() * NAN, 0, 64), "finite \\(N, 3\\) array"),
+    # the centre behind the camera, a NaN translation
+    (lambda: scenes.camera_pose(np.zeros(3), np.random.default_rng(0), distance=(-1, -0.5)),
+     r"distance must be \(min, max\) metres with 0 < min <= max"),
+    (lambda: scenes.camera_pose(np.full(3, NAN), np.random.default_rng(0)),
+     r"centre must be a finite \(3,\) point"),
     # NaN shapes; numpy's 'negative dimensions'
     (lambda: random_shape(0, 1, scale=NAN), "scale must be a finite number >= 0, got nan"),
     (lambda: random_shape(0, -1), "batch must be an integer >= 0"),

@@ -30,8 +30,17 @@ def camera_pose(centre, rng, distance=(0.35, 0.7), toward=None,
 
     Returns:
         ``(R, t)``: world -> OpenCV camera frame, ``X_cam = R @ X + t``.
+
+    Raises:
+        ValueError: ``centre`` not a finite (3,) point, or ``distance`` not ``(min, max)`` with
+            ``0 < min <= max`` finite (a negative distance put ``centre`` behind the camera).
     """
     c = np.asarray(centre, float)
+    if c.shape != (3,) or not np.isfinite(c).all():
+        raise ValueError(f"centre must be a finite (3,) point, got {c.tolist()}")
+    if len(distance) != 2 or not 0 < distance[0] <= distance[1] < np.inf:
+        raise ValueError(f"distance must be (min, max) metres with 0 < min <= max, got "
+                         f"{distance}")
     if toward is None:
         z = -_random_direction(rng)  # optical axis (camera -> centre)
     else:
