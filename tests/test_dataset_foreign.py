@@ -270,6 +270,28 @@ def test_generate_verify_repairs_beside_entries_the_set_does_not_plan(tmp_path, 
     assert (s / "000002").read_text() == "a file where a planned sample belongs"
 
 
+def test_a_balanced_run_starts_no_more_workers_than_there_is_work(tmp_path, monkeypatch):
+    """Issue 43 item 11 (seen once, to check): ``--balance-vr`` started every ``--workers``
+    process for its probe, whatever the work (2 candidates and 1 sample here)."""
+    from handmesh_tutorial.data import generate as G
+
+    class Started(Exception):
+        pass
+
+    sizes = []
+
+    def pool(task, workers, *args):
+        sizes.append(workers)
+        raise Started
+
+    monkeypatch.setattr(G, "_Pool", pool)
+    with pytest.raises(Started):
+        gen(tmp_path / "r", num=1, balance_vr=True, workers=8, vr_probe=2)
+    with pytest.raises(Started):
+        gen(tmp_path / "s", num=3, balance_vr=True, workers=8, vr_probe=64)
+    assert sizes == [2, 8]
+
+
 # ------------------------------------------------------------------ item 4: extra fields
 
 

@@ -305,7 +305,9 @@ def generate_dataset(
                 if workers > 1 and vr_probe > 1:
                     # the probe's candidates in the workers, which then make the samples: this
                     # process renders nothing, so the pool can fork (mp_context="auto")
-                    pool = _Pool(task, workers, worker_init, mp_context)
+                    # no more workers than there is work: the candidates, then the samples
+                    pool = _Pool(task, min(workers, max(vr_probe, len(indices))), worker_init,
+                                 mp_context)
                     stack.callback(pool.close)
                     outcomes: list = []
                     pool.map(_worker_probe, [(k,) for k in range(vr_probe)], outcomes.append)
