@@ -1,5 +1,6 @@
 """The demo job: runs end to end (smoke budget), its report matches eval.json, it resumes."""
 
+import dataclasses
 import json
 import math
 
@@ -211,6 +212,18 @@ def test_config_from_budget_sizes():
     f, full = demo.DemoConfig.from_budget(hmt.budget("full")), hmt.budget("full")
     assert f.augment and (f.train_samples, f.epochs) == (full.samples, full.epochs)
     assert demo.DemoConfig.from_budget(b, epochs=3).epochs == 3
+
+
+def test_the_paper_recipe_halves_its_rate_each_quarter_with_the_encoder_frozen():
+    b = hmt.budget("default")
+    cpu, paper = demo.DemoConfig.from_budget(b), demo.DemoConfig.from_budget(b, recipe="paper")
+    t = demo.train_config(paper, "data", "out")
+    assert (t.epochs, t.lr_step, t.freeze_encoder) == (10, 3, 10)  # halved at 3, 6, 9
+    assert demo.train_config(cpu, "data", "out").lr_step == 8  # once, at three quarters
+    # an explicit schedule wins; an impossible one is refused by name
+    assert demo.train_config(dataclasses.replace(paper, lr_step=7), "d", "o").lr_step == 7
+    with pytest.raises(ValueError, match="lr_step must be >= 1 epoch, got 0"):
+        demo.train_config(dataclasses.replace(paper, lr_step=0), "d", "o")
 
 
 def test_plot_mesh_on_image_projects_with_K():

@@ -43,7 +43,8 @@ docs page "Performance"):
 * network crop = ``budget.image_size`` (``default``: 128 px, cut around the target hand, which
   spans 45-75 % of the rendered image), batch ``budget.batch_size`` (``default``: 16),
   ``budget.epochs / 2`` epochs (``default``: 10, about 1,700 steps), learning rate ``1e-3``,
-  halved after three quarters of the run;
+  halved after three quarters of the run (the paper recipe: after each quarter, the shape of
+  the paper's schedule);
 * **the paper's protocol**: the encoder starts from the shipped pretrained hand encoder
   ([`pretrained_encoder`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder], a ResNet-10 with a
   2D keypoint head; our stand-in for ImageNet weights) and stays frozen; everything after it

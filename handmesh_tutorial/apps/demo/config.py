@@ -83,6 +83,10 @@ class DemoConfig:
         epochs: training epochs.
         batch_size: training batch size.
         lr: Adam learning rate.
+        lr_step: epochs between halvings of the learning rate; ``None``: the recipe's schedule,
+            halved once after three quarters of the run (CPU recipe) or after each quarter
+            (paper recipe: the paper's shape, 50 of its 200 epochs; measured better than once in
+            the demo, docs page "Why the paper starts from pretrained weights").
         encoder: image encoder name.
         decoder: ``"multi"`` or ``"single"``.
         attention: coarse-mesh transformer on.
@@ -103,7 +107,8 @@ class DemoConfig:
             [`pretrained_encoder`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder]; the
             paper's protocol with our stand-in for ImageNet weights), a pose-encoder file, or
             ``None`` (random weights). The rest of the network always starts from random weights.
-        freeze_encoder: epochs at the start with the encoder's weights and statistics fixed.
+        freeze_encoder: epochs at the start with the encoder's weights and statistics fixed
+            (default: the demo's whole run).
         encoder_lr_scale: the encoder's learning rate as a share of ``lr`` after that.
         threads: torch threads.
         workers: data-generation processes.
@@ -118,6 +123,7 @@ class DemoConfig:
     epochs: int = 10
     batch_size: int = 16
     lr: float = 1e-3
+    lr_step: int | None = None
     encoder: str = "resnet10"
     decoder: str = "multi"
     attention: bool = True
@@ -166,9 +172,11 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
     ([`TrainConfig.preset`][handmesh_tutorial.train.config.TrainConfig.preset]) at the sizes and
     choices of ``config``.
 
-    10% of ``data`` is held out for per-epoch validation; the learning rate is halved once, after
-    three quarters of the epochs; crops are cached in memory; CPU; the loss terms and keypoint head
-    of ``config.recipe`` ([`RECIPES`][handmesh_tutorial.apps.demo.config.RECIPES]).
+    10% of ``data`` is held out for per-epoch validation; the learning rate is halved every
+    ``config.lr_step`` epochs (by default once, after three quarters of the epochs, for the CPU
+    recipe; after each quarter for the paper's); crops are cached in memory; CPU; the loss
+    terms and keypoint head of ``config.recipe``
+    ([`RECIPES`][handmesh_tutorial.apps.demo.config.RECIPES]).
 
     Args:
         config: the demo's sizes and choices.
@@ -195,12 +203,19 @@ def train_config(config: DemoConfig, data: str | os.PathLike, out_dir: str | os.
         recipe["model_kwargs"] = {**recipe["model_kwargs"], "keypoints": True}
     kw = dict(data=str(data), out_dir=str(out_dir), image_size=config.image_size,
               epochs=config.epochs, batch_size=config.batch_size, lr=config.lr,
-              lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
+              lr_step=config.lr_step, augment=config.augment,
               encoder=config.encoder, decoder=config.decoder, attention=config.attention,
               seed=seed, threads=config.threads, progress=progress,
-              init_encoder=config.init_encoder,
-              freeze_encoder=config.freeze_encoder if config.init_encoder else 0,
+              init_encoder=config.init_encoder, freeze_encoder=config.freeze_encoder,
               encoder_lr_scale=config.encoder_lr_scale if config.init_encoder else 1.0,
               **recipe)
     kw.update(overrides)
+    if kw["lr_step"] is None:  # the recipe's schedule over config.epochs
+        quarters = config.recipe == "paper"
+        kw["lr_step"] = max(1, -(-config.epochs // 4) if quarters
+                            else round(0.75 * config.epochs))
+    if kw["lr_step"] < 1:
+        raise ValueError(f"lr_step must be >= 1 epoch, got {kw['lr_step']}")
+    if not kw["init_encoder"]:
+        kw["freeze_encoder"] = 0
     return TrainConfig.preset("demo", **kw)
