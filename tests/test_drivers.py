@@ -29,12 +29,20 @@ _BEFORE_RECIPES = {"paper": {"model_kwargs": {"output": "xyz", "smoothing_length
                    "cpu": _CPU}
 
 
+def _before_lr_step(config):
+    if config.lr_step is not None:
+        return config.lr_step
+    if config.recipe == "paper":  # 0.4.0 on purpose: halved after each quarter (paper's shape)
+        return max(1, math.ceil(config.epochs / 4))
+    return max(1, round(0.75 * config.epochs))
+
+
 def _before_demo_train_config(config, data, out_dir, seed=0, progress=True, **overrides):
     from handmesh_tutorial.train import TrainConfig
 
     kw = dict(data=str(data), out_dir=str(out_dir), val_fraction=0.1,
               image_size=config.image_size, epochs=config.epochs, batch_size=config.batch_size,
-              lr=config.lr, lr_step=max(1, round(0.75 * config.epochs)), augment=config.augment,
+              lr=config.lr, lr_step=_before_lr_step(config), augment=config.augment,
               encoder=config.encoder, decoder=config.decoder, attention=config.attention,
               seed=seed, device="cpu", threads=config.threads, cache_data=True,
               progress=progress, init_encoder=config.init_encoder,
