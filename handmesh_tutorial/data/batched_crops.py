@@ -4,8 +4,8 @@
 hand; [`augment_crops`][handmesh_tutorial.data.batched_crops.augment_crops] makes randomly
 rotated, zoomed, shifted and colour-jittered views of a batch of them in one warp on the training
 device. The geometry is [`HandCropDataset`][handmesh_tutorial.data.torch_views.HandCropDataset]'s
-(module [`handmesh_tutorial.data.augment`][handmesh_tutorial.data.augment]): an in-plane rotation is the 3D
-rotation ``R_z`` about the crop camera's optical axis (the image moves by ``K R_z K^-1``), zoom and
+([`augment`][handmesh_tutorial.data.augment]): an in-plane rotation is the 3D rotation
+``R_z`` about the crop camera's optical axis (the image moves by ``K R_z K^-1``), zoom and
 shift move pixels only, and the view is re-centred on the hand's box; the 3D targets turn with
 ``R_z`` and the 2D targets are the turned joints projected with the new intrinsics. Why: with
 per-item augmentation a GPU waits for the data-loader processes (docs page "The pretrained model");

@@ -27,11 +27,10 @@ from .._io import atomic_write_bytes, fsync_dir, json_safe, names_path
 from .._untrusted import read_npz
 from .schema import (
     _KNOWN_KEYS,
+    _TMP_PREFIX,
     FORMAT_VERSION,
     MAX_IMAGE_SIZE,
-    META_FILE,
     READABLE_FORMAT_VERSIONS,
-    _TMP_PREFIX,
     _canonical,
     _check_camera,
     _check_points,

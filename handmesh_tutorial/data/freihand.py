@@ -367,7 +367,8 @@ def write_predictions(path: str | os.PathLike, joints, vertices) -> Path:
 
 def load_predictions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read a ``pred.json`` written by
-    [`write_predictions`][handmesh_tutorial.data.freihand.write_predictions] or the official ``pred.py``.
+    [`write_predictions`][handmesh_tutorial.data.freihand.write_predictions] or the official
+    ``pred.py``.
 
     Args:
         path: the prediction file.

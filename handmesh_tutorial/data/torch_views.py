@@ -26,6 +26,8 @@ import numpy as np
 import torch
 
 from .._untrusted import open_npz
+from ..metrics import ROOT_INDEX
+from ..render.camera import project
 from .augment import (
     IMAGE_MEAN,
     IMAGE_STD,
@@ -36,10 +38,8 @@ from .augment import (
     rotation_z,
     warp_image,
 )
-from ..render.camera import project
-from .freihand import FreiHAND
-from ..metrics import ROOT_INDEX
 from .files import ANNOTATION_MAX_BYTES
+from .freihand import FreiHAND
 from .reader import InterSHDataset
 from .schema import _check_points
 
@@ -69,16 +69,16 @@ class HandCropDataset(torch.utils.data.Dataset):
     * ``mirrored`` bool scalar, the sample was a left hand flipped to the right;
     * ``index`` int64 scalar, position in the underlying reader.
 
-    [`to_camera`][handmesh_tutorial.data.augment.to_camera] maps network-frame points back to the source
-    camera frame.
+    [`to_camera`][handmesh_tutorial.data.augment.to_camera] maps network-frame points back to the
+    source camera frame.
 
     Args:
         image_size: crop side ``S``, pixels.
         train: random augmentation on (``False``: the deterministic crop of the target's box).
         seed: base seed of the augmentation (item ``i`` of epoch ``e`` uses
             ``default_rng([seed, e, i])``).
-        augment: ranges ([`AugmentConfig`][handmesh_tutorial.data.augment.AugmentConfig]); ``None`` =
-            defaults; ``False`` = none even when training.
+        augment: ranges ([`AugmentConfig`][handmesh_tutorial.data.augment.AugmentConfig]);
+            ``None`` = defaults; ``False`` = none even when training.
         crop: ``"bbox"`` = square box around the projected target mesh, ``box_scale`` times its
             larger side; ``"full"`` = the whole image (FreiHAND images are hand-centred crops).
         box_scale: margin of the ``"bbox"`` crop.
@@ -462,7 +462,7 @@ class FreiHANDTorchDataset(HandCropDataset):
     no visibility ratio (``vr`` is NaN) and no left hands (``mirrored`` is always False).
 
     Args:
-        root_or_reader: FreiHAND root folder or a [`FreiHAND`][handmesh_tutorial.data.freihand.FreiHAND].
+        root_or_reader: a FreiHAND root or [`FreiHAND`][handmesh_tutorial.data.freihand.FreiHAND].
         split: ``"training"`` or ``"evaluation"`` (when a root is given).
         image_size: crop side, pixels.
         train: augmentation on.
