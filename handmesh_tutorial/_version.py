@@ -17,7 +17,7 @@ from pathlib import Path
 __all__ = ["ASSET_DIR", "PRETRAINED_FILE", "SHIPPED_ASSETS", "__version__", "shipped_file",
            "shipped_version"]
 
-__version__ = "0.3.0"
+__version__ = "0.4.0"
 
 SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
     # file in handmesh_tutorial/assets/: (sha256 of its bytes, the version that first shipped them)
