@@ -85,8 +85,8 @@ class DemoConfig:
         lr: Adam learning rate.
         lr_step: epochs between halvings of the learning rate; ``None``: the recipe's schedule,
             halved once after three quarters of the run (CPU recipe) or after each quarter
-            (paper recipe: the paper's shape, 50 of its 200 epochs; measured better than once in
-            the demo, docs page "Why the paper starts from pretrained weights").
+            (paper recipe: the paper's shape, 50 of its 200 epochs; why: docs page "Why the paper
+            starts from pretrained weights").
         encoder: image encoder name.
         decoder: ``"multi"`` or ``"single"``.
         attention: coarse-mesh transformer on.
