@@ -911,3 +911,69 @@ def test_a_meta_json_that_disagrees_with_every_sample_removes_nothing(tmp_path, 
     (root / "meta.json").write_text(good)  # the user restores meta.json: the run completes
     assert gen(root, num=3).written == 1 and tree(root) == before
     assert D.verify_dataset(root, progress=False).ok
+
+
+def _with_generator_version(root: Path, version: str) -> None:
+    path = root / D.META_FILE
+    meta = json.loads(path.read_text())
+    meta["generator_version"] = version
+    path.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+
+
+@pytest.mark.parametrize("version, resumes", [
+    (D.schema.SAME_SAMPLES_SINCE, True),   # the oldest version that makes the same samples
+    ("0.2.0", False),                      # before it: other samples
+    ("99.0.0", False),                     # a later library: it may make other samples
+    ("0.3.x", False),                      # not a version at all
+])
+def test_a_set_of_an_older_version_resumes_only_when_its_samples_are_the_same(
+        tmp_path, version, resumes):
+    root = tmp_path / "r"
+    gen(root)
+    for name in sample_dirs(root)[3:]:  # a run cut short: three of the six samples are left
+        shutil.rmtree(root / D.SAMPLES_DIR / name)
+    _with_generator_version(root, version)
+    if resumes:
+        summary = gen(root)
+        assert summary.written == 3 and summary.skipped == 3
+        assert json.loads((root / D.META_FILE).read_text())["generator_version"] == version
+    else:
+        before = tree(root)
+        with pytest.raises(ValueError, match=r"differing keys: generator_version\b.*\n.*"
+                                             + re.escape(repr(version)) + " on disk"):
+            gen(root)
+        assert tree(root) == before
+
+
+def _scene_fingerprint() -> str:
+    """sha256 of the geometry and labels of one small scene of each kind (the rendered pixels
+    are left out: they may differ by a bit between OpenGL drivers)."""
+    from handmesh_tutorial import scenes
+
+    h = hashlib.sha256()
+    for i, kind in enumerate(("hand-hand", "hand-object", "hand-chain")):
+        s = scenes.make_sample(D.sample_seed(7, i), kind, 32)
+        h.update(json.dumps([s["kind"], s["target"], sorted(s["sides"].items()),
+                             sorted(s["names"].items())]).encode())
+        for key in ("joints", "pose"):
+            for label in sorted(s[key]):
+                h.update(np.round(np.asarray(s[key][label], np.float64), 5).tobytes())
+        for label in sorted(s["meshes"]):
+            h.update(np.round(np.asarray(s["meshes"][label][0], np.float64), 5).tobytes())
+        h.update(np.round(s["K"], 6).tobytes())
+    return h.hexdigest()
+
+
+# The scene generator's output, as SAME_SAMPLES_SINCE vouches for it: on a mismatch, the samples
+# of a seed changed, so sets written before no longer match what a resumed run adds.
+SCENE_FINGERPRINTS = {
+    "0.3.0": "d414bce87da59af549d77faf194e39bbf66e8bcbf5a736cecfeb54c02b203526"}
+
+
+def test_the_scene_generator_makes_the_samples_its_same_samples_since_version_made():
+    since = D.schema.SAME_SAMPLES_SINCE
+    got = _scene_fingerprint()
+    assert SCENE_FINGERPRINTS.get(since) == got, (
+        f"the scene generator's samples changed (fingerprint {got[:16]}...), but "
+        f"SAME_SAMPLES_SINCE is still {since}: set it in handmesh_tutorial/data/schema.py to "
+        f"this version and record the fingerprint under it in SCENE_FINGERPRINTS")

@@ -28,9 +28,9 @@ from .root import (
     _check_root,
     _check_shards_folder,
     _coalesce,
-    _diff,
     _diff_message,
     _lock,
+    _meta_diff,
     _open_root,
     _remove_shards,
     merge_shards,
@@ -395,9 +395,7 @@ def _generate_in_parts(root: Path, meta: dict, one: Callable[[int], GenerationSu
 def _kept_parts(root: Path, meta: dict, parts: int, bins, t0: float) -> GenerationSummary:
     """The root that an earlier run in ``parts`` left: checked against this call, kept as is."""
     old = read_meta(root)
-    ignore = ("generator_version", "shards", "ranges", "vr_probe")
-    keys = _diff({k: v for k, v in old.items() if k not in ignore},
-                 {k: v for k, v in meta.items() if k not in ignore})
+    keys = _meta_diff(old, meta, ignore=("shards", "ranges", "vr_probe"))
     if keys:
         raise ValueError(_diff_message(root / META_FILE, old, meta, keys) + "\nuse another "
                          "root, or delete the folder to generate anew")

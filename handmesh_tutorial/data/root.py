@@ -23,6 +23,7 @@ from .schema import (
     _TMP_PREFIX,
     META_FILE,
     MIN_INDEX_WIDTH,
+    SAME_SAMPLES_SINCE,
     SAMPLES_DIR,
     _sample_index,
 )
@@ -169,6 +170,27 @@ def _diff(a: Any, b: Any, prefix: str = "") -> list[str]:
     return [] if a == b else [prefix.rstrip(".")]
 
 
+def _version_tuple(v: Any) -> tuple[int, ...] | None:
+    try:
+        return tuple(int(x) for x in str(v).split("."))
+    except ValueError:
+        return None
+
+
+def _meta_diff(old: Mapping, new: Mapping, ignore: Sequence[str] = ()) -> list[str]:
+    """`_diff` of two ``meta.json`` dicts, less ``ignore`` and less ``generator_version`` when
+    both versions make the same samples (`SAME_SAMPLES_SINCE` up to this library's version)."""
+    from .._version import __version__
+
+    keys = [k for k in _diff(old, new) if k.split(".")[0] not in ignore]
+    if "generator_version" in keys:
+        since, now = _version_tuple(SAME_SAMPLES_SINCE), _version_tuple(__version__)
+        got = _version_tuple(old.get("generator_version"))
+        if got is not None and since <= got <= now:
+            keys.remove("generator_version")
+    return keys
+
+
 def _diff_message(path: Path, old: dict, new: dict, keys: Sequence[str]) -> str:
     def get(d: Any, dotted: str) -> Any:
         for part in dotted.split("."):
@@ -267,7 +289,7 @@ def _open_root(root: Path, meta: dict) -> int:
     path = root / META_FILE
     if path.exists():
         old = read_meta(root)
-        keys = _diff(old, meta)
+        keys = _meta_diff(old, meta)
         if keys:
             raise ValueError(_diff_message(path, old, meta, keys))
     else:

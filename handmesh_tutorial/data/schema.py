@@ -31,6 +31,14 @@ FORMAT_VERSION = 2
 limits by default, and the VR probe of balanced sets in ``meta.json`` (``vr_probe``). The sample
 files are laid out as in version 1.
 """
+SAME_SAMPLES_SINCE = "0.3.0"
+"""The oldest library version whose scene generator makes, from the same seeds and parameters,
+the samples this version makes: a root written by it or a later version (up to this one)
+resumes, although its ``meta.json`` names another ``generator_version``. Set it to the current
+version in any change that alters a sample (``tests/test_dataset.py`` holds a fingerprint of a
+few samples that fails until then), so that a release without such a change keeps the sets
+users spent hours generating.
+"""
 READABLE_FORMAT_VERSIONS = (1, 2)
 """Versions this library reads (version 1 roots read the same; resuming one with this version
 is refused, as any change of parameters is).
