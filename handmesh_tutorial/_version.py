@@ -17,14 +17,14 @@ from pathlib import Path
 __all__ = ["ASSET_DIR", "PRETRAINED_FILE", "SHIPPED_ASSETS", "__version__", "shipped_file",
            "shipped_version"]
 
-__version__ = "0.4.0"
+__version__ = "0.5.0"
 
 SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
     # file in handmesh_tutorial/assets/: (sha256 of its bytes, the version that first shipped them)
     "hand_encoder_neutral.pt": (
         "069afa10e4cf433fd1b9dcce7d5289413890f811cd4608b5bd0a76486fe5aabe", "0.3.0"),
     "hand_encoder_pretrained.pt": (
-        "24efdbb4d848cd637662faaefd80ee449bd1e33b8022e6ba21b7b18f90f43325", "0.2.0"),
+        "1c2bf71bcafce790672d067784defea0d0dab7336b6e54dca8d1eb067db20637", "0.5.0"),
     "fit_sweep_results.json": (
         "cc9747770695d84c371596f37857aa4e8dd57142b07f43d45800b963ed6741f7", "0.3.0"),
     "table3_results.json": (

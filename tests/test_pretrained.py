@@ -2,6 +2,7 @@
 generation, and the shipped file itself."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -365,3 +366,28 @@ def test_the_shipped_file_fits_the_template_and_records_how_it_was_made():
     out = net(torch.zeros(1, 3, size, size))
     assert out["vertices"].shape[1] == len(hmt.train.resolve_template(None).vertices)
     assert torch.isfinite(out["vertices"]).all()
+
+
+def _strings(obj, where=""):
+    """(dotted key, string) for every string in a file's metadata, tensors left out."""
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _strings(v, f"{where}.{k}")
+    elif isinstance(obj, list | tuple):
+        for i, v in enumerate(obj):
+            yield from _strings(v, f"{where}[{i}]")
+    elif isinstance(obj, str):
+        yield where, obj
+
+
+@pytest.mark.parametrize("name", sorted(n for n in _version.SHIPPED_ASSETS if n.endswith(".pt")))
+def test_no_shipped_weight_file_names_a_folder_of_the_machine_that_made_it(name):
+    """The lineage a file records is commands, seeds and file names: an absolute path would
+    name a folder only that machine has (and leak its layout)."""
+    from handmesh_tutorial._untrusted import load_torch_file
+
+    blob = load_torch_file(_version.ASSET_DIR / name)
+    meta = {k: v for k, v in blob.items() if k not in ("model", "scales", "optimizer")}
+    absolute = re.compile(r"(^|[\s='\"(])(/|~/|[A-Za-z]:\\)[\w.~-]")
+    found = [(k, s) for k, s in _strings(meta) if absolute.search(s)]
+    assert not found, f"{name} records absolute paths: {found[:3]}"
