@@ -168,7 +168,7 @@ def _toy_driver(monkeypatch) -> list:
         assert kind == "mixed"  # the pretraining's scenes: all three kinds
         return counted(root, lambda s: toy_sample(s, image_size=image_size), num, seed,
                        "hand-hand", parts=parts, max_seconds=max_seconds, progress=False,
-                       durable=False)
+                       durable=False, image_size=image_size)
 
     monkeypatch.setattr(G, "generate_dataset", counted)
     monkeypatch.setattr(S, "generate_interactions", toy_scenes)
@@ -391,3 +391,45 @@ def test_no_shipped_weight_file_names_a_folder_of_the_machine_that_made_it(name)
     absolute = re.compile(r"(^|[\s='\"(])(/|~/|[A-Za-z]:\\)[\w.~-]")
     found = [(k, s) for k, s in _strings(meta) if absolute.search(s)]
     assert not found, f"{name} records absolute paths: {found[:3]}"
+
+
+def test_a_later_encoder_stage_reads_the_scenes_of_the_stage_before_in_place(tmp_path,
+                                                                            monkeypatch):
+    """--scenes-from: no scene generated again, nothing written in the other run's folder."""
+    import hashlib
+
+    from handmesh_tutorial.apps import pose_pretraining as PP
+
+    made = _toy_driver(monkeypatch)
+    calls = []
+    import handmesh_tutorial.scenes as S
+
+    real = S.generate_interactions
+    monkeypatch.setattr(S, "generate_interactions",
+                        lambda *a, **k: calls.append(a) or real(*a, **k))
+    small = dict(train_scenes=8, val_scenes=4, render_size=64, image_sizes=(32,), batch_size=4,
+                 max_steps=2, warmup_steps=1, workers=1, device="cpu", precision="float32",
+                 data_seed=5)
+    first = PP.build_pretrained_encoder(tmp_path / "one", PP.PosePretrainConfig(**small),
+                                        progress=False, log=None)
+    assert len(calls) == 2 and made == []  # val and train, unsharded
+    one = {p: hashlib.sha256(p.read_bytes()).hexdigest()
+           for p in sorted((tmp_path / "one").rglob("*")) if p.is_file()}
+    second = PP.build_pretrained_encoder(
+        tmp_path / "two", PP.PosePretrainConfig(**{**small, "init": str(first["file"])}),
+        scenes_from=tmp_path / "one", progress=False, log=None)
+    assert len(calls) == 2  # no scene generated again
+    assert {p: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted((tmp_path / "one").rglob("*")) if p.is_file()} == one
+    assert not (tmp_path / "two" / "data").exists()
+    assert not list((tmp_path / "two").glob("crops_*.pt"))  # the first run's crops, read there
+    assert second["info"]["data"]["train_scenes"] == 8 and second["info"]["data"]["val_seed"] == 6
+    assert str(tmp_path) not in repr(second["info"])
+    with pytest.raises(ValueError, match=r"meta\.json: \{'seed': 5\} on disk, but this run asks "
+                                         r"for \{'seed': 7\}"):
+        PP.build_pretrained_encoder(tmp_path / "three",
+                                    PP.PosePretrainConfig(**{**small, "data_seed": 7}),
+                                    scenes_from=tmp_path / "one", progress=False, log=None)
+    with pytest.raises(FileNotFoundError, match=r"nowhere/data/train/meta\.json: no scenes"):
+        PP.build_pretrained_encoder(tmp_path / "four", PP.PosePretrainConfig(**small),
+                                    scenes_from=tmp_path / "nowhere", progress=False, log=None)

@@ -24,11 +24,10 @@ python3 -m handmesh_tutorial.apps.cli pretrain-encoder --out /tmp/peA --no-progr
   | tee "$OUT/logA.txt"
 rc=$?
 if [ -n "$2" ]; then
-  mkdir -p /tmp/peB
-  for f in data crops_train.pt crops_val.pt; do ln -sfn "/tmp/peA/$f" "/tmp/peB/$f"; done
+  # run A's scenes and crops, read in place (a link in --out would be refused)
   # shellcheck disable=SC2086
-  python3 -m handmesh_tutorial.apps.cli pretrain-encoder --out /tmp/peB --no-progress $COMMON $2 \
-    2>&1 | tee "$OUT/logB.txt"
+  python3 -m handmesh_tutorial.apps.cli pretrain-encoder --out /tmp/peB --scenes-from /tmp/peA \
+    --no-progress $COMMON $2 2>&1 | tee "$OUT/logB.txt"
   rc=$((rc + $?))
 fi
 kill $copier 2>/dev/null

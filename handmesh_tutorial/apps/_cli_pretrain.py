@@ -45,7 +45,7 @@ def _cmd_pretrain_encoder(args: argparse.Namespace) -> int:
                                    max_train_seconds=args.max_train_seconds,
                                    stop_after=args.stop_after_steps,
                                    install=args.install, progress=not args.no_progress,
-                                   overwrite=args.overwrite)
+                                   overwrite=args.overwrite, scenes_from=args.scenes_from)
     last = res["history"][-1]
     print(f"handmesh pretrain-encoder: {res['info']['data']['train_scenes']} training scenes, "
           f"{last['step']} steps on {res['info']['hardware']}; val PA-MPJPE "
@@ -156,6 +156,10 @@ def add_pretrain_commands(sub) -> None:
     pe.add_argument("--max-train-seconds", type=float, default=None,
                     help="training budget: the first steps are timed and the steps that fit are "
                     "planned (learning-rate schedule included)")
+    pe.add_argument("--scenes-from", metavar="RUN", default=None,
+                    help="train on the scenes (and crops) of another pretrain-encoder run, read "
+                    "in its --out folder RUN instead of generating them (the same --data-seed, "
+                    "--train-scenes, --val-scenes): a later stage of a chain")
     pe.add_argument("--stop-after-steps", type=int, default=None,
                     help="stop after this many steps of the planned --max-steps schedule (the "
                     "learning rate where the plan has it); a rerun without it continues")

@@ -29,7 +29,7 @@ from .._io import atomic_write_bytes, atomic_write_with, file_identity, single_w
 from .._progress import progress_bar
 from .._untrusted import load_torch_file
 from ..budget import check_image_size
-from ..data.batched_crops import BOX_SCALE, augment_crops, crop_cache
+from ..data.batched_crops import BOX_SCALE, augment_crops
 from ..nn.losses import similarity_align
 from ..nn.pose_encoder import (
     _JOINT_SCALE,
@@ -39,7 +39,7 @@ from ..nn.pose_encoder import (
     export_pose_encoder,
     pose_loss,
 )
-from .pretraining_data import check_device, claim_pretraining_dir
+from .pretraining_data import check_device, claim_pretraining_dir, crop_caches, scenes_of_run
 
 __all__ = ["PosePretrainConfig", "evaluate_pose", "pretrain_pose_encoder",
            "build_pretrained_encoder"]
@@ -419,7 +419,8 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
                              max_generate_seconds: float | None = None,
                              max_train_seconds: float | None = None,
                              stop_after: int | None = None, install: bool | str = False,
-                             progress: bool = True, log=print, overwrite: bool = False) -> dict:
+                             progress: bool = True, log=print, overwrite: bool = False,
+                             scenes_from: str | os.PathLike | None = None) -> dict:
     """Make the pretrained encoder: scenes, crops, training, int8 file (``handmesh
     pretrain-encoder``). ``out`` is claimed first (``claim_pretraining_dir``: files it did not
     write refused unless ``overwrite``).
@@ -431,6 +432,8 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     ``out`` and resumes there. ``install=True`` (or ``"pretrained"``) copies the file into the
     package as the demo's encoder, ``install="neutral"`` as the decoder-neutral one
     ([`SHIPPED_ENCODERS`][handmesh_tutorial.nn.pose_encoder.SHIPPED_ENCODERS]).
+    ``scenes_from``: another run's ``out`` whose scenes (and crops) are read in place, not
+    generated (`scenes_of_run`; seeds and counts must be that run's).
 
     Returns:
         ``{"file", "history", "info"}``.
@@ -443,19 +446,17 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     out = claim_pretraining_dir(out, "pretrain-encoder", overwrite)
     workers = config.workers or os.cpu_count() or 1
     t0 = time.perf_counter()
-    tr, val, t_gen = generate_train_val(out / "data", config.train_scenes, config.val_scenes,
-                                        config.data_seed, render_size=config.render_size,
-                                        workers=workers, max_generate_seconds=max_generate_seconds,
-                                        progress=progress, log=log)
-    caches = {}
-    for split, r in (("train", tr), ("val", val)):
-        path = out / f"crops_{split}.pt"
-        if path.exists():
-            caches[split] = load_torch_file(path)
-            if len(caches[split]["image"]) == r["scenes"]:
-                continue
-        caches[split] = crop_cache(r["root"], workers=max(0, workers - 1), progress=progress)
-        _save(path, caches[split])
+    if scenes_from is None:
+        tr, val, t_gen = generate_train_val(
+            out / "data", config.train_scenes, config.val_scenes, config.data_seed,
+            render_size=config.render_size, workers=workers,
+            max_generate_seconds=max_generate_seconds, progress=progress, log=log)
+    else:  # a later stage of a chain: the scenes of the stage before, read in place
+        tr, val = scenes_of_run(scenes_from, config.train_scenes, config.val_scenes,
+                                config.data_seed, render_size=config.render_size)
+        t_gen = 0.0
+    caches = crop_caches(out, {"train": tr, "val": val}, scenes_from=scenes_from,
+                         workers=max(0, workers - 1), progress=progress)
     t_crop = time.perf_counter() - t0 - t_gen
     dev = "cuda" if config.device == "auto" and torch.cuda.is_available() else config.device
     info = {"command": "handmesh pretrain-encoder", "recipe": _jsonable(_portable(config)),

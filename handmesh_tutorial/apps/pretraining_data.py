@@ -146,3 +146,79 @@ def generate_train_val(data: str | os.PathLike, train_scenes: int, val_scenes: i
     t_gen = time.perf_counter() - t0
     say(f"      {tr['scenes']} training + {val['scenes']} validation scenes in {t_gen:.0f} s")
     return tr, val, t_gen
+
+
+def scenes_of_run(folder: str | os.PathLike, train_scenes: int, val_scenes: int,
+                  data_seed: int, *, render_size: int) -> tuple[dict, dict]:
+    """The scenes another pretraining run generated (its ``data/train`` and ``data/val``), read
+    in place: what ``generate_train_val`` returns, nothing written (``--scenes-from``).
+
+    A later stage of a chain (``handmesh pretrain-encoder --init <file> --scenes-from <run>``)
+    trains on the scenes of the stage before it without generating them again.
+
+    Returns:
+        ``(train, val)``: ``{"root", "scenes", "seconds": 0.0, "shards"}`` each.
+
+    Raises:
+        FileNotFoundError: a split or its ``meta.json`` is missing (named).
+        ValueError: the split was made with another seed, count or image size, or samples of
+            the planned set are missing (named, with what was asked).
+    """
+    from ..data.reader import _planned, _present, read_meta
+
+    folder = Path(folder)
+    got = []
+    for split, seed, num in (("train", data_seed, train_scenes),
+                             ("val", data_seed + 1, val_scenes)):
+        root = folder / "data" / split
+        if not (root / "meta.json").is_file():
+            raise FileNotFoundError(f"{root / 'meta.json'}: no scenes of a pretraining run "
+                                    "there (--scenes-from names a run's --out folder)")
+        meta = read_meta(root)
+        asked = {"seed": seed, "num_samples": num, "image_size": [render_size, render_size]}
+        wrong = {k: meta.get(k) for k, v in asked.items() if meta.get(k) != v}
+        if wrong:
+            raise ValueError(f"{root / 'meta.json'}: {wrong} on disk, but this run asks for "
+                             f"{ {k: asked[k] for k in wrong} } (--data-seed, --train-scenes, "
+                             "--val-scenes, --render-size must be the other run's)")
+        present = set(_present(root / "samples", meta["index_width"]))
+        absent = [i for i in _planned(meta) if i not in present]
+        if absent:
+            raise ValueError(f"{root}: {len(absent)} of its planned samples are missing (first "
+                             f"{absent[:5]}): finish that run's generation first")
+        got.append({"root": root, "scenes": len(present & set(_planned(meta))), "seconds": 0.0,
+                    "shards": len(meta.get("shards", [])) or 1})
+    return got[0], got[1]
+
+
+def crop_caches(out: Path, splits: dict, *, scenes_from: str | os.PathLike | None = None,
+                workers: int = 0, progress: bool = True) -> dict:
+    """The crops of each split (``{"train": scenes, "val": scenes}`` as `generate_train_val`
+    returns them): ``out/crops_<split>.pt`` when it holds as many crops as the split has scenes,
+    else the other run's (``scenes_from``, read only) when it does, else cropped now and saved in
+    ``out``.
+
+    Returns:
+        ``{"train": cache, "val": cache}`` (``data.batched_crops.crop_cache`` dicts).
+    """
+    import torch
+
+    from .._io import atomic_write_with
+    from .._untrusted import load_torch_file
+    from ..data.batched_crops import crop_cache
+
+    caches = {}
+    for split, scenes in splits.items():
+        places = [out] + ([Path(scenes_from)] if scenes_from is not None else [])
+        for place in places:
+            path = place / f"crops_{split}.pt"
+            if path.is_file():
+                cache = load_torch_file(path)
+                if len(cache["image"]) == scenes["scenes"]:
+                    caches[split] = cache
+                    break
+        else:
+            caches[split] = crop_cache(scenes["root"], workers=workers, progress=progress)
+            atomic_write_with(out / f"crops_{split}.pt",
+                              lambda fh, c=caches[split]: torch.save(c, fh))
+    return caches
