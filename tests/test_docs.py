@@ -13,6 +13,7 @@ import ast
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -225,3 +226,58 @@ def test_copy_buttons_leave_doctest_prompts_out():
     assert rule and ".gp" in rule.group(1) and ".go" in rule.group(1)
     config = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
     assert "stylesheets/site.css" in config and "content.code.copy" in config
+
+
+# --- the shipped network's scores in the docs (tools/pretrained_scores.py) ------------------
+
+def _scores_result(rng) -> dict:
+    """A result of tools/pretrained_scores.py's `score` with made-up per-scene errors."""
+    from handmesh_tutorial.metrics.intervals import paired_difference
+
+    def row(errors):
+        return {"pa_mpjpe": float(np.mean(errors)), "pa_mpvpe": 0.0, "mpjpe": 0.0,
+                "roughness_deg": 2.0, "flipped": 0.001,
+                "per_scene": {"pa_mpjpe": list(errors)}}
+
+    kinds, pooled = {}, {"file": [], "rest hand": [], "mean hand": []}
+    for shift, kind in zip((0.0, 1.0, 2.0), ("hand-hand", "hand-object", "hand-chain"),
+                           strict=True):
+        g = {"file": row(5 + shift + rng.normal(0, 1, 10)),
+             "rest hand": row(11 + shift + rng.normal(0, 1, 10)),
+             "mean hand": row(8 + shift + rng.normal(0, 1, 10))}
+        for k in pooled:
+            pooled[k] += g[k]["per_scene"]["pa_mpjpe"]
+        g["intervals"] = {f"file - {k}": paired_difference(g["file"]["per_scene"]["pa_mpjpe"],
+                                                           g[k]["per_scene"]["pa_mpjpe"])
+                          for k in ("rest hand", "mean hand")}
+        kinds[kind] = g
+    everything = {k: row(v) for k, v in pooled.items()}
+    everything["intervals"] = {f"file - {k}": paired_difference(pooled["file"], pooled[k])
+                               for k in ("rest hand", "mean hand")}
+    return {"seed": 12345, "per_kind": 10, "kinds": kinds, "all": everything}
+
+
+def test_the_scores_tool_writes_its_tables_between_the_markers_only(tmp_path):
+    tool = _tool("pretrained_scores")
+    result = _scores_result(np.random.default_rng(0))
+    table = tool.render_block(result, "table")
+    rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ") for line in table.splitlines()[2:]}
+    assert list(rows) == ["hand-hand", "hand-object", "hand-chain", "all"]
+    a = result["all"]
+    assert rows["all"][1] == "30" and rows["all"][2] == f"{a['file']['pa_mpjpe']:.2f}"
+    assert rows["all"][5] == f"{a['file']['pa_mpjpe'] / a['rest hand']['pa_mpjpe']:.2f}"
+    summary = tool.render_block(result, "summary")
+    assert "30 fresh scenes (seed 12345" in summary
+    with pytest.raises(ValueError, match="unknown block 'tables'"):
+        tool.render_block(result, "tables")
+    for rel in tool.DOCS:
+        _write(tmp_path / rel, "before\n<!-- pretrained-scores table -->\nold\n"
+                               "<!-- /pretrained-scores -->\nbetween\n"
+                               "<!-- pretrained-scores summary -->\nold\n"
+                               "<!-- /pretrained-scores -->\nafter\n")
+    assert tool.write_docs(result, tmp_path) == list(tool.DOCS)
+    text = (tmp_path / "README.md").read_text()
+    assert text == ("before\n<!-- pretrained-scores table -->\n" + table
+                    + "<!-- /pretrained-scores -->\nbetween\n<!-- pretrained-scores summary -->\n"
+                    + summary + "<!-- /pretrained-scores -->\nafter\n")
+    assert tool.write_docs(result, tmp_path) == []  # the same result: nothing to change
