@@ -977,3 +977,17 @@ def test_the_scene_generator_makes_the_samples_its_same_samples_since_version_ma
         f"the scene generator's samples changed (fingerprint {got[:16]}...), but "
         f"SAME_SAMPLES_SINCE is still {since}: set it in handmesh_tutorial/data/schema.py to "
         f"this version and record the fingerprint under it in SCENE_FINGERPRINTS")
+
+
+def test_a_library_version_that_is_not_numbers_resumes_only_its_own_sets(tmp_path, monkeypatch):
+    """A development version ("0.6.0.dev1") cannot be placed after SAME_SAMPLES_SINCE: a set
+    of another version is refused, not compared (and not a TypeError)."""
+    import handmesh_tutorial
+    from handmesh_tutorial import _version
+
+    root = tmp_path / "r"
+    gen(root)
+    for module in (handmesh_tutorial, _version):
+        monkeypatch.setattr(module, "__version__", "0.6.0.dev1")
+    with pytest.raises(ValueError, match=r"differing keys: generator_version\b"):
+        gen(root)

@@ -186,7 +186,7 @@ def _meta_diff(old: Mapping, new: Mapping, ignore: Sequence[str] = ()) -> list[s
     if "generator_version" in keys:
         since, now = _version_tuple(SAME_SAMPLES_SINCE), _version_tuple(__version__)
         got = _version_tuple(old.get("generator_version"))
-        if got is not None and since <= got <= now:
+        if None not in (since, got, now) and since <= got <= now:  # "0.6.0.dev1": None
             keys.remove("generator_version")
     return keys
 
