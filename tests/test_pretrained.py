@@ -433,3 +433,33 @@ def test_a_later_encoder_stage_reads_the_scenes_of_the_stage_before_in_place(tmp
     with pytest.raises(FileNotFoundError, match=r"nowhere/data/train/meta\.json: no scenes"):
         PP.build_pretrained_encoder(tmp_path / "four", PP.PosePretrainConfig(**small),
                                     scenes_from=tmp_path / "nowhere", progress=False, log=None)
+
+
+def test_the_recorded_command_makes_the_same_recipe_again(monkeypatch, tmp_path):
+    """replay_command -> the handmesh parser -> the recipe and budgets it was made from."""
+    import shlex
+
+    from handmesh_tutorial.apps._cli_pretrain import _cmd_pretrain
+    from handmesh_tutorial.apps.cli import build_parser
+
+    recipe = P.PretrainedRecipe(train_scenes=20000, data_seed=1000, epochs=12, augment=False,
+                                init_encoder=str(tmp_path / "runs" / "enc.pt"),
+                                freeze_encoder=12, lr=3e-4, device="cpu")
+    cmd = P.replay_command(recipe, max_train_seconds=7200.0)
+    assert cmd == ("handmesh pretrain --data-seed 1000 --epochs 12 --lr 0.0003 --no-augment "
+                   "--device cpu --init-encoder enc.pt --freeze-encoder 12 "
+                   "--max-train-seconds 7200")
+    got = {}
+
+    def fake(out, recipe, **kw):
+        got.update(recipe=recipe, **kw)
+        raise KeyboardInterrupt  # stop before any scene
+
+    monkeypatch.setattr(P, "build_pretrained", fake)
+    with pytest.raises(KeyboardInterrupt):
+        _cmd_pretrain(build_parser().parse_args(shlex.split(cmd)[1:]))
+    assert got["recipe"] == P.PretrainedRecipe(**{**recipe.__dict__, "init_encoder": "enc.pt"})
+    assert got["max_train_seconds"] == 7200 and got["max_generate_seconds"] is None
+    assert P.replay_command(P.PretrainedRecipe()) == "handmesh pretrain"
+    with pytest.raises(ValueError, match="lr_gamma=0.5 has no option"):
+        P.replay_command(P.PretrainedRecipe(lr_gamma=0.5))

@@ -37,7 +37,7 @@ from .pretraining_data import (
 )
 
 __all__ = ["PretrainedRecipe", "build_pretrained", "export_pretrained",
-           "generate_training_scenes", "generate_train_val"]
+           "generate_training_scenes", "generate_train_val", "replay_command"]
 
 @dataclass
 class PretrainedRecipe:
@@ -265,6 +265,41 @@ def export_pretrained(checkpoint: str | os.PathLike, out: str | os.PathLike, *,
 
 _FILE_KEYS = ("data", "val_data", "out_dir", "init", "init_encoder")
 
+_NO_OPTION = ("lr_gamma",)
+"""Recipe fields ``handmesh pretrain`` has no option for (`replay_command` names them apart)."""
+
+
+def replay_command(recipe: PretrainedRecipe, *, max_generate_seconds: float | None = None,
+                   max_train_seconds: float | None = None) -> str:
+    """The ``handmesh pretrain`` line that makes ``recipe`` again: one option per field that
+    differs from `PretrainedRecipe`'s default, files by name (no folder of this machine), plus
+    the time budgets. Recorded as ``command`` in the file, so its lineage reads as commands.
+
+    Raises:
+        ValueError: a field that differs from its default has no command-line option
+            (`_NO_OPTION`): the line would make another network.
+    """
+    from dataclasses import fields
+
+    default, words = PretrainedRecipe(), ["handmesh", "pretrain"]
+    for f in fields(recipe):
+        v = getattr(recipe, f.name)
+        if v == getattr(default, f.name):
+            continue
+        if f.name in _NO_OPTION:
+            raise ValueError(f"{f.name}={v!r} has no option of handmesh pretrain")
+        if f.name == "augment":
+            words.append("--no-augment")
+            continue
+        if f.name in ("init", "init_encoder") and v not in ("pretrained", "neutral"):
+            v = Path(str(v)).name
+        words += [f"--{f.name.replace('_', '-')}", str(v)]
+    for name, v in (("max_generate_seconds", max_generate_seconds),
+                    ("max_train_seconds", max_train_seconds)):
+        if v is not None:
+            words += [f"--{name.replace('_', '-')}", f"{v:g}"]
+    return " ".join(words)
+
 
 class _OutOfTime(Exception):
     pass
@@ -329,7 +364,9 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     from ..train.checkpoints import _read_checkpoint
 
     config = recipe.train_config(tr["root"], val["root"], out / "train", progress)
-    info = {"recipe": asdict(recipe), "max_generate_seconds": max_generate_seconds,
+    info = {"command": replay_command(recipe, max_generate_seconds=max_generate_seconds,
+                                      max_train_seconds=max_train_seconds),
+            "recipe": asdict(recipe), "max_generate_seconds": max_generate_seconds,
             "max_train_seconds": max_train_seconds,
             "data": {"train_seed": recipe.data_seed, "train_scenes": tr["scenes"],
                      "val_seed": recipe.data_seed + 1, "val_scenes": val["scenes"],
