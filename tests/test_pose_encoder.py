@@ -268,3 +268,13 @@ def test_encoder_lineage_of_an_empty_or_unknown_record_says_so():
                             "init_from": {"recipe": {"init": None, "data_seed": 2}}}}
     got = PE.encoder_lineage(chain)
     assert got["decoder_neutral"] and [r["data_seed"] for r in got["runs"]] == [2, 3]
+
+
+def test_a_missing_shipped_encoder_names_the_command_that_makes_it(tmp_path, monkeypatch):
+    from handmesh_tutorial import _version
+
+    monkeypatch.setattr(_version, "ASSET_DIR", tmp_path)
+    with pytest.raises(FileNotFoundError, match=r"`handmesh pretrain-encoder --install`"):
+        PE.pretrained_encoder_path("pretrained")
+    with pytest.raises(FileNotFoundError, match=r"`make pretrained-encoder`"):
+        PE.pretrained_encoder_path("neutral")

@@ -1,5 +1,5 @@
 #!/bin/bash
-# Make the pretrained hand encoder on a lent GPU machine (docs page "The pretrained encoder"):
+# Make the pretrained hand encoder on a lent GPU machine (docs page "Why the paper starts from pretrained weights", section "The pretrained hand encoder"):
 # the scenes once, then up to two trainings on them (run A, run B), whose arguments are given as
 # two quoted strings; each run's file and history are copied to $OUT/peA, $OUT/peB as they come.
 # Prepare .gl and .whl as tools/pretrain_on_device.sh's header says and name both in `carry`.

@@ -16,7 +16,7 @@
 #   HANDMESH_COMMIT=<commit> tools/pretrain_on_device.sh --train-scenes 20000 --val-scenes 300 \
 #     --epochs 16 --batch-size 128 --max-generate-seconds 150 --max-train-seconds 230
 # and run 4, continuing the shipped weights on new scenes (the commit must hold the shipped file;
-# a new run takes a new --data-seed: 900 is the next unused one):
+# a new run takes a new --data-seed: 1200 is the next unused one):
 #   HANDMESH_COMMIT=<commit> tools/pretrain_on_device.sh --init pretrained --data-seed 400 \
 #     --lr 3e-4 --train-scenes 40000 --val-scenes 300 --epochs 16 --batch-size 128 \
 #     --max-generate-seconds 240 --max-train-seconds 240

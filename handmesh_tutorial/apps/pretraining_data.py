@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["generate_training_scenes", "generate_train_val"]
+__all__ = ["crop_caches", "generate_training_scenes", "generate_train_val", "scenes_of_run"]
 
 PRETRAINING_OUTPUTS = {
     "pretrain": ("data", "train", "msmr_net_pretrained.pt", "msmr_net_float16.pt"),
@@ -70,7 +70,8 @@ def claim_pretraining_dir(out: str | os.PathLike, command: str,
     """``_io.claim_out_dir`` for ``handmesh pretrain`` / ``pretrain-encoder`` (before any scene):
     a folder holding files the command did not write is refused unless ``overwrite``, a link
     where it writes always; a run folder of an older version (no marker) is recognised by its
-    scenes' ``meta.json``, so it resumes.
+    scenes' ``meta.json`` as the command's own (its scenes then resume if a version of
+    ``data.schema.SAME_SAMPLES_SINCE`` or later wrote them, and are refused by name otherwise).
 
     Raises:
         ValueError, NotADirectoryError, FileExistsError, OSError: as ``claim_out_dir``.

@@ -213,12 +213,14 @@ def pretrained_encoder_path(name: str = "pretrained") -> Path:
             a mesh decoder; the Table 3 ablation starts from it).
 
     Raises:
-        FileNotFoundError: this installation has none (make it with ``make pretrained-encoder``).
+        FileNotFoundError: this installation has none (make ``"neutral"`` with ``make
+            pretrained-encoder``, ``"pretrained"`` with ``handmesh pretrain-encoder --install``).
         ValueError: another name.
     """
     if name not in SHIPPED_ENCODERS:
         raise ValueError(f"shipped encoders are {sorted(SHIPPED_ENCODERS)}, got {name!r}")
-    return shipped_file(SHIPPED_ENCODERS[name], "make pretrained-encoder")
+    how = {"neutral": "make pretrained-encoder"}.get(name, "handmesh pretrain-encoder --install")
+    return shipped_file(SHIPPED_ENCODERS[name], how)
 
 
 def encoder_source_path(source: str | os.PathLike) -> Path:
