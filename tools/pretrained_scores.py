@@ -81,15 +81,17 @@ def score(checkpoint: str, out: Path, seed: int, per_kind: int, *, previous: str
             raise SystemExit(f"{checkpoint} records no training seed: give --train-data")
         train_data = out / "data" / f"train_seed{train_seed}"
         _generate(train_data, "mixed", mean_scenes, int(train_seed), False, workers)
-    mean = T.mean_hand(InterSHTorchDataset(train_data, image_size=64, train=False))
+    train_set = InterSHTorchDataset(train_data, image_size=64, train=False)
+    mean = T.mean_hand(train_set)
 
-    nets = {"file": checkpoint}
+    nets = {"file": checkpoint, **({"previous": previous} if previous else {})}
+    sizes = {checkpoint: ck["config"]["image_size"]}  # each file read once here
     if previous:
-        nets["previous"] = previous
+        sizes[previous] = _read_checkpoint(previous)["config"]["image_size"]
     result = {"checkpoint": str(checkpoint) if checkpoint == "pretrained" else Path(checkpoint).name,
               "seed": seed, "seeds": {k: seed + i for i, k in enumerate(KINDS)},
               "per_kind": per_kind, "mean_hand_from": str(train_data.name),
-              "mean_hand_scenes": len(InterSHTorchDataset(train_data, image_size=64, train=False)),
+              "mean_hand_scenes": len(train_set),
               "made": {"data": made.get("data"), "date": made.get("date"),
                        "library_version": ck.get("library_version")},
               "kinds": {}}
@@ -99,8 +101,7 @@ def score(checkpoint: str, out: Path, seed: int, per_kind: int, *, previous: str
         _generate(root, kind, per_kind, seed + i, True, workers)
         row: dict = {}
         for name, path in nets.items():
-            size = _read_checkpoint(path)["config"]["image_size"]
-            ev = T.evaluate(path, str(root), image_size=size, device="cpu", progress=False,
+            ev = T.evaluate(path, str(root), image_size=sizes[path], device="cpu", progress=False,
                             mean_hand=mean, baseline=name == "file")
             row[name] = _summary(ev["scores"], ev["per_sample"])
             if name == "file":
@@ -116,9 +117,10 @@ def score(checkpoint: str, out: Path, seed: int, per_kind: int, *, previous: str
     result["all"] = all_rows
     if demo is not None:
         mine = demo / "train" / "checkpoint_best.pt"
+        sizes[mine] = _read_checkpoint(mine)["config"]["image_size"]
         test = str(demo / "data" / "test")
         evs = {name: T.evaluate(path, test, device="cpu", progress=False, baseline=False,
-                                image_size=_read_checkpoint(path)["config"]["image_size"])
+                                image_size=sizes[path])
                for name, path in (("file", checkpoint), ("demo", mine))}
         rows = {n: _summary(e["scores"], e["per_sample"]) for n, e in evs.items()}
         result["demo"] = {"folder": demo.name, "file": rows["file"], "demo": rows["demo"],
