@@ -298,6 +298,44 @@ def test_the_network_on_the_papers_protocol_records_its_encoders_chain(tmp_path,
     raw = res["file"].read_bytes() + res["float16"].read_bytes()
     assert str(tmp_path).encode() not in raw  # no folder of this machine in either file
     assert ck["config"]["data"] == "train" and ck["pretrained"]["recipe"]["init_encoder"] == "e.pt"
+
+
+def test_a_later_network_stage_reads_the_scenes_of_the_stage_before_in_place(tmp_path,
+                                                                            monkeypatch):
+    """handmesh pretrain --init <checkpoint> --scenes-from <run>: the fine-tuning stage of a
+    chain trains on the first stage's scenes without generating or writing any, and its file
+    records the command with the run's name, not its folder."""
+    import hashlib
+
+    calls = []
+    _toy_driver(monkeypatch)
+    import handmesh_tutorial.scenes as S
+
+    real = S.generate_interactions
+    monkeypatch.setattr(S, "generate_interactions",
+                        lambda *a, **k: calls.append(a) or real(*a, **k))
+    small = dict(train_scenes=6, val_scenes=3, render_size=64, image_size=32, epochs=1,
+                 batch_size=3, workers=1, loader_workers=0, device="cpu", precision="float32",
+                 data_seed=7)
+    P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**small), progress=False, log=None)
+    assert len(calls) == 2
+    one = {p: hashlib.sha256(p.read_bytes()).hexdigest()
+           for p in sorted((tmp_path / "one" / "data").rglob("*")) if p.is_file()}
+    init = tmp_path / "one" / "train" / "checkpoint_last.pt"
+    second = P.build_pretrained(tmp_path / "two",
+                                P.PretrainedRecipe(**{**small, "init": str(init)}),
+                                scenes_from=tmp_path / "one", progress=False, log=None)
+    assert len(calls) == 2 and not (tmp_path / "two" / "data").exists()
+    assert {p: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted((tmp_path / "one" / "data").rglob("*")) if p.is_file()} == one
+    info = second["info"]
+    assert info["data"]["train_scenes"] == 6 and info["data"]["val_seed"] == 8
+    assert info["command"].endswith("--init checkpoint_last.pt --scenes-from one")
+    assert str(tmp_path) not in repr(info)
+    with pytest.raises(ValueError, match=r"\{'num_samples': 6\} on disk, but this run asks for "
+                                         r"\{'num_samples': 9\}"):
+        P.build_pretrained(tmp_path / "three", P.PretrainedRecipe(**{**small, "train_scenes": 9}),
+                           scenes_from=tmp_path / "one", progress=False, log=None)
     paper = P.PretrainedRecipe(recipe="paper", init_encoder="neutral").train_config("a", "b", "c")
     assert paper.model_kwargs == {"output": "xyz", "smoothing_length": 0.0, "keypoints": True}
     for bad, match in (({"init": "x.pt", "init_encoder": "neutral"}, "exclude each other"),
@@ -445,10 +483,11 @@ def test_the_recorded_command_makes_the_same_recipe_again(monkeypatch, tmp_path)
     recipe = P.PretrainedRecipe(train_scenes=20000, data_seed=1000, epochs=12, augment=False,
                                 init_encoder=str(tmp_path / "runs" / "enc.pt"),
                                 freeze_encoder=12, lr=3e-4, device="cpu")
-    cmd = P.replay_command(recipe, max_train_seconds=7200.0)
+    cmd = P.replay_command(recipe, max_train_seconds=7200.0,
+                           scenes_from=tmp_path / "runs" / "frozen")
     assert cmd == ("handmesh pretrain --data-seed 1000 --epochs 12 --lr 0.0003 --no-augment "
                    "--device cpu --init-encoder enc.pt --freeze-encoder 12 "
-                   "--max-train-seconds 7200")
+                   "--max-train-seconds 7200 --scenes-from frozen")
     got = {}
 
     def fake(out, recipe, **kw):
@@ -460,6 +499,7 @@ def test_the_recorded_command_makes_the_same_recipe_again(monkeypatch, tmp_path)
         _cmd_pretrain(build_parser().parse_args(shlex.split(cmd)[1:]))
     assert got["recipe"] == P.PretrainedRecipe(**{**recipe.__dict__, "init_encoder": "enc.pt"})
     assert got["max_train_seconds"] == 7200 and got["max_generate_seconds"] is None
+    assert got["scenes_from"] == "frozen"
     assert P.replay_command(P.PretrainedRecipe()) == "handmesh pretrain"
     with pytest.raises(ValueError, match="lr_gamma=0.5 has no option"):
         P.replay_command(P.PretrainedRecipe(lr_gamma=0.5))

@@ -20,7 +20,8 @@ def _cmd_pretrain(args: argparse.Namespace) -> int:
                                  if getattr(args, k) is not None})
     res = build_pretrained(args.out, recipe, max_generate_seconds=args.max_generate_seconds,
                            max_train_seconds=args.max_train_seconds, install=args.install,
-                           progress=not args.no_progress, overwrite=args.overwrite)
+                           progress=not args.no_progress, overwrite=args.overwrite,
+                           scenes_from=args.scenes_from)
     info = res["info"]
     print(f"handmesh pretrain: {info['data']['train_scenes']} training scenes, "
           f"{info['epochs_done']} of {info.get('epochs_planned', recipe.epochs)} epochs on "
@@ -113,6 +114,10 @@ def add_pretrain_commands(sub) -> None:
     pre.add_argument("--max-train-seconds", type=float, default=None,
                      help="fit training to this budget: the first epoch is timed, then the "
                      "epochs that fit are planned (learning-rate schedule included)")
+    pre.add_argument("--scenes-from", metavar="RUN", default=None,
+                     help="train on the scenes of another pretrain run, read in its --out folder "
+                     "RUN instead of generating them (the same --data-seed, --train-scenes, "
+                     "--val-scenes, --render-size): a later stage of a chain, with --init")
     pre.add_argument("--no-progress", action="store_true", help="no progress bars")
     pre.set_defaults(func=_cmd_pretrain)
 

@@ -34,6 +34,7 @@ from .pretraining_data import (
     claim_pretraining_dir,
     generate_train_val,
     generate_training_scenes,
+    scenes_of_run,
 )
 
 __all__ = ["PretrainedRecipe", "build_pretrained", "export_pretrained",
@@ -270,10 +271,12 @@ _NO_OPTION = ("lr_gamma",)
 
 
 def replay_command(recipe: PretrainedRecipe, *, max_generate_seconds: float | None = None,
-                   max_train_seconds: float | None = None) -> str:
+                   max_train_seconds: float | None = None,
+                   scenes_from: str | os.PathLike | None = None) -> str:
     """The ``handmesh pretrain`` line that makes ``recipe`` again: one option per field that
-    differs from `PretrainedRecipe`'s default, files by name (no folder of this machine), plus
-    the time budgets. Recorded as ``command`` in the file, so its lineage reads as commands.
+    differs from `PretrainedRecipe`'s default, files and run folders by name (no folder of this
+    machine), plus the time budgets and ``--scenes-from``. Recorded as ``command`` in the file,
+    so its lineage reads as commands.
 
     Raises:
         ValueError: a field that differs from its default has no command-line option
@@ -298,6 +301,8 @@ def replay_command(recipe: PretrainedRecipe, *, max_generate_seconds: float | No
                     ("max_train_seconds", max_train_seconds)):
         if v is not None:
             words += [f"--{name.replace('_', '-')}", f"{v:g}"]
+    if scenes_from is not None:
+        words += ["--scenes-from", Path(scenes_from).name]
     return " ".join(words)
 
 
@@ -310,7 +315,8 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
                      max_generate_seconds: float | None = None,
                      max_train_seconds: float | None = None, install: bool = False,
                      export_every: float = 60.0, progress: bool = True, log=print,
-                     overwrite: bool = False) -> dict:
+                     overwrite: bool = False,
+                     scenes_from: str | os.PathLike | None = None) -> dict:
     """Make the pretrained MSMR-Net: generate the scenes, train, export (``handmesh pretrain``).
 
     Steps: ``out/data/train`` (``recipe.train_scenes``, seed ``data_seed``) and ``out/data/val``
@@ -342,6 +348,9 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
         log: one-line messages (``None``: silent).
         overwrite: write into an ``out`` holding files this command did not write
             (``claim_pretraining_dir``, before any scene; a link where it writes is refused).
+        scenes_from: another ``handmesh pretrain`` run's ``out`` whose scenes are read in place
+            instead of generated (``scenes_of_run``: the same seed, counts and render size), so
+            that a later stage of a chain (``init`` = that run's checkpoint) skips generation.
 
     Returns:
         dict with ``file`` (the int8 export), ``float16``, ``info`` (what the file records) and
@@ -351,11 +360,18 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     check_device(recipe.device, probe=True)  # a CUDA device asked for: before generating
     say = log or (lambda *_: None)
     out = claim_pretraining_dir(out, "pretrain", overwrite)
-    tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
-                                        recipe.data_seed, render_size=recipe.render_size,
-                                        workers=recipe.workers,
-                                        max_generate_seconds=max_generate_seconds,
-                                        progress=progress, log=log)
+    if scenes_from is None:
+        tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
+                                            recipe.data_seed, render_size=recipe.render_size,
+                                            workers=recipe.workers,
+                                            max_generate_seconds=max_generate_seconds,
+                                            progress=progress, log=log)
+    else:  # a later stage of a chain: the scenes of the run before, read in place
+        tr, val = scenes_of_run(scenes_from, recipe.train_scenes, recipe.val_scenes,
+                                recipe.data_seed, render_size=recipe.render_size)
+        t_gen = 0.0
+        say(f"[1/3] {tr['scenes']} training and {val['scenes']} validation scenes of "
+            f"{Path(scenes_from).name}, read in place")
 
     # torch only now: the generator's workers fork only from a process without torch
     import torch
@@ -365,7 +381,8 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
 
     config = recipe.train_config(tr["root"], val["root"], out / "train", progress)
     info = {"command": replay_command(recipe, max_generate_seconds=max_generate_seconds,
-                                      max_train_seconds=max_train_seconds),
+                                      max_train_seconds=max_train_seconds,
+                                      scenes_from=scenes_from),
             "recipe": asdict(recipe), "max_generate_seconds": max_generate_seconds,
             "max_train_seconds": max_train_seconds,
             "data": {"train_seed": recipe.data_seed, "train_scenes": tr["scenes"],
