@@ -39,7 +39,7 @@ from ..nn.pose_encoder import (
     export_pose_encoder,
     pose_loss,
 )
-from .pretraining_data import check_device, claim_pretraining_dir, crop_caches, scenes_of_run
+from .pretraining_data import check_device, claim_pretraining_dir, crop_caches
 
 __all__ = ["PosePretrainConfig", "evaluate_pose", "pretrain_pose_encoder",
            "build_pretrained_encoder"]
@@ -446,15 +446,10 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
     out = claim_pretraining_dir(out, "pretrain-encoder", overwrite)
     workers = config.workers or os.cpu_count() or 1
     t0 = time.perf_counter()
-    if scenes_from is None:
-        tr, val, t_gen = generate_train_val(
-            out / "data", config.train_scenes, config.val_scenes, config.data_seed,
-            render_size=config.render_size, workers=workers,
-            max_generate_seconds=max_generate_seconds, progress=progress, log=log)
-    else:  # a later stage of a chain: the scenes of the stage before, read in place
-        tr, val = scenes_of_run(scenes_from, config.train_scenes, config.val_scenes,
-                                config.data_seed, render_size=config.render_size)
-        t_gen = 0.0
+    tr, val, t_gen = generate_train_val(
+        out / "data", config.train_scenes, config.val_scenes, config.data_seed,
+        render_size=config.render_size, workers=workers, max_generate_seconds=max_generate_seconds,
+        progress=progress, log=log, scenes_from=scenes_from)
     caches = crop_caches(out, {"train": tr, "val": val}, scenes_from=scenes_from,
                          workers=max(0, workers - 1), progress=progress)
     t_crop = time.perf_counter() - t0 - t_gen

@@ -34,7 +34,6 @@ from .pretraining_data import (
     claim_pretraining_dir,
     generate_train_val,
     generate_training_scenes,
-    scenes_of_run,
 )
 
 __all__ = ["PretrainedRecipe", "build_pretrained", "export_pretrained",
@@ -360,18 +359,11 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     check_device(recipe.device, probe=True)  # a CUDA device asked for: before generating
     say = log or (lambda *_: None)
     out = claim_pretraining_dir(out, "pretrain", overwrite)
-    if scenes_from is None:
-        tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
-                                            recipe.data_seed, render_size=recipe.render_size,
-                                            workers=recipe.workers,
-                                            max_generate_seconds=max_generate_seconds,
-                                            progress=progress, log=log)
-    else:  # a later stage of a chain: the scenes of the run before, read in place
-        tr, val = scenes_of_run(scenes_from, recipe.train_scenes, recipe.val_scenes,
-                                recipe.data_seed, render_size=recipe.render_size)
-        t_gen = 0.0
-        say(f"[1/3] {tr['scenes']} training and {val['scenes']} validation scenes of "
-            f"{Path(scenes_from).name}, read in place")
+    tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
+                                        recipe.data_seed, render_size=recipe.render_size,
+                                        workers=recipe.workers,
+                                        max_generate_seconds=max_generate_seconds,
+                                        progress=progress, log=log, scenes_from=scenes_from)
 
     # torch only now: the generator's workers fork only from a process without torch
     import torch

@@ -120,18 +120,27 @@ def generate_training_scenes(root: str | os.PathLike, num: int, seed: int, *, re
 def generate_train_val(data: str | os.PathLike, train_scenes: int, val_scenes: int,
                        data_seed: int, *, render_size: int, workers: int = 0,
                        max_generate_seconds: float | None = None, progress: bool = True,
-                       log=print) -> tuple[dict, dict, float]:
+                       log=print, scenes_from: str | os.PathLike | None = None,
+                       ) -> tuple[dict, dict, float]:
     """The scenes of a pretraining run: ``data/val`` (seed ``data_seed + 1``) in full, then
     ``data/train`` (seed ``data_seed``) in ten time-bounded shards when a budget is given
     ([`generate_training_scenes`][handmesh_tutorial.apps.pretrain_network.generate_training_scenes]).
 
     Args:
         workers: generator processes (0: one per CPU).
+        scenes_from: another run's ``out``: its scenes are read in place instead (`scenes_of_run`,
+            ``--scenes-from``; nothing generated or written, 0 seconds).
 
     Returns:
         ``(train, val, seconds)``: the two results of ``generate_training_scenes`` and the time.
     """
     say = log or (lambda *_: None)
+    if scenes_from is not None:  # a later stage of a chain: the scenes of the run before
+        tr, val = scenes_of_run(scenes_from, train_scenes, val_scenes, data_seed,
+                                render_size=render_size)
+        say(f"[1/3] {tr['scenes']} training and {val['scenes']} validation scenes of "
+            f"{Path(scenes_from).name}, read in place")
+        return tr, val, 0.0
     data = Path(data)
     workers = workers or os.cpu_count() or 1
     t0 = time.perf_counter()
