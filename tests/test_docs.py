@@ -281,3 +281,36 @@ def test_the_scores_tool_writes_its_tables_between_the_markers_only(tmp_path):
                     + "<!-- /pretrained-scores -->\nbetween\n<!-- pretrained-scores summary -->\n"
                     + summary + "<!-- /pretrained-scores -->\nafter\n")
     assert tool.write_docs(result, tmp_path) == []  # the same result: nothing to change
+
+
+def test_the_score_tables_fill_only_their_markers_and_a_rerun_changes_nothing(tmp_path):
+    tool = _tool("pretrained_scores")
+
+    def row(pa, mpjpe):
+        return {"pa_mpjpe": pa, "mpjpe": mpjpe, "roughness_deg": 2.04, "flipped": 0.0013,
+                "per_scene": {"pa_mpjpe": [pa, pa]}}
+
+    def group(pa):
+        return {"file": row(pa, 13.4), "rest hand": row(10.0, 77.4), "mean hand": row(8.0, 77.9),
+                "intervals": {"file - mean hand": {"difference": -1.5, "low": -2.0,
+                                                   "high": -1.0}}}
+
+    result = {"per_kind": 2, "seed": 123, "kinds": {k: group(5.0) for k in tool.KINDS},
+              "all": group(5.5)}
+    table = tool.render_block(result, "table")
+    assert "| all | 2 | 5.50 | 10.00 | 8.00 | 0.55 | -1.50 (-2.00 to -1.00) | 13 / 77 | 2.0 | " \
+           "0.13 % |" in table
+    assert "0.55x the rest hand (10.00)" in tool.render_block(result, "summary")
+    page = ("intro\n<!-- pretrained-scores table -->\nold table\n<!-- /pretrained-scores -->\n"
+            "middle\n<!-- pretrained-scores summary -->\nold\n<!-- /pretrained-scores -->\nend\n")
+    for rel in tool.DOCS:
+        _write(tmp_path / rel, page if rel == "README.md" else "no markers here\n")
+    assert tool.write_docs(result, tmp_path) == ["README.md"]
+    text = (tmp_path / "README.md").read_text()
+    assert "old" not in text and text.startswith("intro\n") and "\nmiddle\n" in text
+    assert text.endswith("<!-- /pretrained-scores -->\nend\n") and table in text
+    assert tool.write_docs(result, tmp_path) == []
+    _write(tmp_path / "README.md",
+           "<!-- pretrained-scores graph -->\nx\n<!-- /pretrained-scores -->\n")
+    with pytest.raises(ValueError, match="'graph'"):
+        tool.write_docs(result, tmp_path)

@@ -503,3 +503,42 @@ def test_the_recorded_command_makes_the_same_recipe_again(monkeypatch, tmp_path)
     assert P.replay_command(P.PretrainedRecipe()) == "handmesh pretrain"
     with pytest.raises(ValueError, match="lr_gamma=0.5 has no option"):
         P.replay_command(P.PretrainedRecipe(lr_gamma=0.5))
+
+
+def _make_commands(target: str) -> list[list[str]]:
+    """The ``handmesh`` command lines that ``make -n TARGET`` prints, split into words."""
+    import shlex
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    if shutil.which("make") is None:
+        pytest.skip("make is not installed")
+    root = Path(__file__).resolve().parents[1]
+    dry = subprocess.run(["make", "-n", "--no-print-directory", target], cwd=root, check=True,
+                         capture_output=True, text=True).stdout.replace("\\\n", " ")
+    return [shlex.split(line)[1:] for line in dry.splitlines() if "bin/handmesh pretrain" in line]
+
+
+def test_make_pretrained_is_a_chain_from_random_weights_that_installs_its_last_stage():
+    from handmesh_tutorial.apps.cli import build_parser
+
+    parser = build_parser()
+    commands = _make_commands("pretrained")
+    stages = [parser.parse_args(words) for words in commands]
+    assert [s.command for s in stages] == ["pretrain-encoder"] * 2 + ["pretrain"] * 2
+    assert stages[0].init == "none", "the chain must start from random weights"
+    outs = []
+    for s in stages:
+        # every start and every scene set is an earlier stage's output, never a shipped file
+        for start in (s.init, getattr(s, "init_encoder", None), s.scenes_from):
+            if start not in (None, "none"):
+                assert any(start == o or start.startswith(o + "/") for o in outs), start
+        assert str(s.out) not in outs
+        outs.append(str(s.out))
+    assert [bool(s.install) for s in stages] == [False, False, False, True]
+    # the first stage is make pretrained-encoder's command, without installing
+    encoder = _make_commands("pretrained-encoder")
+    assert len(encoder) == 1 and "--install" in encoder[0]
+    i = encoder[0].index("--install")
+    assert encoder[0][:i] + encoder[0][i + 2:] == commands[0]

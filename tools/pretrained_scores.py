@@ -173,7 +173,7 @@ def render_block(result: dict, what: str) -> str:
     prev = "previous" in result["all"]
     head = ("| kind | scenes | shipped | rest hand | mean hand | shipped / rest | shipped - mean "
             "(95 %) |" + (" previous file | shipped - previous (95 %) |" if prev else "")
-            + " roughness (deg) | flipped faces |")
+            + " MPJPE shipped / rest (mm) | roughness (deg) | flipped faces |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for name, g in groups:
         f, r, m = g["file"], g["rest hand"], g["mean hand"]
@@ -184,13 +184,17 @@ def render_block(result: dict, what: str) -> str:
         if prev:
             cells += [f"{g['previous']['pa_mpjpe']:.2f}",
                       _interval(g["intervals"]["file - previous"])]
-        cells += [f"{f['roughness_deg']:.1f}", f"{100 * f['flipped']:.2f} %"]
+        cells += [f"{f['mpjpe']:.0f} / {r['mpjpe']:.0f}", f"{f['roughness_deg']:.1f}",
+                  f"{100 * f['flipped']:.2f} %"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
 def write_docs(result: dict, root: Path = ROOT) -> list[str]:
-    """Replace every marked block in `DOCS`; returns the files changed."""
+    """Replace every marked block in `DOCS` (each file written atomically); returns the files
+    changed."""
+    from handmesh_tutorial._io import atomic_write_text
+
     changed = []
     for rel in DOCS:
         path = root / rel
@@ -198,7 +202,7 @@ def write_docs(result: dict, root: Path = ROOT) -> list[str]:
         new = MARKER.sub(lambda m: m.group(1) + render_block(result, m.group("what"))
                          + m.group(4), text)
         if new != text:
-            path.write_text(new)
+            atomic_write_text(path, new)
             changed.append(rel)
     return changed
 

@@ -1,5 +1,6 @@
-"""The recipe and the one command that make the shipped pretrained MSMR-Net (``handmesh
-pretrain``, ``make pretrained``): generate mixed-kind INTER-SH scenes, train, export.
+"""The network's recipe of the shipped pretrained MSMR-Net (``handmesh pretrain``; ``make
+pretrained`` runs it twice, frozen then fine-tuned, after the encoder's two stages): generate
+mixed-kind INTER-SH scenes, train, export.
 
 * [`PretrainedRecipe`][handmesh_tutorial.apps.pretrain_network.PretrainedRecipe] is the recipe, and
   [`build_pretrained`][handmesh_tutorial.apps.pretrain_network.build_pretrained] runs it.
