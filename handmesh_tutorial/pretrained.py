@@ -3,7 +3,8 @@
 * [`pretrained`][handmesh_tutorial.pretrained.pretrained] loads the shipped network (eval mode);
   ``handmesh evaluate --checkpoint pretrained`` and ``load_checkpoint("pretrained")`` read the same
   file (``torch.load(weights_only=True)``);
-  [`pretrained_info`][handmesh_tutorial.pretrained.pretrained_info] says what made it.
+  [`pretrained_info`][handmesh_tutorial.pretrained.pretrained_info] says what made it, and
+  [`lineage`][handmesh_tutorial.pretrained.lineage] lists its training stages, oldest first.
 * [`pretrained_encoder`][handmesh_tutorial.nn.pose_encoder.pretrained_encoder] and its info: the
   hand encoder that training runs start from (``TrainConfig.init_encoder="pretrained"``).
 
@@ -25,7 +26,7 @@ from .nn.pose_encoder import (  # noqa: F401 - ENCODER_FILE: not public, importa
     pretrained_encoder_path,
 )
 
-__all__ = ["pretrained", "pretrained_path", "pretrained_info", "pretrained_encoder",
+__all__ = ["pretrained", "pretrained_path", "pretrained_info", "lineage", "pretrained_encoder",
            "pretrained_encoder_info", "pretrained_encoder_path"]
 
 
@@ -72,6 +73,78 @@ def pretrained_info() -> dict:
                                    "step", "template_hash", "torch_version")}
     info["library_version"] = ck.get("library_version") or shipped_version(path)
     return info
+
+
+def lineage(made: dict | None = None) -> list[dict]:
+    """Every training stage that made a network file, oldest first: the stages of the encoder
+    it started from (``--init-encoder``), then its own runs (``--init``), as the file records
+    them.
+
+    Args:
+        made: a network file's record, ``pretrained_info()["pretrained"]`` or a checkpoint's
+            ``"pretrained"``; the shipped file's when None.
+
+    Returns:
+        One dict per stage: ``part`` (``"encoder"`` or ``"network"``), ``command`` (the command
+        line that replays it, None when not recorded), ``start`` (``"random weights"``, ``"the
+        stage before"``, ``"the encoder of the stage before"`` or ``"unknown"``),
+        ``train_seed``, ``val_seed``, ``train_scenes``, ``epochs`` (network) or ``steps``
+        (encoder), ``train_seconds`` (None when not recorded), ``hardware``, ``date``.
+
+    Raises:
+        ValueError: ``made`` is not a training record (no ``data``).
+    """
+    made = pretrained_info()["pretrained"] if made is None else made
+    if not isinstance(made, dict) or "data" not in made:
+        raise ValueError("lineage() takes a network file's 'pretrained' record (with 'data'), "
+                         f"got {type(made).__name__} with keys {sorted(made or {})[:8]}")
+    return _network_stages(made, depth=0)
+
+
+def _stage(node: dict, part: str, start: str) -> dict:
+    data, recipe = node.get("data") or {}, node.get("recipe") or {}
+    row = {"part": part, "command": node.get("command"), "start": start,
+           "train_seed": data.get("train_seed", recipe.get("data_seed")),
+           "val_seed": data.get("val_seed"), "train_scenes": data.get("train_scenes"),
+           "train_seconds": (node.get("seconds") or {}).get("train"),
+           "hardware": node.get("hardware"), "date": node.get("date")}
+    if part == "network":
+        row["epochs"] = node.get("epochs_done")
+    else:
+        row["steps"] = node.get("steps") or node.get("stop_after") or recipe.get("max_steps")
+    return row
+
+
+def _network_stages(node: dict, depth: int) -> list[dict]:
+    if depth > 64:  # a recorded chain is never a cycle; bounded all the same
+        raise ValueError("the recorded chain of runs is deeper than 64 stages")
+    parent, encoder = node.get("init_from"), node.get("init_encoder_from")
+    stages: list[dict] = []
+    if isinstance(parent, dict):
+        stages += _network_stages(parent, depth + 1)
+    if isinstance(encoder, dict) and isinstance(encoder.get("made_by"), dict):
+        stages += _encoder_stages(encoder["made_by"], depth + 1)
+    if isinstance(parent, dict):
+        start = "the stage before"
+    elif stages:
+        start = "the encoder of the stage before"
+    else:
+        init = (node.get("recipe") or {}).get("init")
+        start = "random weights" if init is None and parent is None else "unknown"
+    return stages + [_stage(node, "network", start)]
+
+
+def _encoder_stages(node: dict, depth: int) -> list[dict]:
+    if depth > 64:
+        raise ValueError("the recorded chain of runs is deeper than 64 stages")
+    parent, init = node.get("init_from"), (node.get("recipe") or {}).get("init")
+    if isinstance(parent, dict) and isinstance(parent.get("made_by"), dict):
+        # the encoder started from a network's encoder: that network's stages come first
+        return _network_stages(parent["made_by"], depth + 1) + [
+            _stage(node, "encoder", "the encoder of the stage before")]
+    if isinstance(parent, dict):
+        return _encoder_stages(parent, depth + 1) + [_stage(node, "encoder", "the stage before")]
+    return [_stage(node, "encoder", "random weights" if init is None else "unknown")]
 
 
 def __getattr__(name: str):

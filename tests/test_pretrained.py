@@ -542,3 +542,39 @@ def test_make_pretrained_is_a_chain_from_random_weights_that_installs_its_last_s
     assert len(encoder) == 1 and "--install" in encoder[0]
     i = encoder[0].index("--install")
     assert encoder[0][:i] + encoder[0][i + 2:] == commands[0]
+
+
+def _record(seed, **extra):
+    return {"data": {"train_seed": seed, "val_seed": seed + 1, "train_scenes": 10 * seed},
+            "recipe": {"init": extra.pop("init", None)}, "command": f"run {seed}", **extra}
+
+
+def test_lineage_walks_encoder_stages_then_network_stages_oldest_first():
+    enc1 = _record(1)
+    enc2 = _record(2, init="stage1.pt", init_from=enc1, steps=500)
+    frozen = _record(3, init_encoder_from={"file": {"name": "e.pt"}, "made_by": enc2},
+                     epochs_done=12, seconds={"train": 60.0})
+    tuned = _record(4, init="frozen.pt", init_from=frozen, epochs_done=6)
+    stages = L.lineage(tuned)
+    assert [(s["part"], s["train_seed"]) for s in stages] == [
+        ("encoder", 1), ("encoder", 2), ("network", 3), ("network", 4)]
+    assert [s["start"] for s in stages] == [
+        "random weights", "the stage before", "the encoder of the stage before", "the stage before"]
+    assert stages[1]["steps"] == 500 and stages[2]["epochs"] == 12
+    assert stages[2]["train_seconds"] == 60.0 and stages[3]["train_seconds"] is None
+    assert [s["command"] for s in stages] == ["run 1", "run 2", "run 3", "run 4"]
+
+
+def test_lineage_of_an_encoder_made_from_a_network_and_of_an_unrecorded_start():
+    net = _record(7)
+    enc = _record(8, init="network", init_from={"weights": "the encoder", "made_by": net})
+    stages = L.lineage(_record(9, init_encoder_from={"made_by": enc}))
+    assert [(s["part"], s["start"]) for s in stages] == [
+        ("network", "random weights"), ("encoder", "the encoder of the stage before"),
+        ("network", "the encoder of the stage before")]
+    # a run started from a checkpoint that recorded nothing: its start is unknown, not random
+    assert L.lineage(_record(5, init="checkpoint_last.pt", init_from="checkpoint_last.pt"))[0][
+        "start"] == "unknown"
+    with pytest.raises(ValueError, match="'pretrained' record"):
+        L.lineage({"config": {}})
+

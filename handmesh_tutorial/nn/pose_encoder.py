@@ -5,9 +5,9 @@ cannot be downloaded here, and an encoder trained from random weights on a CPU i
 the data's mean hand and nothing per image (docs page "Why the paper starts from pretrained
 weights"). So the package ships an encoder pretrained on INTER-SH scenes with a **decoder-neutral**
 objective: 2D keypoints (heat-maps, soft-argmax) and root-relative 3D joints from the pooled
-features; no mesh decoder takes part in it. (The shipped file continues weights that began as the
-shipped MSMR-Net's encoder; that page shows notebook 10's verdict is the same from an encoder
-trained from random weights.)
+features; no mesh decoder takes part in it. (The demo's file continues weights that began as the
+encoder of the MSMR-Net shipped from 0.2.0 to 0.5.0; that page shows notebook 10's verdict is the
+same from an encoder trained from random weights.)
 
 * [`PoseNet`][handmesh_tutorial.nn.pose_encoder.PoseNet]: the network that is pretrained, a
   [`KeypointEncoder`][handmesh_tutorial.nn.keypoints.KeypointEncoder] (the ``encoder`` MSMR-Net
@@ -258,12 +258,13 @@ def encoder_lineage(meta: dict) -> dict:
     Returns:
         ``{"runs", "origin", "decoder_neutral", "sentence"}``: ``runs`` one dict per training run,
         oldest first (``data_seed``, ``train_scenes``, ``steps`` when recorded, ``lr``);
-        ``origin`` ``"random weights"``, ``"the shipped MSMR-Net's encoder"`` (a network trained
+        ``origin`` ``"random weights"``, ``"an MSMR-Net's encoder"`` (a network trained
         with the multi-path decoder with attention) or ``"unknown"``; ``decoder_neutral`` True
         only when the chain starts from random weights, so that no mesh decoder ever trained
         these weights; ``sentence`` the same in words.
     """
     runs, node, origin = [], (meta or {}).get("pretrained") or {}, "unknown"
+    network = None  # the network whose encoder began the chain, when recorded
     for _ in range(32):  # a recorded chain, never a cycle; bounded all the same
         recipe = node.get("recipe") or node.get("config") or {}
         data = node.get("data") or {}
@@ -276,7 +277,8 @@ def encoder_lineage(meta: dict) -> dict:
             origin = "random weights"
             break
         if init == "network" or (isinstance(parent, dict) and "made_by" in parent):
-            origin = "the shipped MSMR-Net's encoder"
+            origin = "an MSMR-Net's encoder"
+            network = (parent or {}).get("made_by") if isinstance(parent, dict) else None
             break
         if not isinstance(parent, dict):
             break
@@ -285,10 +287,20 @@ def encoder_lineage(meta: dict) -> dict:
     neutral = origin == "random weights"
     sentence = (f"{len(runs)} run(s) of keypoint and 3D-joint training (no mesh decoder), the "
                 f"first from {origin}"
+                + _network_words(network)
                 + ("" if neutral or origin == "unknown" else
                    ", which was trained end to end with the multi-path decoder with attention")
                 + "; scene seeds " + ", ".join(str(r["data_seed"]) for r in runs))
     return {"runs": runs, "origin": origin, "decoder_neutral": neutral, "sentence": sentence}
+
+
+def _network_words(made: dict | None) -> str:
+    """`` (the network whose last run trained on scene seed S, made DATE)`` or nothing."""
+    if not isinstance(made, dict):
+        return ""
+    seed = (made.get("data") or {}).get("train_seed")
+    return (f" (the network whose last run trained on scene seed {seed}, made "
+            f"{made.get('date', 'on an unrecorded date')})" if seed is not None else "")
 
 
 def load_pretrained_encoder(model: nn.Module, source: str | os.PathLike = "pretrained") -> dict:
