@@ -84,7 +84,7 @@ pretrained-encoder: setup
 # 2. 12,000 more encoder steps on the same scenes, a new cosine schedule;
 # 3. the network's decoder on the frozen encoder: 20,000 scenes of seed 1000, each crop encoded once;
 # 4. encoder and decoder fine-tuned on augmented crops of the same scenes; int8 export, installed.
-# About 5.5 h on a 2-core CPU (the page gives each stage's time).
+# About 6.5 h on a 2-core CPU, 1.5 h of it generating scenes (the page gives each stage's time).
 pretrained: setup
 	$(VENV)/bin/handmesh pretrain-encoder --out runs/pretrained_encoder $(ENCODER_STAGE1)
 	$(VENV)/bin/handmesh pretrain-encoder --out runs/pretrained_encoder_stage2 \

@@ -17,7 +17,7 @@ from pathlib import Path
 __all__ = ["ASSET_DIR", "PRETRAINED_FILE", "SHIPPED_ASSETS", "__version__", "shipped_file",
            "shipped_version"]
 
-__version__ = "0.5.0"
+__version__ = "0.6.0"
 
 SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
     # file in handmesh_tutorial/assets/: (sha256 of its bytes, the version that first shipped them)
@@ -32,7 +32,7 @@ SHIPPED_ASSETS: dict[str, tuple[str, str]] = {
     "makehuman_hand.npz": (
         "7ec92e1e3c99b0d6cedef1209e2cd6ade09b5e4ce2abb04c17c1713b08e1a739", "0.2.0"),
     "msmr_net_pretrained.pt": (
-        "98e414ff0ffde8ca72e257481dbcbe962acecd2fc9fdfea4dc21b85181ca9251", "0.2.0"),
+        "76da223e26b8df8c7ec4ba08873cf2e0ce12a130dd98a8187ad8922a5ec9f430", "0.6.0"),
 }
 """The shipped files, by hash: file name -> (sha256, the library version that shipped them).
 

@@ -85,11 +85,13 @@ def lineage(made: dict | None = None) -> list[dict]:
             ``"pretrained"``; the shipped file's when None.
 
     Returns:
-        One dict per stage: ``part`` (``"encoder"`` or ``"network"``), ``command`` (the command
-        line that replays it, None when not recorded), ``start`` (``"random weights"``, ``"the
-        stage before"``, ``"the encoder of the stage before"`` or ``"unknown"``),
-        ``train_seed``, ``val_seed``, ``train_scenes``, ``epochs`` (network) or ``steps``
-        (encoder), ``train_seconds`` (None when not recorded), ``hardware``, ``date``.
+        One dict per stage: ``part`` (``"encoder"`` or ``"network"``), ``command`` (as recorded:
+        a network's full command line; an encoder's sub-command only, its options being
+        ``recipe``'s fields; None when not recorded), ``recipe`` (every setting), ``start``
+        (``"random weights"``, ``"the stage before"``, ``"the encoder of the stage before"`` or
+        ``"unknown"``), ``train_seed``, ``val_seed``, ``train_scenes``, ``epochs`` (network) or
+        ``steps`` (encoder), ``train_seconds`` (None when not recorded), ``hardware``,
+        ``commit`` (the code that ran it), ``date``.
 
     Raises:
         ValueError: ``made`` is not a training record (no ``data``).
@@ -103,11 +105,12 @@ def lineage(made: dict | None = None) -> list[dict]:
 
 def _stage(node: dict, part: str, start: str) -> dict:
     data, recipe = node.get("data") or {}, node.get("recipe") or {}
-    row = {"part": part, "command": node.get("command"), "start": start,
+    row = {"part": part, "command": node.get("command"), "recipe": recipe, "start": start,
            "train_seed": data.get("train_seed", recipe.get("data_seed")),
            "val_seed": data.get("val_seed"), "train_scenes": data.get("train_scenes"),
            "train_seconds": (node.get("seconds") or {}).get("train"),
-           "hardware": node.get("hardware"), "date": node.get("date")}
+           "hardware": node.get("hardware"), "commit": node.get("commit"),
+           "date": node.get("date")}
     if part == "network":
         row["epochs"] = node.get("epochs_done")
     else:

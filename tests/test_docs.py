@@ -300,14 +300,20 @@ def test_the_score_tables_fill_only_their_markers_and_a_rerun_changes_nothing(tm
     table = tool.render_block(result, "table")
     assert "| all | 2 | 5.50 | 10.00 | 8.00 | 0.55 | -1.50 (-2.00 to -1.00) | 13 / 77 | 2.0 | " \
            "0.13 % |" in table
-    assert "0.55x the rest hand (10.00)" in tool.render_block(result, "summary")
-    page = ("intro\n<!-- pretrained-scores table -->\nold table\n<!-- /pretrained-scores -->\n"
-            "middle\n<!-- pretrained-scores summary -->\nold\n<!-- /pretrained-scores -->\nend\n")
+    summary = tool.render_block(result, "summary")
+    assert "0.55x the rest hand (10.00 mm) and 1.50 mm (1.00 to 2.00) below the mean" in summary
+    result["demo"] = {"file": row(5.0, 13.0), "demo": row(4.9, 12.0),
+                      "file - demo": {"difference": 0.1, "low": -0.2, "high": 0.4}}
+    assert "demo's 2 held-out scenes 5.00 mm against the demo network's 4.90 mm, paired " \
+           "difference +0.10 (-0.20 to +0.40), not told apart." in tool.render_block(result,
+                                                                                 "summary")
+    page = ("intro\n<!-- pretrained-scores table -->\nstale table\n<!-- /pretrained-scores -->\n"
+            "middle\n<!-- pretrained-scores summary -->\nstale\n<!-- /pretrained-scores -->\nend\n")
     for rel in tool.DOCS:
         _write(tmp_path / rel, page if rel == "README.md" else "no markers here\n")
     assert tool.write_docs(result, tmp_path) == ["README.md"]
     text = (tmp_path / "README.md").read_text()
-    assert "old" not in text and text.startswith("intro\n") and "\nmiddle\n" in text
+    assert "stale" not in text and text.startswith("intro\n") and "\nmiddle\n" in text
     assert text.endswith("<!-- /pretrained-scores -->\nend\n") and table in text
     assert tool.write_docs(result, tmp_path) == []
     _write(tmp_path / "README.md",

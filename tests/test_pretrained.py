@@ -1,6 +1,7 @@
 """The pretrained model: int8 storage, export, loading by name, the recipe, time-bounded
 generation, and the shipped file itself."""
 
+import json
 import math
 import re
 
@@ -246,6 +247,15 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     again = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                progress=False, log=None)
     assert again["file"].exists() and calls[-1] == 3
+    # with its files still there (e.g. rerun to --install): exported again, the record complete
+    n = len(calls)
+    kept = P.build_pretrained(tmp_path / "one", P.PretrainedRecipe(**{**small, "epochs": 3}),
+                              install=True, progress=False, log=None)
+    assert len(calls) == n + 2 and kept["info"]["epochs_done"] == 3
+    # a resumed run records the seconds of every invocation, not only its own
+    clock = tmp_path / "one" / "train" / "train_seconds.json"
+    assert json.loads(clock.read_text())["epoch"] == 3
+    assert again["info"]["seconds"]["train"] >= made["seconds"]["train"] > 0
     short = P.build_pretrained(tmp_path / "short", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                max_train_seconds=1e-6, progress=False, log=None)
     assert short["info"]["epochs_planned"] == 1 and short["info"]["epochs_done"] == 1
@@ -254,7 +264,9 @@ def test_build_pretrained_end_to_end_installs_and_chains(tmp_path, monkeypatch):
     resumed = P.build_pretrained(tmp_path / "short", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                  max_train_seconds=1e6, progress=False, log=None)
     assert resumed["info"]["epochs_planned"] == 3 and resumed["info"]["epochs_done"] == 3
-    lrs = [row["lr"] for row in T.load_checkpoint(resumed["file"])[1]["history"]]
+    rows = T.load_checkpoint(resumed["file"])[1]["history"]
+    assert resumed["info"]["seconds"]["train"] >= sum(r["seconds"] for r in rows)
+    lrs = [row["lr"] for row in rows]
     assert lrs == pytest.approx([1e-3, 3e-4, 9e-5])
     roomy = P.build_pretrained(tmp_path / "roomy", P.PretrainedRecipe(**{**small, "epochs": 3}),
                                max_train_seconds=1e6, progress=False, log=None)
@@ -578,3 +590,11 @@ def test_lineage_of_an_encoder_made_from_a_network_and_of_an_unrecorded_start():
     with pytest.raises(ValueError, match="'pretrained' record"):
         L.lineage({"config": {}})
 
+
+def test_the_shipped_network_replays_from_random_weights_with_recorded_commands():
+    stages = L.lineage()
+    assert stages[0]["start"] == "random weights"
+    assert all(s["start"] != "unknown" for s in stages)
+    assert all(s["command"] and "--init pretrained" not in s["command"] for s in stages), \
+        "every stage must record the command that replays it, never from a shipped file"
+    assert all(s["train_seed"] is not None and s["train_scenes"] for s in stages)

@@ -5,7 +5,7 @@ Usage::
 
     PYOPENGL_PLATFORM=egl python tools/pretrained_scores.py --out runs/scores [--seed N|random]
         [--per-kind 100] [--checkpoint pretrained] [--previous FILE|git|none]
-        [--demo runs/demo] [--train-data ROOT] [--write-docs]
+        [--demo runs/demo] [--train-data ROOT] [--write-docs] [--from-scores OUT/scores.json]
 
 What it does, in order:
 
@@ -45,6 +45,13 @@ MARKER = re.compile(r"(<!-- pretrained-scores (?P<what>[a-z-]+) -->\n)(?P<body>.
 
 def _interval(d: dict) -> str:
     return f"{d['difference']:+.2f} ({d['low']:+.2f} to {d['high']:+.2f})"
+
+
+def _than(d: dict) -> str:
+    """``"2.46 mm (2.17 to 2.76) below"`` for a paired difference, or ``above``."""
+    if d["difference"] < 0:
+        return f"{-d['difference']:.2f} mm ({-d['high']:.2f} to {-d['low']:.2f}) below"
+    return f"{d['difference']:.2f} mm ({d['low']:.2f} to {d['high']:.2f}) above"
 
 
 def _previous_file(out: Path) -> Path | None:
@@ -160,14 +167,18 @@ def render_block(result: dict, what: str) -> str:
         ratio = a["file"]["pa_mpjpe"] / a["rest hand"]["pa_mpjpe"]
         text = (f"On {3 * result['per_kind']} fresh scenes (seed {result['seed']}, never used "
                 f"for training) it scores PA-MPJPE {a['file']['pa_mpjpe']:.2f} mm, "
-                f"{ratio:.2f}x the rest hand ({a['rest hand']['pa_mpjpe']:.2f}) and "
-                f"{_interval(a['intervals']['file - mean hand'])} mm against the mean training "
-                f"hand ({a['mean hand']['pa_mpjpe']:.2f})")
+                f"{ratio:.2f}x the rest hand ({a['rest hand']['pa_mpjpe']:.2f} mm) and "
+                f"{_than(a['intervals']['file - mean hand'])} the mean training hand "
+                f"({a['mean hand']['pa_mpjpe']:.2f} mm)")
         if "demo" in result:
-            text += (f"; on the demo's held-out scenes {result['demo']['file']['pa_mpjpe']:.2f} "
-                     f"mm against the demo network's {result['demo']['demo']['pa_mpjpe']:.2f} "
-                     f"(paired {_interval(result['demo']['file - demo'])})")
-        return text + ".\n"
+            d = result["demo"]
+            text += (f"; on the demo's {len(d['file']['per_scene']['pa_mpjpe'])} held-out "
+                     f"scenes {d['file']['pa_mpjpe']:.2f} mm "
+                     f"against the demo network's {d['demo']['pa_mpjpe']:.2f} mm, paired "
+                     f"difference {_interval(d['file - demo'])}"
+                     + (", not told apart" if d["file - demo"]["low"] <= 0
+                        <= d["file - demo"]["high"] else ""))
+        return text + ". Intervals: paired, 95 %.\n"
     if what != "table":
         raise ValueError(f"unknown block {what!r}: 'table' or 'summary'")
     prev = "previous" in result["all"]
@@ -221,7 +232,15 @@ def main(argv=None) -> int:
     p.add_argument("--mean-scenes", type=int, default=600)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--write-docs", action="store_true")
+    p.add_argument("--from-scores", type=Path, metavar="JSON",
+                   help="no scoring: render (and with --write-docs write) an earlier scores.json")
     a = p.parse_args(argv)
+    if a.from_scores is not None:
+        result = json.loads(a.from_scores.read_text())
+        print(render_block(result, "table") + "\n" + render_block(result, "summary"))
+        if a.write_docs:
+            print("rewrote:", ", ".join(write_docs(result)) or "nothing (no markers)")
+        return 0
     seed = secrets.randbelow(2**31 - 10) + 10_000 if a.seed == "random" else int(a.seed)
     a.out.mkdir(parents=True, exist_ok=True)
     previous = {"git": None, "none": None}.get(a.previous, a.previous)

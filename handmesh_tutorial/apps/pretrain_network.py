@@ -17,17 +17,17 @@ pretrained model".
 from __future__ import annotations
 
 import datetime
+import json
 import math
 import os
 import platform
-import shutil
 import subprocess
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from .. import _version
-from .._io import file_identity
+from .._io import atomic_write_bytes, file_identity, write_json
 from .._version import PRETRAINED_FILE, __version__
 from ..budget import check_image_size
 from .pretraining_data import (
@@ -171,6 +171,22 @@ def _resumed_plan(saved: dict, history: list, epochs: int,
     if int(saved["epochs"]) > 1 or epochs == 1:
         return int(saved["epochs"]), int(saved["lr_step"])
     return _plan(epochs, float(history[0]["seconds"]), max_train_seconds)
+
+
+def _prior_train_seconds(clock: Path, last: Path) -> float:
+    """Training seconds spent before this invocation, so that a resumed run records them all:
+    ``clock``'s (written after each epoch) plus the epochs the checkpoint ``last`` holds beyond
+    it; without ``clock`` (a run of before 0.6.0) the checkpoint's per-epoch seconds."""
+    from ..train.checkpoints import _read_checkpoint
+
+    if not last.exists():
+        return 0.0
+    history = _read_checkpoint(last).get("history") or []
+    done = {"epoch": 0, "seconds": 0.0}
+    if clock.exists():
+        done = json.loads(clock.read_text())
+    return float(done["seconds"]) + sum(float(r.get("seconds", 0.0)) for r in history
+                                        if int(r["epoch"]) > int(done["epoch"]))
 
 
 def _plan(epochs: int, per_epoch: float, max_train_seconds: float) -> tuple[int, int]:
@@ -402,12 +418,14 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
             info["recipe"]["init_encoder"] = source.name
     files = {"file": out / PRETRAINED_FILE, "float16": out / "msmr_net_float16.pt"}
     plan = {"config": config}  # the run's config; its epochs may be fitted to the time budget
-    t_train = time.perf_counter()
     last = out / "train" / "checkpoint_last.pt"
+    clock = out / "train" / "train_seconds.json"  # the seconds of earlier invocations
+    prior = _prior_train_seconds(clock, last)
+    t_train = time.perf_counter()
     exported = [-math.inf]  # when the files were last written
 
     def export(epoch: int) -> None:
-        info["seconds"]["train"] = round(time.perf_counter() - t_train, 1)
+        info["seconds"]["train"] = round(prior + time.perf_counter() - t_train, 1)
         info["epochs_done"] = int(epoch)
         info["hardware"] = _hardware(config.device if config.device != "auto" else
                                      ("cuda" if torch.cuda.is_available() else "cpu"))
@@ -417,6 +435,7 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
 
     def after_epoch(row):
         spent = time.perf_counter() - t_train
+        write_json(clock, {"epoch": int(row["epoch"]), "seconds": round(prior + spent, 1)})
         final = row["epoch"] >= plan["config"].epochs
         stop = (max_train_seconds is not None and not final
                 and spent * (1 + 1 / row["epoch"]) > max_train_seconds)
@@ -457,13 +476,13 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     except _OutOfTime:
         say(f"      stopped after epoch {info['epochs_done']} of {plan['config'].epochs}: the "
             f"next would end past the {max_train_seconds:.0f} s budget")
-    if not files["file"].exists():  # a finished run resumed: nothing trained, export it now
+    if "epochs_done" not in info:  # a finished run resumed: nothing trained, export it now
         export(int(_read_checkpoint(last)["epoch"]))
     say(f"[3/3] exported {files['file']} ({files['file'].stat().st_size / 1e6:.1f} MB, int8) and "
         f"{files['float16'].name}")
     if install:
         assets = _version.ASSET_DIR
         assets.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(files["file"], assets / PRETRAINED_FILE)
+        atomic_write_bytes(assets / PRETRAINED_FILE, files["file"].read_bytes(), True)
         say(f"      installed as {assets / PRETRAINED_FILE}")
     return {**files, "info": info}
