@@ -5,7 +5,7 @@ thread, for the shipped ``msmr_net_pretrained.pt`` and for the previous version 
 git history (the newest committed version whose bytes differ from the file now in the package),
 or for ``--previous FILE``. Round-robin repeats, the fastest of each is printed with the ratio
 new / previous (below 1: the new file is cheaper). Also prints each file's parameters, its
-storage and what it was made from.
+storage and its training stages (``hmt.pretrained.lineage``).
 
 Run: ``python benchmarks/pretrained_speed.py [--previous FILE] [--repeats 7] [--threads 1]``.
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from handmesh_tutorial.pretrained import pretrained_path
+from handmesh_tutorial.pretrained import lineage, pretrained_path
 from handmesh_tutorial.train import load_checkpoint
 
 ASSET = "handmesh_tutorial/assets/msmr_net_pretrained.pt"
@@ -43,6 +43,16 @@ def previous_file(current: Path, out: Path) -> tuple[Path, str] | None:
     except (OSError, subprocess.CalledProcessError):
         return None
     return None
+
+
+def _stages(made: dict | None) -> str:
+    """What made a file, in a few words: its training stages and where the first started."""
+    if not made:
+        return "(no training record)"
+    stages = lineage(made)
+    parts = sorted({s["part"] for s in stages})
+    return (f"{len(stages)} training stage(s) ({', '.join(parts)}), the first from "
+            f"{stages[0]['start']}")
 
 
 def time_forward(net: torch.nn.Module, size: int, repeats: int) -> list[float]:
@@ -80,8 +90,7 @@ def main() -> None:
             net, ck = load_checkpoint(path)
             nets[name] = (net.eval(), int(ck["config"]["image_size"]))
             params = sum(p.numel() for p in net.parameters())
-            made = (ck.get("pretrained") or {}).get("init_encoder_from", {}).get("lineage") \
-                or "(no encoder lineage recorded)"
+            made = _stages(ck.get("pretrained"))
             print(f"{name:9s} {where}: {params / 1e6:.2f} M parameters, "
                   f"{ck.get('weights', 'float32')} storage, {nets[name][1]}-px input; {made}")
         best = {k: float("inf") for k in nets}
