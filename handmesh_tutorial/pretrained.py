@@ -138,16 +138,15 @@ def _network_stages(node: dict, depth: int) -> list[dict]:
 
 
 def _encoder_stages(node: dict, depth: int) -> list[dict]:
-    if depth > 64:
-        raise ValueError("the recorded chain of runs is deeper than 64 stages")
-    parent, init = node.get("init_from"), (node.get("recipe") or {}).get("init")
-    if isinstance(parent, dict) and isinstance(parent.get("made_by"), dict):
-        # the encoder started from a network's encoder: that network's stages come first
-        return _network_stages(parent["made_by"], depth + 1) + [
-            _stage(node, "encoder", "the encoder of the stage before")]
-    if isinstance(parent, dict):
-        return _encoder_stages(parent, depth + 1) + [_stage(node, "encoder", "the stage before")]
-    return [_stage(node, "encoder", "random weights" if init is None else "unknown")]
+    from .nn.pose_encoder import _encoder_runs
+
+    nodes, origin, network = _encoder_runs(node)
+    first = {"random weights": "random weights"}.get(origin, "unknown")
+    before: list[dict] = []
+    if isinstance(network, dict):  # began as a network's encoder: its stages come first
+        before, first = _network_stages(network, depth + 1), "the encoder of the stage before"
+    return before + [_stage(n, "encoder", first if i == 0 else "the stage before")
+                     for i, n in enumerate(nodes)]
 
 
 def __getattr__(name: str):

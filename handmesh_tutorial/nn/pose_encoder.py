@@ -5,8 +5,8 @@ cannot be downloaded here, and an encoder trained from random weights on a CPU i
 the data's mean hand and nothing per image (docs page "Why the paper starts from pretrained
 weights"). So the package ships an encoder pretrained on INTER-SH scenes with a **decoder-neutral**
 objective: 2D keypoints (heat-maps, soft-argmax) and root-relative 3D joints from the pooled
-features; no mesh decoder takes part in it. (The demo's file continues weights that began as the
-encoder of the MSMR-Net shipped from 0.2.0 to 0.5.0; that page shows notebook 10's verdict is the
+features; no mesh decoder takes part in it. (The demo's file continues weights that began as an
+earlier MSMR-Net's encoder, which its lineage names; that page shows notebook 10's verdict is the
 same from an encoder trained from random weights.)
 
 * [`PoseNet`][handmesh_tutorial.nn.pose_encoder.PoseNet]: the network that is pretrained, a
@@ -263,27 +263,14 @@ def encoder_lineage(meta: dict) -> dict:
         only when the chain starts from random weights, so that no mesh decoder ever trained
         these weights; ``sentence`` the same in words.
     """
-    runs, node, origin = [], (meta or {}).get("pretrained") or {}, "unknown"
-    network = None  # the network whose encoder began the chain, when recorded
-    for _ in range(32):  # a recorded chain, never a cycle; bounded all the same
+    nodes, origin, network = _encoder_runs((meta or {}).get("pretrained") or {})
+    runs = []
+    for node in nodes:
         recipe = node.get("recipe") or node.get("config") or {}
         data = node.get("data") or {}
         runs.append({"data_seed": data.get("train_seed", recipe.get("data_seed")),
                      "train_scenes": data.get("train_scenes"), "steps": node.get("steps"),
                      "lr": recipe.get("lr")})
-        init = recipe.get("init", "unknown")
-        parent = node.get("init_from")
-        if init is None:
-            origin = "random weights"
-            break
-        if init == "network" or (isinstance(parent, dict) and "made_by" in parent):
-            origin = "an MSMR-Net's encoder"
-            network = (parent or {}).get("made_by") if isinstance(parent, dict) else None
-            break
-        if not isinstance(parent, dict):
-            break
-        node = parent
-    runs.reverse()
     neutral = origin == "random weights"
     sentence = (f"{len(runs)} run(s) of keypoint and 3D-joint training (no mesh decoder), the "
                 f"first from {origin}"
@@ -292,6 +279,29 @@ def encoder_lineage(meta: dict) -> dict:
                    ", which was trained end to end with the multi-path decoder with attention")
                 + "; scene seeds " + ", ".join(str(r["data_seed"]) for r in runs))
     return {"runs": runs, "origin": origin, "decoder_neutral": neutral, "sentence": sentence}
+
+
+def _encoder_runs(node: dict) -> tuple[list[dict], str, dict | None]:
+    """The run records of an encoder's chain, from ``node`` (its last run's ``pretrained``
+    record) back through ``init_from``: ``(records oldest first, origin, network)``, ``origin``
+    as `encoder_lineage` names it and ``network`` the record of the MSMR-Net whose encoder
+    began the chain (None when not recorded). Shared with ``hmt.pretrained.lineage``."""
+    nodes, origin, network = [], "unknown", None
+    for _ in range(32):  # a recorded chain, never a cycle; bounded all the same
+        nodes.append(node)
+        recipe = node.get("recipe") or node.get("config") or {}
+        init, parent = recipe.get("init", "unknown"), node.get("init_from")
+        if init is None:
+            origin = "random weights"
+            break
+        if init == "network" or (isinstance(parent, dict) and "made_by" in parent):
+            origin = "an MSMR-Net's encoder"
+            network = parent.get("made_by") if isinstance(parent, dict) else None
+            break
+        if not isinstance(parent, dict):
+            break
+        node = parent
+    return nodes[::-1], origin, network
 
 
 def _network_words(made: dict | None) -> str:
