@@ -173,15 +173,10 @@ def _resumed_plan(saved: dict, history: list, epochs: int,
     return _plan(epochs, float(history[0]["seconds"]), max_train_seconds)
 
 
-def _prior_train_seconds(clock: Path, last: Path) -> float:
+def _prior_train_seconds(clock: Path, history: list[dict]) -> float:
     """Training seconds spent before this invocation, so that a resumed run records them all:
-    ``clock``'s (written after each epoch) plus the epochs the checkpoint ``last`` holds beyond
-    it; without ``clock`` (a run of before 0.6.0) the checkpoint's per-epoch seconds."""
-    from ..train.checkpoints import _read_checkpoint
-
-    if not last.exists():
-        return 0.0
-    history = _read_checkpoint(last).get("history") or []
+    ``clock``'s (written after each epoch) plus the epochs of the checkpoint's ``history``
+    beyond it; without ``clock`` (a run of before 0.6.0) the history's per-epoch seconds."""
     done = {"epoch": 0, "seconds": 0.0}
     if clock.exists():
         done = json.loads(clock.read_text())
@@ -420,7 +415,8 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     plan = {"config": config}  # the run's config; its epochs may be fitted to the time budget
     last = out / "train" / "checkpoint_last.pt"
     clock = out / "train" / "train_seconds.json"  # the seconds of earlier invocations
-    prior = _prior_train_seconds(clock, last)
+    saved = _read_checkpoint(last) if last.exists() else None  # the run being resumed
+    prior = _prior_train_seconds(clock, (saved or {}).get("history") or [])
     t_train = time.perf_counter()
     exported = [-math.inf]  # when the files were last written
 
@@ -450,14 +446,13 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
 
     say(f"[2/3] training ({recipe.epochs} epochs, batch {recipe.batch_size}, "
         f"{recipe.image_size}-px crops, {recipe.encoder}) in {out / 'train'}")
-    resume = last.exists()
+    resume = saved is not None
     if resume and max_train_seconds is not None:  # keep the plan of the run being resumed
-        ck = _read_checkpoint(last)
-        fit, lr_step = _resumed_plan(ck["config"], ck["history"], config.epochs,
+        fit, lr_step = _resumed_plan(saved["config"], saved["history"], config.epochs,
                                      max_train_seconds)
         plan["config"] = replace(config, epochs=fit, lr_step=lr_step)
         info["epochs_planned"] = fit
-        say(f"      resuming after epoch {int(ck['epoch'])} of the {fit} planned")
+        say(f"      resuming after epoch {int(saved['epoch'])} of the {fit} planned")
     try:
         if max_train_seconds is not None and not resume and config.epochs > 1:
             # One epoch first, to see how many fit the budget; then the learning-rate schedule
