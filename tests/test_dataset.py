@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fingerprints import differences, fingerprint
 from PIL import Image
 
 from handmesh_tutorial import data as D
@@ -945,38 +946,61 @@ def test_a_set_of_an_older_version_resumes_only_when_its_samples_are_the_same(
         assert tree(root) == before
 
 
-def _scene_fingerprint() -> str:
-    """sha256 of the geometry and labels of one small scene of each kind (the rendered pixels
+def _scene_arrays() -> dict:
+    """The labels and geometry of one small scene of each kind, by name (the rendered pixels
     are left out: they may differ by a bit between OpenGL drivers)."""
     from handmesh_tutorial import scenes
 
-    h = hashlib.sha256()
+    arrays = {}
     for i, kind in enumerate(("hand-hand", "hand-object", "hand-chain")):
         s = scenes.make_sample(D.sample_seed(7, i), kind, 32)
-        h.update(json.dumps([s["kind"], s["target"], sorted(s["sides"].items()),
-                             sorted(s["names"].items())]).encode())
+        labels = json.dumps([s["kind"], s["target"], sorted(s["sides"].items()),
+                             sorted(s["names"].items())])
+        arrays[f"{kind}/labels"] = np.frombuffer(labels.encode(), np.uint8)  # exact
         for key in ("joints", "pose"):
             for label in sorted(s[key]):
-                h.update(np.round(np.asarray(s[key][label], np.float64), 5).tobytes())
+                arrays[f"{kind}/{key}/{label}"] = np.asarray(s[key][label], np.float64)
         for label in sorted(s["meshes"]):
-            h.update(np.round(np.asarray(s["meshes"][label][0], np.float64), 5).tobytes())
-        h.update(np.round(s["K"], 6).tobytes())
-    return h.hexdigest()
+            vertices, faces = s["meshes"][label][:2]
+            arrays[f"{kind}/vertices/{label}"] = np.asarray(vertices, np.float64)
+            arrays[f"{kind}/faces/{label}"] = np.asarray(faces, np.int64)  # exact
+        arrays[f"{kind}/K"] = np.asarray(s["K"], np.float64)
+    return arrays
 
 
 # The scene generator's output, as SAME_SAMPLES_SINCE vouches for it: on a mismatch, the samples
-# of a seed changed, so sets written before no longer match what a resumed run adds.
-SCENE_FINGERPRINTS = {
-    "0.3.0": "d414bce87da59af549d77faf194e39bbf66e8bcbf5a736cecfeb54c02b203526"}
+# of a seed changed, so sets written before no longer match what a resumed run adds. Labels,
+# faces and shapes are compared exactly, the numbers to the spread of CPU kernels
+# (tests/fingerprints.py): the same seed makes the same scene on every x86-64 CPU, equal to
+# within 6e-7 of each array's norm (measured across kernel paths), not bit for bit. The
+# geometry is float64 numpy, so the bound is tighter than a network's: 1e-5 of the norm, about
+# 0.02 mm for a hand's joints 30-50 cm from the camera.
+SCENE_FINGERPRINTS = Path(__file__).parent / "fixtures" / "scene_fingerprints.json"
+SCENE_RTOL = 1e-5
 
 
+@pytest.mark.recorded
 def test_the_scene_generator_makes_the_samples_its_same_samples_since_version_made():
     since = D.schema.SAME_SAMPLES_SINCE
-    got = _scene_fingerprint()
-    assert SCENE_FINGERPRINTS.get(since) == got, (
-        f"the scene generator's samples changed (fingerprint {got[:16]}...), but "
+    recorded = json.loads(SCENE_FINGERPRINTS.read_text())
+    problems = differences(fingerprint(_scene_arrays()), recorded.get(since, {}),
+                           SCENE_RTOL)
+    assert not problems, (
+        f"the scene generator's samples changed ({'; '.join(problems[:3])}), but "
         f"SAME_SAMPLES_SINCE is still {since}: set it in handmesh_tutorial/data/schema.py to "
-        f"this version and record the fingerprint under it in SCENE_FINGERPRINTS")
+        f"this version and record the fingerprint under it in {SCENE_FINGERPRINTS.name}")
+
+
+@pytest.mark.recorded
+def test_the_scene_fingerprint_sees_a_moved_joint_and_a_changed_label():
+    recorded = json.loads(SCENE_FINGERPRINTS.read_text())[D.schema.SAME_SAMPLES_SINCE]
+    arrays = _scene_arrays()
+    key = next(k for k in arrays if "/joints/" in k)
+    moved = dict(arrays, **{key: arrays[key] + np.eye(21, 3) * 1e-4})  # 0.1 mm, one joint
+    assert any(p.startswith(key) for p in differences(fingerprint(moved), recorded,
+                                                           SCENE_RTOL))
+    relabelled = dict(arrays, **{"hand-hand/labels": arrays["hand-hand/labels"][::-1]})
+    assert any("labels: sha256" in p for p in differences(fingerprint(relabelled), recorded))
 
 
 def test_a_library_version_that_is_not_numbers_resumes_only_its_own_sets(tmp_path, monkeypatch):

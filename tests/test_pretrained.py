@@ -70,6 +70,7 @@ def test_quantize_round_trip_is_within_half_a_step_and_keeps_buffers_exact():
         dequantize_state_dict(stored, {**scales, "gone": torch.ones(2)})
 
 
+@pytest.mark.recorded
 def test_export_loads_back_close_to_the_run_and_is_small(run, tmp_path):
     ref = _vertices(run["model"], run["dataset"])
     info = {"data": {"train_seed": 5}, "hardware": "test"}
@@ -83,11 +84,25 @@ def test_export_loads_back_close_to_the_run_and_is_small(run, tmp_path):
     params = dict(run["model"].named_parameters())
     big = [k for k, v in params.items() if v.ndim >= 2]
     assert big and all(raw["model"][k].dtype == torch.int8 for k in big)
-    for path, tol in ((f8, 0.5e-3), (f16, 0.1e-3)):  # metres: 0.5 mm and 0.1 mm
+    # What the file holds is exactly the run's weights stored as int8 (float16): loaded back,
+    # the network is the run's network with its weights quantized in memory (equal to the bit
+    # here; 1e-4 mm allowed). How far that is from the run depends on the trained
+    # weights, not on the code: on this toy run int8 moved the vertices 0.29 mm on an AMD EPYC
+    # and 0.88 mm with MKL_CBWR=COMPATIBLE (its training ends elsewhere); float16 0.03 mm on
+    # both. The bounds on that, 2 mm and 0.1 mm, only catch a broken store.
+    float_state = full["model"]
+    names = [n for n, _ in run["model"].named_parameters()]
+    in_memory = {"int8": dequantize_state_dict(*quantize_state_dict(float_state, names)),
+                 "float16": {k: v.half().float() if k in names and v.is_floating_point() else v
+                             for k, v in float_state.items()}}
+    for path, kind, tol in ((f8, "int8", 2e-3), (f16, "float16", 0.1e-3)):  # metres
         net, ck = T.load_checkpoint(path)
         assert not net.training
         got = _vertices(net, run["dataset"])
         assert np.abs(got - ref).max() < tol, (path.name, np.abs(got - ref).max())
+        twin, _ = T.load_checkpoint(run["checkpoint"])
+        twin.load_state_dict(in_memory[kind])
+        assert np.abs(got - _vertices(twin.eval(), run["dataset"])).max() < 1e-7, kind
     n_float = sum(v.numel() for v in params.values())
     assert f8.stat().st_size < 0.5 * 4 * n_float + 200_000
     with pytest.raises(ValueError, match="int8"):

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 import os
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -455,3 +457,39 @@ def test_hand_template_hierarchy(tmp_path):
         np.testing.assert_allclose(np.asarray(h.up[l].sum(1)).ravel(), 1.0, atol=1e-12)
     for mean, mx in h.reconstruction_errors():
         assert mean < 0.004 and mx < 0.02  # metres: 4 mm mean, 2 cm max at the coarsest step
+
+
+HAND_HIERARCHY = Path(__file__).parent / "fixtures" / "hand_hierarchy_fingerprint.json"
+
+
+def _hand_hierarchy_arrays() -> dict:
+    """The right hand's hierarchy as a network builds it (template, default factors) and its
+    spirals: what the shipped weights were trained on, level by level."""
+    from handmesh_tutorial.nn.spiral import spiral_indices
+
+    hand = hmt.hand.HandModel("right")
+    h = mesh_hierarchy(np.asarray(hand.template_vertices, np.float64), np.asarray(hand.faces),
+                       use_cache=False)
+    arrays = {}
+    for l, faces in enumerate(h.faces):
+        arrays[f"faces/{l}"] = np.asarray(faces, np.int64)
+        arrays[f"spiral/{l}"] = np.asarray(spiral_indices(faces, 9), np.int64)
+    for l, (down, up) in enumerate(zip(h.down, h.up, strict=True)):
+        arrays[f"down/{l}"] = np.asarray(down.indices, np.int64)
+        arrays[f"up_columns/{l}"] = np.asarray(up.indices, np.int64)
+        arrays[f"up_rows/{l}"] = np.asarray(up.indptr, np.int64)
+        arrays[f"up_weights/{l}"] = np.asarray(up.data, np.float64)
+    return arrays
+
+
+@pytest.mark.recorded
+def test_the_hand_hierarchy_is_the_recorded_one_on_every_cpu():
+    """The shipped network's mesh levels are rebuilt on each machine, not stored: the decimation's
+    choices (faces, kept vertices, closest triangles, spirals) must be the recorded ones exactly
+    on any CPU, the barycentric weights to float rounding (8e-7 apart across kernel paths;
+    1e-5 of their norm allowed)."""
+    from fingerprints import differences, fingerprint
+
+    recorded = json.loads(HAND_HIERARCHY.read_text())
+    problems = differences(fingerprint(_hand_hierarchy_arrays()), recorded, 1e-5)
+    assert not problems, "; ".join(problems[:5])
