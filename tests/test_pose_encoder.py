@@ -280,3 +280,25 @@ def test_a_missing_shipped_encoder_names_the_command_that_makes_it(tmp_path, mon
         PE.pretrained_encoder_path("pretrained")
     with pytest.raises(FileNotFoundError, match=r"`make pretrained-encoder`"):
         PE.pretrained_encoder_path("neutral")
+
+
+def test_evaluate_pose_per_crop_errors_average_to_its_scores(cache):
+    """The per-crop errors (for paired comparisons) are the crops' own PA-MPJPE: their mean is
+    the reported score, and a constant answer's equal an independent Procrustes per crop."""
+    torch.manual_seed(0)
+    net = PE.build_pose_net("resnet10")
+    mean = cache["joints"].mean(0)
+    got = PP.evaluate_pose(net, cache, sizes=(64,), baselines={"mean": mean}, per_crop=True)
+    plain = PP.evaluate_pose(net, cache, sizes=(64,), baselines={"mean": mean})
+    assert "pa_per_crop" not in plain["64"]
+    for key in ("64", "mean"):
+        per = got[key]["pa_per_crop"]
+        assert per.shape == (len(cache["image"]),)
+        assert per.mean() == pytest.approx(plain[key]["pa_mpjpe"], rel=1e-5)
+    from handmesh_tutorial.metrics import procrustes_align
+
+    gt = cache["joints"].double().numpy()
+    pred = np.broadcast_to(mean.double().numpy(), gt.shape)
+    aligned = procrustes_align(pred, gt, allow_reflection=False)  # Umeyama: proper rotations
+    ref = 1000 * np.linalg.norm(aligned - gt, axis=-1).mean(1)
+    np.testing.assert_allclose(got["mean"]["pa_per_crop"], ref, atol=1e-3)

@@ -145,7 +145,7 @@ def _procrustes_mean(joints: torch.Tensor, iterations: int = 3) -> torch.Tensor:
 
 
 def evaluate_pose(net: PoseNet, cache: dict, sizes=(64, 128), batch_size: int = 256,
-                  baselines: dict | None = None) -> dict:
+                  baselines: dict | None = None, per_crop: bool = False) -> dict:
     """Joint errors of ``net`` on the evaluation crops of ``cache`` (and of constant answers).
 
     Args:
@@ -154,6 +154,8 @@ def evaluate_pose(net: PoseNet, cache: dict, sizes=(64, 128), batch_size: int = 
             validation scenes (on any device; ``net``'s is used).
         sizes: crop sides to score.
         baselines: ``{name: (21, 3) root-relative joints}`` predicted for every crop.
+        per_crop: also return each crop's PA-MPJPE (mm, ``(N,)`` numpy) under
+            ``"pa_per_crop"`` in each entry, for paired comparisons on the same crops.
 
     Returns:
         ``{f"{size}": {"mpjpe", "pa_mpjpe", "uv_px"}, name: {"mpjpe", "pa_mpjpe"}}`` in mm
@@ -181,12 +183,16 @@ def evaluate_pose(net: PoseNet, cache: dict, sizes=(64, 128), batch_size: int = 
             out[str(size)] = {"mpjpe": 1000 * float(torch.cat(err).mean()),
                               "pa_mpjpe": 1000 * float(torch.cat(pa).mean()),
                               "uv_px": float(torch.cat(uv).mean())}
+            if per_crop:
+                out[str(size)]["pa_per_crop"] = 1000 * torch.cat(pa).double().cpu().numpy()
         gt = cache["joints"].to(dev)
         for name, joints in (baselines or {}).items():
             pred = torch.as_tensor(joints, dtype=torch.float32, device=dev).expand_as(gt)
+            pa = (similarity_align(pred, gt) - gt).norm(dim=-1).mean(1)
             out[name] = {"mpjpe": 1000 * float((pred - gt).norm(dim=-1).mean()),
-                         "pa_mpjpe": 1000 * float((similarity_align(pred, gt) - gt)
-                                                  .norm(dim=-1).mean())}
+                         "pa_mpjpe": 1000 * float(pa.mean())}
+            if per_crop:
+                out[name]["pa_per_crop"] = 1000 * pa.double().cpu().numpy()
     net.train(was)
     return out
 
