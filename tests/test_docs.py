@@ -320,3 +320,25 @@ def test_the_score_tables_fill_only_their_markers_and_a_rerun_changes_nothing(tm
            "<!-- pretrained-scores graph -->\nx\n<!-- /pretrained-scores -->\n")
     with pytest.raises(ValueError, match="'graph'"):
         tool.write_docs(result, tmp_path)
+
+
+# --- tables that restate the code (tools/code_tables.py) --------------------------------------
+
+def test_every_code_table_in_the_docs_is_what_its_code_says_now():
+    tool = _tool("code_tables")
+    assert tool.stale() == [], "run python tools/code_tables.py"
+
+
+def test_a_code_table_is_rewritten_only_between_its_markers(tmp_path):
+    tool = _tool("code_tables")
+    page = tmp_path / "p.md"
+    page.write_text("intro\n<!-- code-table lcs-limits -->\n| old |\n<!-- /code-table -->\nend\n")
+    assert tool.stale({"lcs-limits": page}) == ["lcs-limits"]
+    text = tool.updated(page.read_text(), "lcs-limits")
+    assert text.startswith("intro\n<!-- code-table lcs-limits -->\n| joint |")
+    assert text.endswith("| paper (every joint) | ±60 | ±60 | ±60 |\n<!-- /code-table -->\nend\n")
+    assert "| finger PIP | ±10 | 0 .. 110 | ±10 |" in text
+    page.write_text(text)
+    assert tool.stale({"lcs-limits": page}) == []
+    with pytest.raises(ValueError, match="code-table lcs-limits"):
+        tool.updated("no markers", "lcs-limits")
