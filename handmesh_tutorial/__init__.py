@@ -21,7 +21,7 @@ _SUBMODULES = (
 
 __all__ = ["Budget", "budget", "__version__", *(m for m in _SUBMODULES if m != "budget")]
 
-_aliases.install()  # the module paths of 0.1 (``hmt.spiral``, ``hmt.dataset``...) until 0.4
+_aliases.install()  # four module paths of 0.1 that are fixed entry points (``hmt.spiral``...)
 
 
 def __getattr__(name: str):

@@ -229,10 +229,3 @@ def _encoder_stages(node: dict, depth: int) -> list[dict]:
         before, first = _network_stages(network, depth + 1), "the encoder of the stage before"
     return before + [_stage(n, "encoder", first if i == 0 else "the stage before")
                      for i, n in enumerate(nodes)]
-
-
-def __getattr__(name: str):
-    # the recipe's names moved to the apps layer in 0.2: the old path works until 0.4
-    from ._aliases import moved_attribute
-
-    return moved_attribute(__name__, name)
