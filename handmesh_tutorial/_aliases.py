@@ -5,7 +5,7 @@
 project's fixed public entry points (tests, docs and outside checks call them), so their paths
 stay: each is a stand-in module that hands out the names of its new home, with a
 ``FutureWarning`` that names that home (new code imports it). The other stand-ins of 0.1 and the
-0.1 names of plumbing made private in 0.2 were removed in 0.7 (``CHANGELOG.md``), as promised
+0.1 names of plumbing made private in 0.2 are removed after 0.6.0 (``CHANGELOG.md``), as promised
 for 0.4.
 """
 
