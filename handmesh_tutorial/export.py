@@ -179,8 +179,8 @@ def onnx_network(model=None, *, image_size: int | None = None, box_scale: float 
                  threads: int | None = None) -> OnnxNetwork:
     """Export a network in memory and open it in onnxruntime (the fast path of one call).
 
-    The export takes seconds (about 15 s for the shipped network on a busy 2-core CPU); the
-    shipped network's is made once per process. To skip it in later processes, write the file
+    The export takes seconds (docs page "Exporting the network"); the shipped network's is
+    made once per process. To skip it in later processes, write the file
     once with [`export_onnx`][handmesh_tutorial.export.export_onnx] and open
     ``OnnxNetwork(path)``.
 
