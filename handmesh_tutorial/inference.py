@@ -423,7 +423,8 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
             checkpoint path, or a network (then give ``image_size``); or the fast path, the
             network exported and run by onnxruntime: an
             [`OnnxNetwork`][handmesh_tutorial.export.OnnxNetwork]
-            (``hmt.export.onnx_network()``) or a path ending in ``.onnx``.
+            (``hmt.export.onnx_network()``) or a path ending in ``.onnx`` (opened on each
+            call: keep the ``OnnxNetwork`` for repeated calls); it runs on the CPU.
         image_size: crop side, an integer in [32, 4096]; default: the checkpoint's.
         box_scale: crop margin, a number in [1, 4] (``None``: the checkpoint's, 1.5; 0 is
             refused, not read as the default).
