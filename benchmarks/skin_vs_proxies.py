@@ -1,11 +1,11 @@
 """The cylinder proxies against the skin: which finger pairs each names, pose by pose.
 
-Random poses of the MakeHuman hand within its anatomical joint limits (``hand_lcs(hand)
-.random_pose``, the generator's valid poses; seed ``--seed``). For each pose: the finger pairs whose proxies intersect
-(``hmt.collision.finger_collisions``, radii shrunk 30 % as the generator tests them, and not
-shrunk), and the finger pairs whose skin triangles intersect
-(``hmt.collision.skin_collisions``: every phalanx, and the distal phalanges only). Prints how
-often the two name the same pairs, and the pairs each names alone. Also times both tests.
+Random poses of the MakeHuman hand within its anatomical joint limits
+(``hand_lcs(hand).random_pose``, the generator's valid poses; seed ``--seed``). For each pose:
+the finger pairs whose proxies intersect (``hmt.collision.finger_collisions``, radii shrunk 30 %
+as the generator tests them, and not shrunk), and the finger pairs whose skin triangles
+intersect (``hmt.collision.skin_collisions``: every phalanx, and the distal phalanges only).
+Prints how often the two name the same pairs, and the pairs each names alone. Also times both.
 
 Run: ``python benchmarks/skin_vs_proxies.py [--poses 40] [--seed 0]``.
 """

@@ -379,6 +379,9 @@ def _network(model, image_size, box_scale, device) -> tuple[nn.Module, int, floa
         size = model.image_size if image_size is None else check_image_size(image_size)
         if size is None:
             raise ValueError("give image_size: this ONNX file records no crop side")
+        if model.image_size is not None and size != model.image_size:
+            raise ValueError(f"image_size={image_size}, but the ONNX file was exported for "
+                             f"{model.image_size}-px crops; leave image_size out")
         return model, int(size), _check_box_scale(model.box_scale if box_scale is None
                                                   else box_scale)
     if model is None or isinstance(model, str | os.PathLike):

@@ -214,6 +214,8 @@ def test_predict_hands_in_onnxruntime_equals_torch(nets, tmp_path):
             assert g.side == w.side and g.frame == w.frame == "root-relative"
     one = hmt.inference.predict_hand(image, boxes[0], "left", model=str(path))
     np.testing.assert_allclose(one.vertices, want[0].vertices, rtol=0, atol=ATOL)
+    with pytest.raises(ValueError, match="exported for 32-px crops"):
+        hmt.inference.predict_hand(image, boxes[0], "left", model=str(path), image_size=64)
 
 
 @pytest.mark.slow
