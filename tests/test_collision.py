@@ -804,6 +804,8 @@ def test_skin_collisions_own_triangle_test_agrees_with_python_fcl():
     theirs = skin.skin_collisions(out.vertices, hand.faces, fingers, backend="fcl")
     assert ours == theirs and sum(map(len, ours)) >= 4  # these poses press fingers together
     assert skin.skin_collisions(hand().vertices, hand.faces, fingers) == [set()]  # rest pose
+    with pytest.raises(ValueError, match="one entry per vertex"):
+        skin.skin_collisions(hand().vertices, hand.faces, fingers[:-1])
     distal = skin.finger_of_vertices(hand, phalanges=(2,))
     assert set(np.unique(distal)) == {-1, 0, 1, 2, 3, 4}
     assert (np.isin(np.flatnonzero(distal >= 0), np.flatnonzero(fingers >= 0))).all()

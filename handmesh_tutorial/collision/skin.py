@@ -186,6 +186,8 @@ def skin_collisions(vertices, faces, fingers, *, backend: str = "auto"
         One set per pose of ``(finger_a, finger_b)``, ``finger_a < finger_b``.
 
     Raises:
+        ValueError: ``fingers`` not one entry per vertex, faces out of range, an unknown
+            backend.
         ModuleNotFoundError: ``backend="fcl"`` without python-fcl.
     """
     if backend not in ("auto", "fcl", "numpy"):
@@ -200,7 +202,13 @@ def skin_collisions(vertices, faces, fingers, *, backend: str = "auto"
                                           "python-fcl, or the dev extra)") from None
     verts = _poses(vertices)
     f = np.asarray(faces, dtype=np.int64)
-    lab = np.asarray(fingers, dtype=np.int64)[f]
+    fingers = np.asarray(fingers, dtype=np.int64).reshape(-1)
+    if fingers.shape != (verts.shape[1],):
+        raise ValueError(f"fingers must have one entry per vertex ({verts.shape[1]}), got "
+                         f"{fingers.shape}")
+    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= len(fingers))):
+        raise ValueError(f"faces must be (F, 3) vertex ids in [0, {len(fingers)})")
+    lab = fingers[f]
     tri_finger = np.where((lab == lab[:, :1]).all(1), lab[:, 0], -1)
     groups = [np.flatnonzero(tri_finger == k) for k in range(_FINGERS)]
     out = []
