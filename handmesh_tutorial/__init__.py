@@ -16,12 +16,12 @@ from .budget import Budget, budget
 # The library in the paper's data-flow order (docs page "The pipeline"); `apps` sits on top.
 _SUBMODULES = (
     "hand", "lcs", "collision", "objects", "scenes", "render", "visibility", "data", "nn",
-    "train", "metrics", "viz", "pretrained", "inference", "budget", "testing", "apps",
+    "train", "metrics", "viz", "pretrained", "export", "inference", "budget", "testing", "apps",
 )
 
 __all__ = ["Budget", "budget", "__version__", *(m for m in _SUBMODULES if m != "budget")]
 
-_aliases.install()  # the module paths of 0.1 (``hmt.spiral``, ``hmt.dataset``...) until 0.4
+_aliases.install()  # four module paths of 0.1 that are fixed entry points (``hmt.spiral``...)
 
 
 def __getattr__(name: str):

@@ -1,14 +1,12 @@
-"""The module paths of 0.1 (before the data-flow tree of 0.2), kept importable for one version.
+"""The four module paths of 0.1 that DESIGN's fixed entry points name, kept importable.
 
-``import handmesh_tutorial.spiral``, ``hmt.dataset.InterSHDataset`` or
-``from handmesh_tutorial.interact import build_scene`` keep working: an old path is a stand-in
-module that hands out the names of its new home, with a ``FutureWarning`` naming that home. The
-stand-ins go in 0.4 (``CHANGELOG.md``). New code uses the new paths (docs page "The pipeline").
-The same holds for a public name of 0.1 that is plumbing and private since 0.2 (`RENAMED`,
-``hmt.data.TMP_PREFIX`` -> ``hmt.data.schema._TMP_PREFIX``), through its module's ``__getattr__``.
-
-This table is the one place that names modules of the apps layer from inside the library (as
-strings, imported only when an old name is used).
+``hmt.spiral.spiral_indices`` / ``hmt.spiral.SpiralConv``, ``hmt.sampling.mesh_hierarchy``,
+``hmt.model.build_model`` and ``hmt.model.pretrained`` and ``hmt.dataset.InterSHDataset`` are the
+project's fixed public entry points (tests, docs and outside checks call them), so their paths
+stay: each is a stand-in module that hands out the names of its new home, with a
+``FutureWarning`` that names that home (new code imports it). The other stand-ins of 0.1 and the
+0.1 names of plumbing made private in 0.2 are removed after 0.6.0 (``CHANGELOG.md``), as promised
+for 0.4.
 """
 
 from __future__ import annotations
@@ -20,35 +18,16 @@ import sys
 import types
 import warnings
 
-__all__ = ["MOVED", "MOVED_NAMES", "RENAMED", "install", "moved_attribute"]
+__all__ = ["MOVED", "MOVED_NAMES", "install", "moved_attribute"]
 
 _P = "handmesh_tutorial."
 
 MOVED: dict[str, tuple[str, ...]] = {
     # old module path -> its new home(s), first match wins for a name
-    "augment": ("data.augment",),
-    "blocks": ("nn.blocks",),
-    "camera": ("render.camera",),
-    "cli": ("apps.cli",),
     "dataset": ("data",),
-    "decoder": ("nn.decoder",),
-    "demo": ("apps.demo",),
-    "encoder": ("nn.encoder",),
-    "freihand": ("data.freihand",),
-    "interact": ("scenes",),
-    "keypoints": ("nn.keypoints",),
-    "losses": ("nn.losses",),
-    "mano": ("hand.mano",),
     "model": ("nn.model",),
-    "pose_encoder": ("nn.pose_encoder",),
-    "pretraining_data": ("apps.pretraining_data",),
-    "rotation": ("nn.rotation",),
     "sampling": ("nn.hierarchy",),
-    "skinned": ("nn.skinned",),
     "spiral": ("nn.spiral",),
-    "surface": ("metrics.surface", "nn.smoothing"),
-    "train.batched_crops": ("data.batched_crops",),
-    "train.pose_pretraining": ("apps.pose_pretraining",),
 }
 """Old module (without the ``handmesh_tutorial.`` prefix) -> new module(s). A submodule of a moved
 package moves with it (``dataset.files`` -> ``data.files``)."""
@@ -56,28 +35,10 @@ package moves with it (``dataset.files`` -> ``data.files``)."""
 MOVED_NAMES: dict[str, dict[str, str]] = {
     # names that left a module which still exists: module -> {name: new module}
     "model": {"pretrained": "pretrained"},
-    "pretrained": {name: "apps.pretrain_network" for name in (
-        "PretrainedRecipe", "build_pretrained", "export_pretrained", "generate_training_scenes",
-        "generate_train_val")},
 }
 """Names that moved out of a module: old module -> {name: its new module}."""
 
-_TMP, _LOCK = "data.schema._TMP_PREFIX", "data.schema._LOCK_FILE"
-_EGL, _NP2 = "render.backend._ensure_egl", "render.backend._patch_pyrender_numpy2"
-_SKIMAGE = "render.backgrounds._skimage_data_dir"
-_STALE = "train.checkpoints._remove_stale_temp_files"
-RENAMED: dict[str, dict[str, str]] = {
-    # public names of 0.1 that are plumbing, private since 0.2: module -> {old name: new home}
-    "data": {"TMP_PREFIX": _TMP, "LOCK_FILE": _LOCK},
-    "data.schema": {"TMP_PREFIX": _TMP, "LOCK_FILE": _LOCK},
-    "render": {"ensure_egl": _EGL, "patch_pyrender_numpy2": _NP2, "skimage_data_dir": _SKIMAGE},
-    "render.backend": {"ensure_egl": _EGL, "patch_pyrender_numpy2": _NP2},
-    "render.backgrounds": {"skimage_data_dir": _SKIMAGE},
-    "train": {"remove_stale_temp_files": _STALE},
-    "train.checkpoints": {"remove_stale_temp_files": _STALE},
-}
-"""Names made private (``_``-prefixed): module -> {old name: ``module._new_name``}. The old name
-keeps working until 0.4 through the module's ``__getattr__`` (`moved_attribute`)."""
+_KEPT = "the old path stays (a fixed entry point); new code imports the new one"
 
 
 def _targets(old: str) -> tuple[str, ...] | None:
@@ -93,24 +54,17 @@ def _targets(old: str) -> tuple[str, ...] | None:
 
 
 def moved_attribute(module: str, name: str):
-    """``name`` of a module from its new home (`MOVED_NAMES`, `RENAMED`), with a ``FutureWarning``.
+    """``name`` of a module from its new home (`MOVED_NAMES`), with a ``FutureWarning``.
 
     Raises:
-        AttributeError: ``name`` did not move out of ``module`` and was not renamed.
+        AttributeError: ``name`` did not move out of ``module``.
     """
     rel = module[len(_P):] if module.startswith(_P) else module
-    private = RENAMED.get(rel, {}).get(name)
-    if private is not None:
-        home, new_name = private.rsplit(".", 1)
-        warnings.warn(f"{_P}{rel}.{name} is private since 0.2 ({_P}{private}: plumbing, not "
-                      "part of the public surface); the old name goes in 0.4",
-                      FutureWarning, stacklevel=3)
-        return getattr(importlib.import_module(_P + home), new_name)
     new = MOVED_NAMES.get(rel, {}).get(name)
     if new is None:
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
-    warnings.warn(f"{module}.{name} is now {_P}{new}.{name}; the old name goes in 0.4",
-                  FutureWarning, stacklevel=3)
+    warnings.warn(f"{module}.{name} is now {_P}{new}.{name}; {_KEPT}", FutureWarning,
+                  stacklevel=3)
     return getattr(importlib.import_module(_P + new), name)
 
 
@@ -174,8 +128,8 @@ class _Finder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
     def create_module(self, spec):
         targets = _targets(spec.name)
-        warnings.warn(f"{spec.name} is now {' and '.join(targets)}; the old path goes in 0.4",
-                      FutureWarning, stacklevel=2)
+        warnings.warn(f"{spec.name} is now {' and '.join(targets)}; {_KEPT}", FutureWarning,
+                      stacklevel=2)
         return _Moved(spec.name, targets)
 
     def exec_module(self, module):

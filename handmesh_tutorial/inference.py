@@ -42,6 +42,7 @@ from .data.augment import (
     to_camera,
     warp_image,
 )
+from .export import OnnxNetwork
 from .metrics import ROOT_INDEX
 from .render.camera import check_intrinsics
 
@@ -372,6 +373,17 @@ def _shipped(device: str) -> tuple[nn.Module, dict]:
 def _network(model, image_size, box_scale, device) -> tuple[nn.Module, int, float]:
     """``(network, crop side, box scale)`` of ``model``: the shipped network (``None`` or
     ``"pretrained"``), a checkpoint path, or a module (then ``image_size`` is needed)."""
+    if isinstance(model, str | os.PathLike) and str(model).endswith(".onnx"):
+        model = OnnxNetwork(model)
+    if isinstance(model, OnnxNetwork):  # the fast path (hmt.export), run by onnxruntime
+        size = model.image_size if image_size is None else check_image_size(image_size)
+        if size is None:
+            raise ValueError("give image_size: this ONNX file records no crop side")
+        if model.image_size is not None and size != model.image_size:
+            raise ValueError(f"image_size={image_size}, but the ONNX file was exported for "
+                             f"{model.image_size}-px crops; leave image_size out")
+        return model, int(size), _check_box_scale(model.box_scale if box_scale is None
+                                                  else box_scale)
     if model is None or isinstance(model, str | os.PathLike):
         from .train import load_checkpoint
 
@@ -411,7 +423,11 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
         K: ``(3, 3)`` intrinsics of ``image`` (pixels): outputs in its camera frame; ``None``:
             root-relative outputs.
         model: ``None`` or ``"pretrained"`` (the shipped network, loaded once per device), a
-            checkpoint path, or a network (then give ``image_size``).
+            checkpoint path, or a network (then give ``image_size``); or the fast path, the
+            network exported and run by onnxruntime: an
+            [`OnnxNetwork`][handmesh_tutorial.export.OnnxNetwork]
+            (``hmt.export.onnx_network()``) or a path ending in ``.onnx`` (opened on each
+            call: keep the ``OnnxNetwork`` for repeated calls); it runs on the CPU.
         image_size: crop side, an integer in [32, 4096]; default: the checkpoint's.
         box_scale: crop margin, a number in [1, 4] (``None``: the checkpoint's, 1.5; 0 is
             refused, not read as the default).
@@ -445,9 +461,11 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
     if not crops:
         return []
     outs: dict[str, list] = {"vertices": [], "joints": [], "uv": []}
-    was_training = net.training
-    net.eval()
-    dev = next(net.parameters()).device
+    is_module = not isinstance(net, OnnxNetwork)  # the fast path runs in onnxruntime
+    was_training = net.training if is_module else False
+    dev = next(net.parameters()).device if is_module else "cpu"
+    if is_module:
+        net.eval()
     try:
         with torch.no_grad():
             for s in range(0, len(crops), batch_size):
@@ -456,7 +474,8 @@ def predict_hands(image, boxes, sides, K=None, model=None, *, image_size: int | 
                     if k in o:
                         outs[k].append(o[k].double().cpu())
     finally:
-        net.train(was_training)
+        if is_module:
+            net.train(was_training)
     verts, joints = torch.cat(outs["vertices"]), torch.cat(outs["joints"])
     uv_crop = (torch.cat(outs["uv"]).numpy() + 1.0) * size / 2.0 - 0.5 if outs["uv"] else None
     mirrored = torch.tensor([c.mirrored for c in crops])

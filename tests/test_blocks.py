@@ -270,3 +270,47 @@ def test_sparse_vertex_map_csr_equals_gather_reference(hier, dtype):
         torch.testing.assert_close(copy.deepcopy(m)(x.detach()), outs["csr"][0])
     with pytest.raises(ValueError, match="method"):
         blocks.SparseVertexMap(dense, method="dense")
+
+
+def test_pool_layer_is_a_hand_written_barycentric_pooling_and_takes_one_mesh():
+    """Issue 54: ``Pool`` (SpiralNet++'s name) against closest-point barycentric interpolation
+    written here with trimesh's triangle routines, and the down map against plain indexing."""
+    from handmesh_tutorial.nn.hierarchy import to_torch_sparse
+
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    mesh.vertices = mesh.vertices * np.array([1.0, 0.7, 0.4])  # not a sphere: uneven triangles
+    h = mesh_hierarchy(mesh.vertices, mesh.faces, factors=(2,), use_cache=False)
+    fine, coarse, cf = h.vertices[0], h.vertices[1], h.faces[1]
+    feats = np.random.default_rng(0).standard_normal((len(coarse), 5))
+    want = np.zeros((len(fine), 5))
+    tris = coarse[cf]
+    for i, p in enumerate(fine):
+        close = trimesh.triangles.closest_point(tris, np.repeat(p[None], len(tris), 0))
+        t = int(np.argmin(np.linalg.norm(close - p, axis=1)))
+        bary = trimesh.triangles.points_to_barycentric(tris[t:t + 1], close[t:t + 1])[0]
+        bary = np.clip(bary, 0, None) / np.clip(bary, 0, None).sum()
+        want[i] = bary @ feats[cf[t]]
+    want[h.kept[0]] = feats  # a kept vertex copies its coarse self
+    up, down = blocks.Pool(h.up[0]), blocks.Pool(h.down[0])
+    x = torch.from_numpy(feats).float()
+    np.testing.assert_allclose(up(x).numpy(), want, atol=1e-5)  # unbatched (V, C)
+    np.testing.assert_allclose(up(x[None].expand(2, -1, -1)).numpy(), [want, want], atol=1e-5)
+    y = torch.from_numpy(want).float()
+    torch.testing.assert_close(down(y), y[torch.from_numpy(h.kept[0])])
+    torch.testing.assert_close(torch.sparse.mm(to_torch_sparse(h.up[0]), x), up(x))
+    with pytest.raises(ValueError, match=r"\(B, 81, C\) or \(81, C\)"):
+        up(torch.zeros(80, 5))
+
+
+def test_spiral_conv_takes_one_unbatched_mesh():
+    from handmesh_tutorial.nn.spiral import SpiralConv
+
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    idx = spiral_indices(mesh.faces, 9)
+    conv = SpiralConv(3, 4, idx)
+    x = torch.randn(len(mesh.vertices), 3)
+    want = conv.linear(x[torch.from_numpy(idx)].reshape(len(idx), -1))  # gather by hand
+    torch.testing.assert_close(conv(x), want)
+    torch.testing.assert_close(conv(x[None])[0], want)
+    with pytest.raises(ValueError, match="or \\(42, 3\\)"):
+        conv(torch.zeros(42, 4))

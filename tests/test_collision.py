@@ -781,3 +781,66 @@ def test_project_to_cylinder_refuses_what_point_cylinder_distance_refuses():
             f([[np.nan, 0, 0]], p0[:1], p1[:1], 0.01)
         with pytest.raises(ValueError, match=r"p1 must have shape \(\.\.\., 3\)"):
             f(x, p0, [0.0, 0.1], 0.01)
+
+
+# -- issue 54: finger against finger over many poses, proxies and skin --------------------------
+
+def _random_hand_poses(num: int, seed: int):
+    import torch
+
+    hand = hmt.hand.HandModel()
+    rng = np.random.default_rng(seed)
+    pose = torch.from_numpy(rng.uniform(-0.6, 0.9, (num, 15, 3)).astype(np.float32))
+    return hand, hand(pose=pose)
+
+
+def test_skin_collisions_own_triangle_test_agrees_with_python_fcl():
+    fcl = pytest.importorskip("fcl", reason="python-fcl (the dev extra)")
+    from handmesh_tutorial.collision import skin
+
+    hand, out = _random_hand_poses(8, seed=54)
+    fingers = skin.finger_of_vertices(hand)
+    ours = skin.skin_collisions(out.vertices, hand.faces, fingers, backend="numpy")
+    theirs = skin.skin_collisions(out.vertices, hand.faces, fingers, backend="fcl")
+    assert ours == theirs and sum(map(len, ours)) >= 4  # these poses press fingers together
+    assert skin.skin_collisions(hand().vertices, hand.faces, fingers) == [set()]  # rest pose
+    with pytest.raises(ValueError, match="one entry per vertex"):
+        skin.skin_collisions(hand().vertices, hand.faces, fingers[:-1])
+    distal = skin.finger_of_vertices(hand, phalanges=(2,))
+    assert set(np.unique(distal)) == {-1, 0, 1, 2, 3, 4}
+    assert (np.isin(np.flatnonzero(distal >= 0), np.flatnonzero(fingers >= 0))).all()
+    # one triangle pair at a time against fcl's own triangle test
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(300, 3, 3)), rng.normal(size=(300, 3, 3))
+    want = []
+    for ta, tb in zip(a, b, strict=True):
+        objs = []
+        for t in (ta, tb):
+            m = fcl.BVHModel()
+            m.beginModel(3, 1)
+            m.addSubModel(t, np.array([[0, 1, 2]]))
+            m.endModel()
+            objs.append(fcl.CollisionObject(m, fcl.Transform()))
+        want.append(fcl.collide(*objs, fcl.CollisionRequest()) > 0)
+    got = skin.triangles_intersect(a, b)
+    assert 0.1 < np.mean(want) < 0.9
+    np.testing.assert_array_equal(got, want)
+
+
+def test_finger_collisions_are_the_proxies_finger_pairs_pose_by_pose():
+    from handmesh_tutorial.collision import skin
+
+    hand, out = _random_hand_poses(4, seed=7)
+    got = skin.finger_collisions(out, model=hand)
+    loose = skin.finger_collisions(out.vertices, out.joints, hand, compression=0.0)
+    for b in range(4):
+        body = hmt.collision.hand_cylinders(out, model=hand, index=b)
+        i, j = hmt.collision.self_collisions(body)
+        want = set()
+        for x, y in zip(i, j, strict=True):  # filtered by .parts by hand
+            fx, fy = body.parts[x], body.parts[y]
+            if fx != fy and max(fx, fy) < 5:
+                want.add((min(fx, fy), max(fx, fy)))
+        assert got[b] == want
+        assert got[b] <= loose[b]  # unshrunk cylinders meet wherever shrunk ones do
+    assert any(got)

@@ -19,7 +19,10 @@ FLAGS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
 LIFTABLE = {
     "handmesh_tutorial.nn.spiral": ("spiral_indices", "SpiralConv"),
     "handmesh_tutorial.nn.hierarchy.hierarchy": ("mesh_hierarchy",),
+    "handmesh_tutorial.nn.hierarchy.matrices": ("to_torch_sparse",),
+    "handmesh_tutorial.nn.blocks": ("Pool",),
     "handmesh_tutorial.collision.exact": ("cylinders_intersect", "capsules_intersect"),
+    "handmesh_tutorial.collision.skin": ("triangles_intersect",),
     "handmesh_tutorial.visibility": ("visibility_ratio",),
     "handmesh_tutorial.metrics.scores": ("freihand_scores",),
     "handmesh_tutorial.metrics.procrustes": ("procrustes_align",),

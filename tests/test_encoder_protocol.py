@@ -131,3 +131,22 @@ def test_a_second_training_into_the_same_folder_is_refused(samples, tmp_path):
     assert not (out / "checkpoint_last.pt").exists()  # nothing written by the refused run
     _run(samples, out, epochs=1)  # the lock is free again: the same folder trains
     assert (out / "checkpoint_last.pt").exists()
+
+
+def test_train_only_the_decoder_keeps_every_other_weight(samples, tmp_path):
+    """Issue 54: a decoder-only run; every weight and statistic outside ``decoder`` is as built."""
+    with pytest.raises(ValueError, match="at least one part"):
+        T.TrainConfig(train_only=())
+    res = _run(samples, tmp_path / "dec", train_only=("decoder",), epochs=1)
+    cfg = T.TrainConfig(**TINY)
+    torch.manual_seed(cfg.seed)
+    start = T.build_model_from_config(cfg, T.resolve_template(None)).state_dict()
+    got = res.model.state_dict()
+    moved = {k for k in start if not torch.equal(got[k], start[k])}
+    assert moved and all(k.startswith("decoder.") for k in moved), sorted(moved)[:5]
+    assert any(k.startswith("decoder.") and k.endswith("weight") for k in moved)
+    ck = torch.load(res.checkpoint, weights_only=True)
+    assert ck["config"]["train_only"] == ["decoder"]
+    assert T.TrainConfig.from_dict(ck["config"]).train_only == ("decoder",)
+    with pytest.raises(ValueError, match=r"does not have; its parts are \['decoder', 'encoder'"):
+        _run(samples, tmp_path / "bad", train_only=("decodr",), epochs=1)

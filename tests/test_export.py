@@ -171,3 +171,65 @@ def test_jit_trace_of_the_pretrained_network_saves_and_equals_eager(nets, tmp_pa
     traced = torch.jit.trace(net, (x,), strict=False, check_trace=False)
     torch.jit.save(traced, tmp_path / "net.pt")  # a graph with no Python calls left in it
     _assert_equal_to_eager(net, x, torch.jit.load(tmp_path / "net.pt")(x))
+
+
+def _onnx_or_skip():
+    pytest.importorskip("onnxscript", reason="ONNX export needs onnxscript (the export extra)")
+    pytest.importorskip("onnxruntime", reason="running ONNX needs onnxruntime (the export extra)")
+
+
+def test_export_onnx_writes_one_file_with_a_named_batch(nets, tmp_path):
+    """Issue 54: no ``.onnx.data`` beside the file; the batch dimension is called ``batch``."""
+    _onnx_or_skip()
+    import onnx
+
+    net, _ = nets["multi"]
+    path = hmt.export.export_onnx(tmp_path / "net.onnx", net, image_size=32)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["net.onnx"]
+    proto = onnx.load(path)
+    for v in [*proto.graph.input, *proto.graph.output]:
+        assert v.type.tensor_type.shape.dim[0].dim_param == hmt.export.BATCH_DIM == "batch"
+    fast = hmt.export.OnnxNetwork(path, threads=1)
+    assert fast.image_size == 32 and fast.box_scale == 1.5
+    np.testing.assert_array_equal(fast.faces, net.faces)
+    x = torch.randn(3, 3, 32, 32)
+    _assert_equal_to_eager(net, x, fast(x))
+
+
+def test_predict_hands_in_onnxruntime_equals_torch(nets, tmp_path):
+    """The fast path of ``predict_hands``/``predict_hand``: the same outputs as eager torch."""
+    _onnx_or_skip()
+    net, _ = nets["multi"]
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 256, (60, 80, 3), dtype=np.uint8)
+    boxes, sides = [(10, 5, 40, 38), (30, 20, 70, 55)], ["left", "right"]
+    want = hmt.inference.predict_hands(image, boxes, sides, model=net, image_size=32)
+    path = hmt.export.export_onnx(tmp_path / "net.onnx", net, image_size=32)
+    for model in (hmt.export.OnnxNetwork(path), str(path)):
+        got = hmt.inference.predict_hands(image, boxes, sides, model=model, batch_size=1)
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_allclose(g.vertices, w.vertices, rtol=0, atol=ATOL)
+            np.testing.assert_allclose(g.joints, w.joints, rtol=0, atol=ATOL)
+            np.testing.assert_array_equal(g.faces, w.faces)  # mirrored for the left hand
+            assert g.side == w.side and g.frame == w.frame == "root-relative"
+    one = hmt.inference.predict_hand(image, boxes[0], "left", model=str(path))
+    np.testing.assert_allclose(one.vertices, want[0].vertices, rtol=0, atol=ATOL)
+    with pytest.raises(ValueError, match="exported for 32-px crops"):
+        hmt.inference.predict_hand(image, boxes[0], "left", model=str(path), image_size=64)
+
+
+@pytest.mark.slow
+def test_the_shipped_network_in_onnxruntime_places_the_hand_as_torch(nets):
+    _onnx_or_skip()
+    net, _ = nets["pretrained"]
+    fast = hmt.export.onnx_network(threads=1)
+    assert fast.image_size == hmt.pretrained.pretrained_info()["config"]["image_size"]
+    rng = np.random.default_rng(4)
+    image = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    K = np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]])
+    box = (100, 60, 200, 170)
+    want = hmt.inference.predict_hand(image, box, "left", K=K, model=net, image_size=128)
+    got = hmt.inference.predict_hand(image, box, "left", K=K, model=fast)
+    np.testing.assert_allclose(got.joints - got.root, want.joints - want.root, rtol=0, atol=ATOL)
+    np.testing.assert_allclose(got.keypoints_2d, want.keypoints_2d, rtol=0, atol=1e-3)  # px
+    np.testing.assert_allclose(got.root, want.root, rtol=1e-4)

@@ -85,30 +85,24 @@ def test_the_surface_count_names_a_re_exported_name_once():
     assert total == 3 and per_folder == {"collision": 2, "data": 1}
 
 
-def test_plumbing_made_private_keeps_its_old_name_for_one_version():
-    import warnings
+def test_the_0_1_stand_ins_promised_for_removal_are_gone():
+    """Issue 54: 0.1's paths and plumbing names that were to go in 0.4 are gone; the four module
+    paths of the fixed entry points stay."""
+    import sys
 
     from handmesh_tutorial import _aliases
 
-    assert {"TMP_PREFIX", "LOCK_FILE", "patch_pyrender_numpy2"} <= {
-        n for names in _aliases.RENAMED.values() for n in names}
-    for module, names in _aliases.RENAMED.items():
-        mod = importlib.import_module(f"handmesh_tutorial.{module}")
-        for old, new in names.items():
-            home, private = new.rsplit(".", 1)
-            assert old not in mod.__all__ and private.startswith("_"), (module, old)
-            with pytest.warns(FutureWarning, match=f"{module}.{old} is private since 0.2.*0.4"):
-                value = getattr(mod, old)
-            assert value is getattr(importlib.import_module(f"handmesh_tutorial.{home}"), private)
-    with pytest.raises(AttributeError, match="no attribute 'NO_SUCH_NAME'"):
-        hmt.data.NO_SUCH_NAME  # noqa: B018
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", FutureWarning)
-        old = importlib.import_module("handmesh_tutorial.dataset")  # 0.1's path of data
-    with warnings.catch_warnings(record=True) as seen:
-        warnings.simplefilter("always")
-        assert old.LOCK_FILE == hmt.data.schema._LOCK_FILE
-    assert [str(w.message).split(" is ")[0] for w in seen] == ["handmesh_tutorial.data.LOCK_FILE"]
+    assert set(_aliases.MOVED) == {"dataset", "model", "sampling", "spiral"}
+    for old in ("interact", "augment", "train.pose_pretraining", "surface"):
+        sys.modules.pop(f"handmesh_tutorial.{old}", None)
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(f"handmesh_tutorial.{old}")
+    for module, name in (("data", "TMP_PREFIX"), ("data.schema", "LOCK_FILE"),
+                         ("render", "ensure_egl"), ("train", "remove_stale_temp_files"),
+                         ("pretrained", "PretrainedRecipe")):
+        with pytest.raises(AttributeError, match=f"no attribute '{name}'"):
+            getattr(importlib.import_module(f"handmesh_tutorial.{module}"), name)
+    assert not hasattr(hmt, "interact")
 
 
 @pytest.mark.parametrize("module", PUBLIC_MODULES)
@@ -250,7 +244,7 @@ def test_the_library_never_imports_the_apps():
     assert not up, f"library modules that import the apps layer: {up}"
 
 
-def test_the_old_module_paths_still_work_for_one_version(monkeypatch):
+def test_the_fixed_entry_points_old_module_paths_still_work(monkeypatch):
     import sys
     import warnings
 
@@ -260,7 +254,7 @@ def test_the_old_module_paths_still_work_for_one_version(monkeypatch):
         full = f"handmesh_tutorial.{old}"  # a stand-in imported by an earlier test warned then
         for name in [m for m in sys.modules if m == full or m.startswith(full + ".")]:
             monkeypatch.delitem(sys.modules, name)
-        with pytest.warns(FutureWarning, match="goes in 0.4"):
+        with pytest.warns(FutureWarning, match="the old path stays"):
             mod = importlib.import_module(f"handmesh_tutorial.{old}")
         target = importlib.import_module(f"handmesh_tutorial.{new[0]}")
         name = next(iter(getattr(target, "__all__", ())), None)
@@ -268,8 +262,6 @@ def test_the_old_module_paths_still_work_for_one_version(monkeypatch):
             with warnings.catch_warnings():
                 warnings.simplefilter("error")  # the stand-in warns once, on import
                 assert getattr(mod, name) is getattr(target, name), (old, name)
-    with pytest.warns(FutureWarning, match="apps.pretrain_network"):
-        from handmesh_tutorial.pretrained import PretrainedRecipe  # noqa: F401
     assert hmt.spiral.SpiralConv is hmt.nn.spiral.SpiralConv
 
 
@@ -288,7 +280,7 @@ def test_the_0_1_name_hmt_model_pretrained_still_works(monkeypatch):
 
     for name in [m for m in sys.modules if m == "handmesh_tutorial.model"]:
         monkeypatch.delitem(sys.modules, name)
-    with pytest.warns(FutureWarning, match=r"handmesh_tutorial\.pretrained\.pretrained.*0\.4"):
+    with pytest.warns(FutureWarning, match=r"handmesh_tutorial\.pretrained\.pretrained.*stays"):
         old = hmt.model.pretrained
     assert old is hmt.pretrained.pretrained
     with pytest.raises(AttributeError, match="no attribute 'nope'"):

@@ -473,3 +473,86 @@ def test_given_normals_shade_and_only_shade(renderer):
         renderer.render([(v, f, c, lab, flat * 0.0)], _K())
     with pytest.raises(ValueError, match=r"occluders\[0\] must be"):
         renderer.render([(v, f, c, lab)], _K(), occluders=[(v, f, c, 1, flat, 0)])
+
+
+# -- issue 54: a scene of one's own meshes, rendered with one's own camera ----------------------
+
+def _composed():
+    import torch
+
+    import handmesh_tutorial as hmt
+    from handmesh_tutorial.scenes import Scene, SceneBody
+
+    hand = hmt.hand.HandModel("right")
+    out = hand(global_orient=torch.tensor([[np.pi, 0.0, 0.0]]))  # palm to the camera
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.025)
+    ball.apply_translation(out.joints[0, 9].numpy() + [0.02, 0.0, -0.1])  # in front of it
+    scene = Scene.compose([SceneBody.from_mesh(ball.vertices, ball.faces, label=2, name="ball"),
+                           SceneBody.from_hand(out, side="right", label=1, model=hand)])
+    K = np.array([[260.0, 0, 63.5], [0, 260.0, 63.5], [0, 0, 1]])
+    centre = out.joints[0, 9].numpy()
+    camera = (np.eye(3), np.array([0.0, 0.0, 0.4]) - centre, K)
+    return hand, out, ball, scene, camera
+
+
+def test_a_composed_scene_renders_with_masks_and_vr_of_its_own_camera():
+    from handmesh_tutorial.render.camera import project
+    from handmesh_tutorial.scenes import render_scene
+
+    _, out, ball, scene, camera = _composed()
+    assert scene.target == 1 and [b.label for b in scene.bodies] == [1, 2]
+    assert len(scene.body(1).cylinders) == 20 and len(scene.body(2).cylinders) == 1
+    s = render_scene(scene, 0, 128, camera=camera, photo_prob=0.0)
+    hand_alone, ball_alone = s["alone_masks"][1], s["alone_masks"][2]
+    # the ball is in front: the hand's VR is its pixels the ball leaves uncovered
+    want = 1.0 - (hand_alone & ball_alone).sum() / hand_alone.sum()
+    assert 0.3 < want < 0.99 and s["vr"][2] == 1.0
+    assert s["vr"][1] == pytest.approx(want, abs=0.01)
+    # the ball's silhouette: pixels within its projected radius (independent of the renderer)
+    R, t, K = camera
+    c = project((ball.vertices.mean(0) @ R.T + t)[None], K)[0]
+    depth = (ball.vertices.mean(0) @ R.T + t)[2]
+    rad = K[0, 0] * 0.025 / np.sqrt(depth**2 - 0.025**2)
+    v, u = np.mgrid[:128, :128]
+    disc = (u - c[0]) ** 2 + (v - c[1]) ** 2 <= rad**2
+    iou = (disc & ball_alone).sum() / (disc | ball_alone).sum()
+    assert iou > 0.93
+    np.testing.assert_allclose(s["joints"][1], out.joints[0].numpy() @ R.T + t, atol=1e-6)
+
+
+def test_make_samples_retries_a_seed_whose_scene_cannot_be_made(monkeypatch):
+    import handmesh_tutorial as hmt
+    from handmesh_tutorial.scenes import InteractionError
+    from handmesh_tutorial.scenes import sample as S
+
+    tried = []
+
+    def fake(seed, kind="hand-hand", image_size=224, **kw):
+        tried.append(seed)
+        if len(tried) % 2:  # every first try of a sample fails
+            raise InteractionError(kind, seed, "no contact")
+        return {"image": np.zeros((image_size, image_size, 3), np.uint8)}
+
+    monkeypatch.setattr(S, "make_sample", fake)
+    got = S.make_samples(2, seed=9, kind="hand-object", image_size=32)
+    seeds = [hmt.data.sample_seed(9, i, a) for i in range(2) for a in range(2)]
+    assert tried == seeds and [g["attempt"] for g in got] == [1, 1]
+    assert [g["seed"] for g in got] == [seeds[1], seeds[3]]
+    monkeypatch.setattr(S, "make_sample", lambda *a, **k: (_ for _ in ()).throw(
+        InteractionError("hand-hand", 0, "never")))
+    with pytest.raises(InteractionError, match="3 seeds failed.*never"):
+        S.make_samples(1, seed=1, max_attempts=3)
+
+
+def test_network_input_of_a_sample_is_predict_hands_crop():
+    import handmesh_tutorial as hmt
+    from handmesh_tutorial.render.camera import project
+    from handmesh_tutorial.scenes import render_scene
+
+    _, out, _, scene, camera = _composed()
+    s = render_scene(scene, 1, 128, camera=camera)
+    item = hmt.data.InterSHTorchDataset.network_input(s, 128)
+    uv = project(s["meshes"][1][0].astype(np.float64), s["K"])
+    box = (*uv.min(0), *uv.max(0))
+    crop = hmt.inference.crop_hand(s["image"], box, "right", image_size=128, K=s["K"])
+    np.testing.assert_allclose(item["image"].numpy(), crop.image.numpy(), atol=1e-5)

@@ -244,10 +244,11 @@ def test_spiralconv_init_buffer_and_grad():
 def test_spiralconv_shape_errors():
     idx = spiral_indices(MESHES["grid"], 9)
     conv = SpiralConv(4, 6, idx)
-    with pytest.raises(ValueError, match=r"expects input \(B, 49, 4\), got \(2, 48, 4\)"):
+    with pytest.raises(ValueError, match=r"expects input \(B, 49, 4\) or \(49, 4\), got \(2, 48"):
         conv(torch.zeros(2, 48, 4))
-    with pytest.raises(ValueError, match=r"got \(49, 4\)"):
-        conv(torch.zeros(49, 4))
+    assert conv(torch.zeros(49, 4)).shape == (49, 6)  # one mesh, unbatched (issue 54)
+    with pytest.raises(ValueError, match=r"got \(49, 5\)"):
+        conv(torch.zeros(49, 5))
     with pytest.raises(ValueError, match=r"indices must have shape \(V, L\)"):
         SpiralConv(4, 6, idx[0])
     with pytest.raises(ValueError, match="indices must lie in"):

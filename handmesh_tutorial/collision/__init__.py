@@ -22,6 +22,10 @@ re-exported here, so ``hmt.collision.cylinders_intersect`` and
   [`hand_cylinders`][handmesh_tutorial.collision.hand_proxies.hand_cylinders],
   [`fit_cylinders`][handmesh_tutorial.collision.hand_proxies.fit_cylinders],
   [`coverage`][handmesh_tutorial.collision.hand_proxies.coverage].
+* ``skin``: finger against finger over a batch of poses, with the proxies
+  ([`finger_collisions`][handmesh_tutorial.collision.skin.finger_collisions]) and on the skin
+  ([`skin_collisions`][handmesh_tutorial.collision.skin.skin_collisions], python-fcl or an exact
+  triangle test), and what each is for.
 * ``_numba`` (private, the default when numba imports): compiled mirrors of the exact kernels;
   ``_common`` (private): input checks, tolerances, vector kernels, the backend switch.
 """
@@ -50,6 +54,7 @@ from .queries import (
     colliding_pairs,
     self_collisions,
 )
+from .skin import finger_collisions, finger_of_vertices, skin_collisions, triangles_intersect
 
 BACKEND: str = "auto"
 """Which implementation the exact tests use: ``"auto"`` (the default: the compiled kernels of
@@ -73,11 +78,15 @@ __all__ = [
     "coverage",
     "cylinders_intersect",
     "distance_bounds",
+    "finger_collisions",
+    "finger_of_vertices",
     "hand_cylinders",
     "point_cylinder_distance",
     "project_to_cylinder",
     "ring_cylinders",
     "segment_segment_distance",
+    "skin_collisions",
+    "triangles_intersect",
     "self_collisions",
     "sphere_cylinder_intersect",
 ]

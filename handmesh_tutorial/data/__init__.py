@@ -99,6 +99,4 @@ def __getattr__(name: str):
         return getattr(importlib.import_module(f"{__name__}.torch_views"), name)
     if name in _PLUMBING:  # not public, still importable from here
         return getattr(importlib.import_module(f"{__name__}.{_PLUMBING[name]}"), name)
-    from .._aliases import moved_attribute  # 0.1's public names of plumbing, until 0.4
-
-    return moved_attribute(__name__, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

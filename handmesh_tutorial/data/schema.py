@@ -280,9 +280,3 @@ def _canonical(sample: Mapping, loc: Callable[[str], str]) -> dict:
         if isinstance(s[key], np.ndarray) and s[key].dtype.kind not in "biuf":
             raise _fail(loc(key), f"extra array of dtype {s[key].dtype} cannot be stored")
     return s
-
-
-def __getattr__(name: str):  # 0.1's public names of plumbing (``TMP_PREFIX``...), until 0.4
-    from .._aliases import moved_attribute
-
-    return moved_attribute(__name__, name)

@@ -12,6 +12,9 @@ samples. The bad-item helpers leave unreadable samples out of a run.
 This module loads torch; ``handmesh_tutorial.data`` imports it only on first use of one of its
 names, and ``handmesh_tutorial.data.augment`` re-exports them the same way. Taught in notebook 08
 ("Training").
+
+Why one file: the readers are a few lines each over the one crop of `HandCropDataset`, and the
+bad-item helpers act on those datasets; together they are the one path from a sample to a batch.
 """
 
 from __future__ import annotations
@@ -446,6 +449,25 @@ class InterSHTorchDataset(HandCropDataset):
         if ann["sides"][t] == "left" and self.mirror_left:
             v = v * np.array([-1.0, 1.0, 1.0])
         return v
+
+    @classmethod
+    def network_input(cls, sample: dict, image_size: int = 128, **kwargs) -> dict:
+        """One sample dict (``make_sample``, ``InterSHDataset(root)[i]``) -> its network input.
+
+        The evaluation crop of its target hand, without augmentation: ``item["image"]``
+        ``(3, S, S)`` float32 (``x / 255 - 0.5``, a left hand mirrored), so
+        ``net(item["image"][None])`` runs the network on it; ``vertices``, ``joints``
+        (root-relative, metres) are its targets in the crop's frame.
+
+        Args:
+            sample: an INTER-SH sample dict.
+            image_size: crop side (the shipped network's 128).
+            **kwargs: ``box_scale``, ``mirror_left``, ``crop`` (see the class).
+
+        Returns:
+            The item dict of ``InterSHTorchDataset([sample], image_size, train=False)[0]``.
+        """
+        return cls([sample], image_size, train=False, **kwargs)[0]
 
     def vr_values(self) -> np.ndarray:
         """Target VR of every item (reads only ``annotation.json`` for an on-disk root)."""

@@ -25,6 +25,9 @@ why and how fast: docs page "The network".
 Taught in notebook 07 ("The multi-path decoder"); its section 4 writes the coarse-mesh
 transformer from scratch and draws the shipped network's attention weights.
 
+Why one file: every block here is built on the same two parts, the spiral convolution and the
+fixed vertex map, and reads next to them.
+
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from torch import nn
 from .spiral import SpiralConv
 
 __all__ = [
-    "SparseVertexMap", "compose_up", "compose_down", "channel_map", "ResSpiralBlock",
+    "SparseVertexMap", "Pool", "compose_up", "compose_down", "channel_map", "ResSpiralBlock",
     "MultiResolutionGroupConv", "MultiResolutionFusion", "TransformerBlock",
     "CoarseMeshTransformer",
 ]
@@ -162,13 +165,16 @@ class SparseVertexMap(nn.Module):
         """Apply the map.
 
         Args:
-            x: features ``(B, V_in, C)``.
+            x: features ``(B, V_in, C)``, or ``(V_in, C)`` for one mesh.
 
         Returns:
-            ``(B, V_out, C)``.
+            ``(B, V_out, C)`` (``(V_out, C)`` for an unbatched input).
         """
+        if x.dim() == 2 and x.shape[0] == self.in_vertices:
+            return self.forward(x[None])[0]
         if x.dim() != 3 or x.shape[1] != self.in_vertices:
-            raise ValueError(f"expected features (B, {self.in_vertices}, C), got {tuple(x.shape)}")
+            raise ValueError(f"expected features (B, {self.in_vertices}, C) or "
+                             f"({self.in_vertices}, C), got {tuple(x.shape)}")
         if self.is_selection:
             return x.index_select(1, self.index[:, 0])
         if self.method == "csr" and not _tracing():
@@ -212,6 +218,34 @@ class SparseVertexMap(nn.Module):
     def extra_repr(self) -> str:
         kind = "selection" if self.is_selection else f"K={self.nnz_per_row}, {self.method}"
         return f"{self.in_vertices} -> {self.out_vertices} vertices, {kind}"
+
+
+class Pool(SparseVertexMap):
+    """SpiralNet++'s ``Pool(x, trans)`` as a layer: a mesh hierarchy's down- or upsampling map.
+
+    ``Pool(hier.down[l])`` maps features of level ``l`` to level ``l + 1`` (a selection of the
+    kept vertices), ``Pool(hier.up[l])`` maps level ``l + 1`` back to ``l`` (closest-triangle
+    barycentric weights): ``y[b, i] = sum_k M[i, k] x[b, k]``, what SpiralNet++'s
+    ``Pool(x, trans)`` computes with ``torch_scatter``. The same layer as
+    [`SparseVertexMap`][handmesh_tutorial.nn.blocks.SparseVertexMap] (the decoders' maps), under
+    the name SpiralNet++ and HandMesh code uses.
+
+    Args:
+        matrix: ``(V_out, V_in)`` scipy sparse matrix (``hier.down[l]``, ``hier.up[l]``) or array.
+
+    Shape:
+        ``(B, V_in, C)`` -> ``(B, V_out, C)``; an unbatched ``(V_in, C)`` -> ``(V_out, C)``.
+
+    Examples:
+        >>> import torch, trimesh
+        >>> from handmesh_tutorial.nn.hierarchy import mesh_hierarchy
+        >>> ico = trimesh.creation.icosphere(subdivisions=2)
+        >>> hier = mesh_hierarchy(ico.vertices, ico.faces, factors=(2,), use_cache=False)
+        >>> down, up = Pool(hier.down[0]), Pool(hier.up[0])
+        >>> x = torch.as_tensor(ico.vertices, dtype=torch.float32)  # (162, 3) one mesh
+        >>> down(x).shape, up(down(x)).shape
+        (torch.Size([81, 3]), torch.Size([162, 3]))
+    """
 
 
 def compose_up(up: Sequence, fine: int, coarse: int) -> sp.csr_matrix:

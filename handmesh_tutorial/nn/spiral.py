@@ -341,7 +341,7 @@ class SpiralConv(nn.Module):
             non-persistent buffer, so ``.to(device)`` moves it and checkpoints do not contain it.
 
     Shape:
-        input (B, V, Cin) -> output (B, V, Cout).
+        input (B, V, Cin) -> output (B, V, Cout); an unbatched (V, Cin) -> (V, Cout).
 
     Raises:
         ValueError: ``indices`` not (V, L) integers in ``[0, V)``; an input not (B, V, Cin).
@@ -355,6 +355,8 @@ class SpiralConv(nn.Module):
         Linear(in_features=21, out_features=8, bias=True)
         >>> conv(torch.zeros(2, 12, 3)).shape
         torch.Size([2, 12, 8])
+        >>> conv(torch.zeros(12, 3)).shape  # one mesh, unbatched
+        torch.Size([12, 8])
     """
 
     def __init__(self, in_channels: int, out_channels: int, indices):
@@ -384,13 +386,16 @@ class SpiralConv(nn.Module):
         """Apply the convolution.
 
         Args:
-            x: (B, V, Cin) vertex features.
+            x: (B, V, Cin) vertex features, or (V, Cin) for one mesh.
 
         Returns:
-            (B, V, Cout) vertex features.
+            (B, V, Cout) vertex features ((V, Cout) for an unbatched input).
         """
+        if x.dim() == 2 and x.shape == (self.num_vertices, self.in_channels):
+            return self.forward(x[None])[0]
         if x.dim() != 3 or x.shape[1] != self.num_vertices or x.shape[2] != self.in_channels:
             raise ValueError(f"SpiralConv expects input (B, {self.num_vertices}, "
+                             f"{self.in_channels}) or ({self.num_vertices}, "
                              f"{self.in_channels}), got {tuple(x.shape)}")
         b = x.shape[0]
         # One index_select over the flattened spiral table: (B, V*L, Cin) -> (B, V, L*Cin).

@@ -79,9 +79,3 @@ __all__ = [
     "scene_lights",
     "srgb_to_linear",
 ]
-
-
-def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.4
-    from .._aliases import moved_attribute
-
-    return moved_attribute(__name__, name)

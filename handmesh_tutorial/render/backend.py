@@ -133,9 +133,3 @@ def _keep_egl_display(platform: Any) -> None:
             platform._egl_display = None
 
     platform.delete_context = delete_context
-
-
-def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.4
-    from .._aliases import moved_attribute
-
-    return moved_attribute(__name__, name)

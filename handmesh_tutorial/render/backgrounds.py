@@ -323,9 +323,3 @@ def scene_background(rng: np.random.Generator | int | None, H: int, W: int | Non
     grey = (img @ np.array([0.299, 0.587, 0.114]))[..., None]
     img = grey + rng.uniform(0.3, 0.8) * (img - grey)
     return np.clip(img + 0.5, 0, 255).astype(np.uint8)
-
-
-def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.4
-    from .._aliases import moved_attribute
-
-    return moved_attribute(__name__, name)

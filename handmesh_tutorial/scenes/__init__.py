@@ -83,7 +83,8 @@ Everything is seeded: the same seed gives the same scene, to the byte.
   (notebook 04).
 * [`framing`][handmesh_tutorial.scenes.framing]: the camera of step 6, `frame_camera`,
   `camera_pose` (notebook 05).
-* [`sample`][handmesh_tutorial.scenes.sample]: step 6, `make_sample`, `render_scene` (lit by
+* [`sample`][handmesh_tutorial.scenes.sample]: step 6, `make_sample`, `make_samples` (retries
+  a seed whose scene cannot be made), `render_scene` (lit by
   `render.scene_lights`), the per-process renderer (notebook 05).
 * [`generate`][handmesh_tutorial.scenes.generate]: the dataset driver `generate_interactions`
   (``handmesh generate``, notebook 05).
@@ -101,7 +102,7 @@ from .contact import closest_points_on_triangles, mesh_contact, signed_distance
 from .framing import FRAME_FOCAL, FRAME_MARGIN, FRAME_SHARE, camera_pose, frame_camera
 from .generate import MAX_IMAGE_SIZE, MIN_IMAGE_SIZE, generate_interactions
 from .generator import build_scene
-from .sample import get_renderer, init_worker, make_sample, render_scene
+from .sample import get_renderer, init_worker, make_sample, make_samples, render_scene
 from .scene import Scene, SceneBody
 
 # A dataset's meta.json records its make_sample as "<module>.<name>" and a resumed run must
@@ -130,6 +131,7 @@ __all__ = [
     "get_renderer",
     "init_worker",
     "make_sample",
+    "make_samples",
     "mesh_contact",
     "render_scene",
     "scene_lights",

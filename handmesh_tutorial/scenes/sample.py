@@ -20,7 +20,7 @@ from .framing import FRAME_FOCAL, FRAME_MARGIN, FRAME_SHARE, frame_camera
 from .generator import build_scene
 from .scene import Scene
 
-__all__ = ["get_renderer", "init_worker", "make_sample", "render_scene"]
+__all__ = ["get_renderer", "init_worker", "make_sample", "make_samples", "render_scene"]
 
 
 _RENDERERS: dict = {}
@@ -115,10 +115,57 @@ def make_sample(sample_seed: int, kind: str = "hand-hand", image_size: int = 224
     return (sample, scene) if return_scene else sample
 
 
+def make_samples(num: int, seed: int, kind: str = "mixed", image_size: int = 224, *,
+                 max_attempts: int = 20, **kwargs) -> list[dict]:
+    """``num`` samples in memory, each retried on a new seed when its scene cannot be made.
+
+    Sample ``i`` is ``make_sample(sample_seed(seed, i, attempt))`` for the first ``attempt``
+    that raises no [`InteractionError`][handmesh_tutorial.scenes.config.InteractionError]: the
+    seeds ``generate_dataset`` draws (it also rejects implausible candidates and balances VR,
+    so its samples can differ; for a set on disk use it or ``handmesh generate``). Wrap the
+    list in [`InterSHTorchDataset`][handmesh_tutorial.data.torch_views.InterSHTorchDataset] to
+    train on it.
+
+    Args:
+        num: number of samples, >= 1.
+        seed: base seed, a non-negative integer.
+        kind: see [`make_sample`][handmesh_tutorial.scenes.sample.make_sample].
+        image_size: square image side, pixels.
+        max_attempts: seeds tried per sample before giving up.
+        **kwargs: more options of ``make_sample`` (``config``, ``limits``, ``share``, ...).
+
+    Returns:
+        The sample dicts; each has ``seed`` and ``attempt`` entries.
+
+    Raises:
+        InteractionError: a sample failed ``max_attempts`` times.
+    """
+    from ..data import sample_seed
+
+    if isinstance(num, bool) or not isinstance(num, int) or num < 1 or max_attempts < 1:
+        raise ValueError(f"num and max_attempts must be integers >= 1, got {num!r}, "
+                         f"{max_attempts!r}")
+    out = []
+    for i in range(num):
+        for attempt in range(max_attempts):
+            s = sample_seed(seed, i, attempt)
+            try:
+                sample = make_sample(s, kind, image_size, **kwargs)
+            except InteractionError as e:
+                last = e
+                continue
+            out.append({**sample, "seed": s, "attempt": attempt})
+            break
+        else:
+            raise InteractionError(kind, seed, f"sample {i}: {max_attempts} seeds failed, the "
+                                   f"last with: {last.reason}")
+    return out
+
+
 def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
                  occluder_view: float = 0.4, *, share: tuple[float, float] = FRAME_SHARE,
                  focal: tuple[float, float] = FRAME_FOCAL, margin: float = FRAME_MARGIN,
-                 photo_prob: float = PHOTO_PROB) -> dict:
+                 photo_prob: float = PHOTO_PROB, camera=None) -> dict:
     """Step 6: place a camera, render a scene and measure visibility; the dataset sample dict.
 
     **Camera** ([`frame_camera`][handmesh_tutorial.scenes.framing.frame_camera]): it looks at the
@@ -148,6 +195,11 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
         focal: (min, max) focal length as a multiple of the image side.
         margin: free border around the target hand, as a fraction of the image side.
         photo_prob: probability of a photograph (else a procedural texture) as background.
+        camera: ``(R, t, K)``, a camera of one's own instead of the drawn one: world to camera
+            ``x -> R x + t`` (OpenCV frame, metres) and the (3, 3) intrinsics of the
+            ``image_size`` image (e.g. for a scene of
+            [`Scene.compose`][handmesh_tutorial.scenes.scene.Scene.compose]); lights and
+            background are still drawn from ``rng``.
 
     Returns:
         A sample for
@@ -186,9 +238,12 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
     # view (or behind its own forearm); the first good view is used (same bytes as long as it
     # is the first one).
     missing = None
-    for _ in range(10):
-        R, t, K = frame_camera(tb.vertices, rng, image_size, toward=toward, share=share,
-                               focal=focal, margin=margin, avoid=avoid)
+    for _ in range(1 if camera is not None else 10):
+        if camera is None:
+            R, t, K = frame_camera(tb.vertices, rng, image_size, toward=toward, share=share,
+                                   focal=focal, margin=margin, avoid=avoid)
+        else:
+            R, t, K = (np.asarray(c, np.float64) for c in camera)
         meshes = scene.render_meshes(R, t)
         if min(m[0][:, 2].min() for m in meshes) <= 0.05:  # something behind the camera
             continue
@@ -222,7 +277,7 @@ def render_scene(scene: Scene, rng, image_size: int = 224, renderer=None,
         "meshes": {b.label: ((b.vertices @ R.T + t).astype(np.float32), b.faces.astype(np.int32))
                    for b in scene.bodies},
         "joints": {b.label: (b.joints @ R.T + t).astype(np.float32) for b in hands},
-        "pose": {b.label: b.pose.astype(np.float32) for b in hands},
+        "pose": {b.label: b.pose.astype(np.float32) for b in hands if b.pose is not None},
         "K": K,
         "vr": vr,
         "kind": scene.kind,

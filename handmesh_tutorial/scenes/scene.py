@@ -1,5 +1,11 @@
 """A generated scene before rendering: `Scene` and its `SceneBody`s (world frame, metres).
 
+A scene of one's own needs none of the generator's fields:
+``Scene.compose([SceneBody.from_hand(out, side="left", label=1), SceneBody.from_mesh(v, f,
+label=2)])`` fills the collision cylinders, colours and joints, and
+[`render_scene`][handmesh_tutorial.scenes.sample.render_scene] (with ``camera=`` for a camera of
+one's own) renders it with its label masks and visibility ratios. Docs page "For researchers".
+
 Taught in notebook 04 ("Generating interactions").
 """
 
@@ -66,6 +72,91 @@ class SceneBody:
     tone: int | None = None
     normals: np.ndarray | None = None
 
+    @classmethod
+    def from_mesh(cls, vertices, faces, *, label: int, name: str = "object",
+                  color=(0.7, 0.7, 0.7), colors=None) -> SceneBody:
+        """A body of one's own mesh (an object): one collision cylinder around it.
+
+        Args:
+            vertices: (V, 3) world coordinates, metres (numpy, torch or ``trimesh`` arrays).
+            faces: (F, 3) int triangles.
+            label: its label in the masks (>= 1; 1 is the target hand of generated scenes).
+            name: a name for the sample's ``names``.
+            color: one linear RGB colour in [0, 1] for every vertex (when ``colors`` is None).
+            colors: (V, 3) per-vertex RGB in [0, 1].
+
+        Returns:
+            A [`SceneBody`][handmesh_tutorial.scenes.scene.SceneBody] of kind ``"object"``;
+            its ``cylinders`` hold one cylinder along the mesh's principal axis that contains
+            every vertex.
+        """
+        v = _array(vertices, np.float64, "vertices")
+        f = _array(faces, np.int64, "faces")
+        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+            raise ValueError(f"vertices must be (V, 3) and faces (F, 3), got {v.shape}, {f.shape}")
+        if int(label) < 1:
+            raise ValueError(f"label must be >= 1 (0 is the background), got {label}")
+        c = np.broadcast_to(np.asarray(color if colors is None else colors, np.float64),
+                            v.shape).copy()
+        centre = v.mean(0)
+        axis = np.linalg.svd(v - centre, full_matrices=False)[2][0]
+        along = (v - centre) @ axis
+        radial = np.linalg.norm(v - centre - along[:, None] * axis, axis=1)
+        cyl = Cylinders((centre + along.min() * axis)[None], (centre + along.max() * axis)[None],
+                        [max(float(radial.max()), 1e-4)], names=(name,))
+        return cls(label=int(label), name=name, kind="object", side=None, vertices=v, faces=f,
+                   colors=c, cylinders=cyl, dynamic=False)
+
+    @classmethod
+    def from_hand(cls, output_or_vertices, joints=None, *, side: str, label: int, model=None,
+                  index: int = 0, tone: int | None = 2, faces=None) -> SceneBody:
+        """A body of a hand: a [`HandModel`][handmesh_tutorial.hand.HandModel] output (or its
+        vertices and joints) with its 20 collision cylinders and skin colours.
+
+        Args:
+            output_or_vertices: the model's output (``.vertices`` (B, V, 3), ``.joints``) or
+                (V, 3) / (B, V, 3) vertices, metres, world frame.
+            joints: (21, 3) FreiHAND keypoints when vertices are passed.
+            side: ``"left"`` or ``"right"``.
+            label: its label in the masks (>= 1).
+            model: the hand model (its faces and skinning weights; default ``HandModel(side)``).
+            index: which pose of a batch.
+            tone: skin tone, an index into
+                [`SKIN_TONES`][handmesh_tutorial.hand.appearance.SKIN_TONES].
+            faces: (F, 3) faces (default: the model's).
+
+        Returns:
+            A [`SceneBody`][handmesh_tutorial.scenes.scene.SceneBody] of kind ``"hand"``.
+        """
+        from ..collision import hand_cylinders
+        from ..hand import HandModel
+        from ..hand.appearance import plain_skin_colors
+
+        if side not in ("left", "right"):
+            raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+        if int(label) < 1:
+            raise ValueError(f"label must be >= 1 (0 is the background), got {label}")
+        model = HandModel(side) if model is None else model
+        v = _array(getattr(output_or_vertices, "vertices", output_or_vertices), np.float64,
+                   "vertices")
+        j = _array(getattr(output_or_vertices, "joints", None) if joints is None else joints,
+                   np.float64, "joints")
+        v, j = (v[index] if v.ndim == 3 else v), (j[index] if j.ndim == 3 else j)
+        cyl = hand_cylinders(v, j, model)
+        f = np.asarray(model.faces if faces is None else faces, dtype=np.int64)
+        colors = plain_skin_colors(len(v), tone)
+        return cls(label=int(label), name=f"{side}_hand", kind="hand", side=side, vertices=v,
+                   faces=f, colors=np.asarray(colors, np.float64), cylinders=cyl, joints=j,
+                   dynamic=False, tone=tone)
+
+
+def _array(x, dtype, name: str) -> np.ndarray:
+    if x is None:
+        raise ValueError(f"{name} is required")
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().numpy()
+    return np.asarray(x, dtype=dtype)
+
 
 @dataclass
 class Scene:
@@ -95,6 +186,33 @@ class Scene:
     approach: np.ndarray
     stats: dict
     history: list | None = None
+
+    @classmethod
+    def compose(cls, bodies, *, target: int | None = None, kind: str = "composed") -> Scene:
+        """A scene of one's own bodies (no generator): render it with
+        [`render_scene`][handmesh_tutorial.scenes.sample.render_scene].
+
+        Args:
+            bodies: [`SceneBody`][handmesh_tutorial.scenes.scene.SceneBody]s with distinct
+                labels (``SceneBody.from_hand``, ``SceneBody.from_mesh``).
+            target: the label the camera frames (default: the first hand's, else the first
+                body's).
+            kind: the scene's ``kind`` string (the sample's ``kind``).
+
+        Returns:
+            The [`Scene`][handmesh_tutorial.scenes.scene.Scene], bodies in label order,
+            ``approach`` zero, ``stats`` empty.
+        """
+        bodies = sorted(bodies, key=lambda b: b.label)
+        labels = [b.label for b in bodies]
+        if not bodies or len(set(labels)) != len(labels):
+            raise ValueError(f"bodies need distinct labels, got {labels}")
+        if target is None:
+            target = next((b.label for b in bodies if b.kind == "hand"), labels[0])
+        if target not in labels:
+            raise ValueError(f"target {target} is not one of the labels {labels}")
+        return cls(kind=kind, seed=None, bodies=bodies, target=int(target),
+                   approach=np.zeros(3), stats={})
 
     def body(self, label: int) -> SceneBody:
         """The body with this label."""

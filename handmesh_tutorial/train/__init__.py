@@ -73,9 +73,3 @@ __all__ = [
     "mean_hand", "REST_HAND", "MEAN_HAND", "METRIC_COLUMNS", "RESUMABLE_KEYS",
     "linear_readout", "fit_linear_readout", "LINEAR_READOUT",
 ]
-
-
-def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.4
-    from .._aliases import moved_attribute
-
-    return moved_attribute(__name__, name)

@@ -288,9 +288,3 @@ def _write_logs(out: Path, history: list[dict], step_losses: list[float], durabl
     _write_csv(out / "metrics.csv", history, METRIC_COLUMNS, durable)
     _write_csv(out / "steps.csv", [{"step": i + 1, "loss": x} for i, x in enumerate(step_losses)],
                ("step", "loss"), durable)
-
-
-def __getattr__(name: str):  # 0.1's public names of plumbing, private since 0.2, until 0.4
-    from .._aliases import moved_attribute
-
-    return moved_attribute(__name__, name)

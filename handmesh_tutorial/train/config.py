@@ -138,6 +138,11 @@ class TrainConfig:
             statistics stay fixed (0: trained from the first step; ``>= epochs``: frozen
             throughout).
         encoder_lr_scale: the encoder's learning rate as a share of ``lr`` once it trains.
+        train_only: names of the network's parts that train (its child modules: ``encoder``,
+            ``latent_to_mesh``, ``transformer``, ``decoder``, ...); every other weight stays
+            fixed for the whole run, BatchNorm statistics included. ``("decoder",)`` fine-tunes
+            the mesh decoder alone, e.g. of ``init="pretrained"``. ``None``: everything trains
+            (as ``freeze_encoder`` says).
     """
 
     data: str | None = None
@@ -182,6 +187,7 @@ class TrainConfig:
     init_encoder: str | None = None
     freeze_encoder: int = 0
     encoder_lr_scale: float = 1.0
+    train_only: tuple[str, ...] | None = None
 
     def __post_init__(self):
         for name in ("data", "val_data", "template", "init", "init_encoder"):
@@ -226,6 +232,12 @@ class TrainConfig:
                 or self.freeze_encoder < 0:
             raise ValueError(f"freeze_encoder must be an integer >= 0 (epochs), got "
                              f"{self.freeze_encoder!r}")
+        if self.train_only is not None:
+            names = (self.train_only,) if isinstance(self.train_only, str) else self.train_only
+            self.train_only = tuple(str(n) for n in names)
+            if not self.train_only:
+                raise ValueError("train_only must name at least one part of the network (e.g. "
+                                 "('decoder',)), or be None to train everything")
         if not self.encoder_lr_scale >= 0:
             raise ValueError(f"encoder_lr_scale must be >= 0, got {self.encoder_lr_scale}")
         if self.num_workers < 0:
@@ -329,6 +341,7 @@ class TrainConfig:
         """Plain JSON-able dict (tuples become lists)."""
         d = asdict(self)
         d["channels"] = None if self.channels is None else list(self.channels)
+        d["train_only"] = None if self.train_only is None else list(self.train_only)
         return d
 
     @classmethod

@@ -31,6 +31,9 @@ What the loop guarantees:
   and step (before the optimiser step, so the last checkpoint stays good).
 
 Taught in notebook 08 ("Training").
+
+Why one file: resume, DDP, the frozen parts and the checkpoints all act on the one run's state
+(network, optimiser, sampler, history) inside `train`; apart, each would take that state whole.
 """
 
 from __future__ import annotations
@@ -342,7 +345,9 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         train_ds, val_ds, skipped = _skip_bad_items(train_ds, val_ds, config.progress and is_main)
         if is_main:
             write_json(out / "skipped.json", {"skipped": skipped})
-    if config.freeze_encoder >= config.epochs and world == 1 and is_deterministic(train_ds) \
+    fixed = _fixed_parts(net, config)  # train_only: the parts that never train
+    encoder_fixed = config.freeze_encoder >= config.epochs or "encoder" in fixed
+    if encoder_fixed and world == 1 and is_deterministic(train_ds) \
             and (val_ds is None or is_deterministic(val_ds)):
         # frozen throughout and no augmentation: each crop's features are the same every epoch
         kw = dict(batch_size=config.val_batch_size or 64, progress=config.progress and is_main)
@@ -354,7 +359,9 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         raise ValueError(f"training targets have vertices {got}, the template has ({n_vert}, 3):"
                          " train with the template of the data (TrainConfig.template)")
 
-    if config.freeze_encoder >= config.epochs:  # before DDP: it then syncs the trained part only
+    for part in fixed.values():  # before DDP: it then syncs the trained parts only
+        part.requires_grad_(False)
+    if encoder_fixed:
         net.encoder.requires_grad_(False)
     elif world > 1 and config.freeze_encoder:
         raise ValueError(f"freeze_encoder={config.freeze_encoder} of {config.epochs} epochs: under "
@@ -386,11 +393,13 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
             generator=torch.Generator().manual_seed(config.seed * 100003 + epoch))
         model.train()
         frozen = epoch < config.freeze_encoder
-        if config.freeze_encoder:
+        if config.freeze_encoder and "encoder" not in fixed:
             # frozen: no gradients (Adam skips the weights) and fixed BatchNorm statistics
             net.encoder.requires_grad_(not frozen)
             if frozen:
                 net.encoder.eval()
+        for part in fixed.values():  # train_only: fixed weights and BatchNorm statistics
+            part.eval()
         lr = opt.param_groups[0]["lr"]
         losses = []
         bar = progress_bar(loader, desc=f"epoch {epoch + 1}/{config.epochs}", per="epoch",
@@ -450,6 +459,18 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         history=history, step_losses=step_losses, final=dict(history[-1]) if history else {},
         epochs=done, steps=step, seconds=time.perf_counter() - t_start, model=net, rank=rank,
         world_size=world, skipped=skipped)
+
+
+def _fixed_parts(net: nn.Module, config: TrainConfig) -> dict[str, nn.Module]:
+    """The network's child modules that ``config.train_only`` leaves out (none without it)."""
+    if config.train_only is None:
+        return {}
+    parts = dict(net.named_children())
+    unknown = sorted(set(config.train_only) - set(parts))
+    if unknown:
+        raise ValueError(f"train_only names {unknown}, which this network does not have; its "
+                         f"parts are {sorted(parts)}")
+    return {k: m for k, m in parts.items() if k not in config.train_only}
 
 
 def _param_groups(net: nn.Module, config: TrainConfig) -> list[dict]:

@@ -43,7 +43,7 @@ re-exported here, so ``hmt.nn.hierarchy.mesh_hierarchy`` and
 
 from __future__ import annotations
 
-# ALGORITHM_VERSION, default_cache_dir, to_torch_sparse: not public, importable as in 0.1
+# ALGORITHM_VERSION, default_cache_dir: not public, importable as in 0.1
 from .hierarchy import (  # noqa: F401
     ALGORITHM_VERSION,
     MeshHierarchy,
@@ -59,5 +59,6 @@ __all__ = [
     "decimate",
     "mesh_hierarchy",
     "selection_matrix",
+    "to_torch_sparse",
     "vertex_quadrics",
 ]

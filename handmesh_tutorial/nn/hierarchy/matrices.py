@@ -13,7 +13,7 @@ import trimesh
 
 from ._common import _check_mesh
 
-__all__ = ["selection_matrix", "barycentric_upsampling"]
+__all__ = ["selection_matrix", "barycentric_upsampling", "to_torch_sparse"]
 
 
 def selection_matrix(kept, num_fine: int) -> sp.csr_matrix:
@@ -112,6 +112,16 @@ def to_torch_sparse(matrix: sp.spmatrix, dtype=None):
 
     Shapes:
         ``(M, N)`` scipy sparse -> ``(M, N)`` torch sparse COO.
+
+    For a layer that applies such a map to batched ``(B, N, C)`` features (and exports to
+    ONNX), use [`Pool`][handmesh_tutorial.nn.blocks.Pool].
+
+    Examples:
+        >>> import numpy as np, scipy.sparse as sp, torch
+        >>> m = sp.csr_matrix(np.array([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0]]))
+        >>> torch.sparse.mm(to_torch_sparse(m), torch.ones(3, 2))
+        tensor([[1., 1.],
+                [1., 1.]])
     """
     import torch
 
