@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .files import _read_json, _read_target, read_annotation, read_sample
+from .files import _own_folder, _read_json, _read_target, read_annotation, read_sample
 from .schema import (
     FORMAT_NAME,
     KINDS,
@@ -71,12 +71,13 @@ def read_meta(root: str | os.PathLike) -> dict:
 
 
 def _present(samples_dir: Path, width: int) -> list[int]:
-    """Indices of the sample folders in ``samples_dir``: folders named by exactly ``width`` ASCII
-    digits (`schema._sample_index`); anything else there is not a sample of the set."""
+    """Indices of the sample folders in ``samples_dir``: real folders (`files._own_folder`: a
+    link is none) named by exactly ``width`` ASCII digits (`schema._sample_index`); anything
+    else there is not a sample of the set. Every reader of a root counts samples here."""
     if not samples_dir.is_dir():
         return []
     found = ((_sample_index(p.name, width), p) for p in samples_dir.iterdir())
-    return sorted(i for i, p in found if i is not None and p.is_dir())
+    return sorted(i for i, p in found if i is not None and _own_folder(p))
 
 
 def _planned(meta: Mapping) -> list[int]:
