@@ -151,6 +151,15 @@ def fsync_dir(path: str | os.PathLike) -> None:
             os.close(fd)
 
 
+def _new_file_mode() -> int:
+    """The mode ``open()`` gives a new file: ``0o666`` less the process's umask (``0o644`` under
+    the usual 022, ``0o600`` under 077), so an atomic write shares a file exactly as widely as
+    the user's other files (and the sample folders the generator writes)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, binary: bool = True,
                       durable: bool = True, tmp_path: str | os.PathLike | None = None) -> Path:
     """Call ``write(file)`` on a temporary file beside ``path``, then rename it to ``path``.
@@ -165,7 +174,8 @@ def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, bi
             ``.<name>.<random>.tmp`` (the form `leftover_temporaries` finds).
 
     Returns:
-        The written path.
+        The written path, with the mode a new file gets under the user's umask (``0o644``
+        under 022, ``0o600`` under 077).
 
     Raises:
         OSError: the write failed (full disk, read-only or forbidden folder); the error names
@@ -186,7 +196,7 @@ def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, bi
             if durable:
                 fh.flush()
                 os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; outputs are meant to be shared
+        os.chmod(tmp, _new_file_mode())  # mkstemp creates 0600: as open() would, by umask
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
