@@ -26,7 +26,7 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
            "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer",
            "EnvironmentFailure", "names_path", "check_writable", "claim_out_dir", "out_marker",
-           "json_record", "remove_outputs", "file_identity"]
+           "json_record", "remove_outputs", "file_identity", "is_locked"]
 
 
 _TMP_SUFFIX = ".tmp"
@@ -109,6 +109,29 @@ def single_writer(lock_file: str | os.PathLike, what: str):
             yield
         finally:
             fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+def is_locked(lock_file: str | os.PathLike) -> bool:
+    """Whether another process holds `single_writer`'s lock on ``lock_file`` now (a reader's
+    question: nothing is created, a link or a missing file is no lock)."""
+    try:
+        import fcntl
+    except ImportError:
+        return False
+    try:
+        fd = os.open(lock_file, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0)
+                     | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    else:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
     finally:
         os.close(fd)
 

@@ -223,3 +223,77 @@ def test_a_finished_command_does_not_fail_on_a_terminal_that_cannot_show_its_out
                           "--no-progress"], capture_output=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr.decode("ascii", "replace")
     assert b"donn\\xe9es: 2 samples read, 0 bad" in out.stdout, out.stdout
+
+
+# ------------------------------------------------------------------ partial roots are said
+
+def _partial(root, tmp_path, gone=(1, 3)):
+    import shutil
+
+    copy = tmp_path / "partial"
+    shutil.copytree(root, copy)
+    for i in gone:
+        shutil.rmtree(copy / "samples" / f"{i:06d}")
+    return copy
+
+
+def test_verify_fails_when_planned_samples_are_missing(root, tmp_path, capsys):
+    import json
+    import shutil
+
+    part = _partial(root, tmp_path)
+    assert cli.main(["verify", str(part), "--no-progress"]) == cli.EXIT_CODES["bad-input"]
+    out = capsys.readouterr().out
+    assert "6 samples read, 0 bad, 2 of 8 planned samples missing (first [1, 3])" in out, out
+    assert cli.main(["verify", str(part), "--no-progress", "--remove-bad"]) == 0  # a repair
+    assert "to write the missing samples" in capsys.readouterr().out
+    shutil.rmtree(part / "samples")
+    (part / "samples").write_text("not a folder")
+    assert cli.main(["verify", str(part), "--no-progress"]) == 3
+    assert "8 of 8 planned samples missing" in capsys.readouterr().out
+    (part / "samples").unlink()
+    shutil.copytree(root / "samples", part / "samples")
+    meta = json.loads((part / "meta.json").read_text())
+    meta.update(num_samples=10**8, ranges=[[0, 10**8]])
+    (part / "meta.json").write_text(json.dumps(meta))
+    assert cli.main(["verify", str(part), "--no-progress"]) == 3
+    assert "99,999,992" not in (out := capsys.readouterr().out)
+    assert "99999992 of 100000000 planned samples missing (first [8, 9, 10, 11, 12])" in out, out
+
+
+def test_evaluate_says_it_scored_a_partial_root(root, tmp_path, capsys):
+    torch.manual_seed(0)
+    net = T.build_model_from_config(T.TrainConfig(encoder="resnet10", image_size=32,
+                                                  channels=(4, 4, 8, 8, 8),
+                                                  latent_channels=8)).eval()
+    part = _partial(root, tmp_path)
+    ev = T.evaluate(net, part, image_size=32, progress=False, baseline=False,
+                    out_dir=tmp_path / "ev")
+    assert ev["num_samples"] == 6 and ev["planned"] == 8
+    assert ev["notes"][0].startswith(f"scored 6 of 8 planned samples: {part}: 6 of 8 planned "
+                                     "samples present (first missing [1, 3]); rerun")
+    import json
+
+    assert json.loads((tmp_path / "ev" / "eval.json").read_text())["planned"] == 8
+    with _io.single_writer(part / ".generate.lock", str(part)):  # a generate is writing it
+        ev = T.evaluate(net, part, image_size=32, progress=False, baseline=False)
+    assert "a `handmesh generate` is writing it now" in ev["notes"][0]
+    ev = T.evaluate(net, root, image_size=32, progress=False, baseline=False)
+    assert ev["notes"] == [] and ev["planned"] == ev["num_samples"] == 8
+
+
+@pytest.mark.parametrize("how", ["empty", "file"])
+def test_train_on_a_root_without_samples_says_so(root, tmp_path, capsys, how):
+    import shutil
+
+    part = _partial(root, tmp_path, gone=range(8))
+    if how == "file":
+        shutil.rmtree(part / "samples")
+        (part / "samples").write_text("")
+    code = cli.main(["train", "--data", str(part), "--out", str(tmp_path / "run"), *TRAIN])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["bad-input"], err
+    assert f"no sample to train on: {part}: 0 of 8 planned samples present" in err, err
+    assert "out of range" not in err
+    if how == "file":
+        assert "samples is not a folder" in err

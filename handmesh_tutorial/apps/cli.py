@@ -203,7 +203,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .demo import BASELINE_ROW, headline
 
     sc = ev["scores"]
-    print(f"handmesh evaluate: {ev['num_samples']} samples of {args.data} (targets centred at "
+    n, planned = ev["num_samples"], ev.get("planned")
+    scored = (f"scored {n} of {planned} planned samples" if planned not in (None, n)
+              else f"{n} samples")
+    print(f"handmesh evaluate: {scored} of {args.data} (targets centred at "
           f"joint 9; '{BASELINE_ROW}' = the template's open hand for every image)")
     print(headline(sc, ev["baseline"]["scores"]))
     if "mpvpe" in sc:  # joints only when the network's mesh is not the data's (a note says so)

@@ -138,6 +138,38 @@ class InterSHDataset:
                 f"{self.meta['kinds']}, {planned - present} missing)")
 
     @property
+    def num_planned(self) -> int:
+        """How many samples ``meta.json`` plans (its ranges)."""
+        return sum(b - a for a, b in self.meta["ranges"])
+
+    def coverage(self) -> str:
+        """What a reader of this root must say about it: ``""`` when every planned sample is
+        present, else one sentence such as ``"root: 4 of 6 planned samples present (first
+        missing [1, 3]); ..."`` naming why they may be missing (``samples`` is no folder, or a
+        ``generate`` is writing the root now). Used by ``evaluate`` (a note, and "scored N of M
+        planned") and ``train`` (refused when none is present)."""
+        from .._io import is_locked
+        from .schema import _LOCK_FILE
+
+        planned = self.num_planned
+        present = sum(int(((self.indices >= a) & (self.indices < b)).sum())
+                      for a, b in self.meta["ranges"])
+        if present >= planned:
+            return ""
+        have, first = set(self.indices.tolist()), []
+        for i in (i for a, b in self.meta["ranges"] for i in range(a, b)):
+            if i not in have:
+                first.append(i)
+                if len(first) == 5:
+                    break
+        samples = self.root / SAMPLES_DIR
+        why = ("; " + f"{samples} is not a folder" if not _own_folder(samples)
+               else "; a `handmesh generate` is writing it now" if is_locked(self.root / _LOCK_FILE)
+               else "; rerun the `handmesh generate` command that made it to finish it")
+        return (f"{self.root}: {present} of {planned} planned samples present (first missing "
+                f"{first}){why}")
+
+    @property
     def missing(self) -> list[int]:
         """Global indices planned by ``meta.json`` (its ranges) but not on disk."""
         present = set(self.indices.tolist())
@@ -271,6 +303,11 @@ class VerifyReport:
         unplanned: the names in ``kept`` that are no sample ``meta.json`` plans (``2024`` or
             ``99`` beside 6-digit names, ``000007`` of a 7-sample set): ``generate`` neither
             counts them as done nor writes them, so a repair may go on beside them.
+        planned: how many samples ``meta.json`` plans (its ``ranges``).
+        missing: how many of them have no entry in ``samples/`` (a generation not finished, or
+            ``samples`` missing or a file): a check (``remove=False``) is not ``ok`` with any;
+            rerunning the ``generate`` command that made the root writes them.
+        missing_first: the first (at most five) missing indices.
     """
 
     root: Path
@@ -282,12 +319,18 @@ class VerifyReport:
     foreign: list[tuple[str, str]] = field(default_factory=list)
     error: OSError | None = field(default=None, repr=False, compare=False)
     unplanned: list[str] = field(default_factory=list)
+    planned: int = 0
+    missing: int = 0
+    missing_first: list[int] = field(default_factory=list)
+    repair: bool = field(default=False, repr=False)
 
     @property
     def ok(self) -> bool:
-        """Nothing left to fix: no disagreement, and every bad sample removed (entries that are
+        """Nothing left to fix: no disagreement, every bad sample removed, and (for a check, not
+        a repair, which leaves them to ``generate``) no planned sample missing (entries that are
         no sample, ``foreign``, do not count)."""
-        return not self.disagree and len(self.removed) == len(self.bad)
+        return (not self.disagree and len(self.removed) == len(self.bad)
+                and (self.repair or not self.missing))
 
     def disagreements(self) -> dict[str, list[str]]:
         """``{meta.json key: [folder names]}`` of the disagreements, keys in order of
@@ -310,16 +353,19 @@ class VerifyReport:
     def __str__(self) -> str:
         lines = [f"{self.root}: {self.checked} samples read, {len(self.bad)} bad"
                  + (f", {len(self.removed)} removed" if self.removed else "")
+                 + (f", {self.missing} of {self.planned} planned samples missing (first "
+                    f"{self.missing_first})" if self.missing else "")
                  + (f", {len({n for n, _, _ in self.disagree})} disagree with meta.json"
                     if self.disagree else "")
                  + (f", {len(self.foreign)} entries that are no sample (left as they are)"
                     if self.foreign else "")]
         lines += [f"  {name}: {why}" for name, why in self.bad]
         lines += [f"  {name}: not removed: {why}" for name, why in self.kept]
-        if self.removed:  # only indices meta.json plans: the generator writes exactly these
+        if self.removed or self.missing:  # only planned indices: the generator writes these
             lines.append("  rerun the `handmesh generate` command that made it (same --kind, "
-                         "--num, --seed, --image-size, --shard) to write the removed samples "
-                         "again")
+                         "--num, --seed, --image-size, --shard) to write the "
+                         + ("removed and missing" if self.removed and self.missing else
+                            "removed" if self.removed else "missing") + " samples")
         lines += [f"  {name!r}: {what}, not a sample (left as it is)"
                   for name, what in self.foreign[:20]]
         if len(self.foreign) > 20:
@@ -465,6 +511,17 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                                    "left as it is"))
             else:
                 removed.append(name)
+    names = {p.name for p in entries}
+    planned = sum(b - a for a, b in meta["ranges"])
+    here = sum(1 for n in names if _sample_index(n, width) is not None
+               and any(a <= int(n) < b for a, b in meta["ranges"]))
+    first = []
+    for i in (i for a, b in meta["ranges"] for i in range(a, b)) if here < planned else ():
+        if f"{i:0{width}d}" not in names:
+            first.append(i)
+            if len(first) == 5:
+                break
     return VerifyReport(root=root, checked=len(entries), bad=bad, removed=removed,
                         disagree=disagree, kept=kept, foreign=foreign, error=error,
-                        unplanned=unplanned)
+                        unplanned=unplanned, planned=planned, missing=planned - here,
+                        missing_first=first, repair=remove)

@@ -97,6 +97,13 @@ def _split(n: int, fraction: float, seed: int) -> tuple[list[int], list[int]]:
     return sorted(perm[n_val:].tolist()), sorted(perm[:n_val].tolist())
 
 
+def _non_empty(src: InterSHDataset) -> InterSHDataset:
+    """``src``, refused when it holds no sample (`InterSHDataset.coverage` says why)."""
+    if len(src) == 0:
+        raise ValueError(f"no sample to train on: {src.coverage()}")
+    return src
+
+
 def make_datasets(config: TrainConfig):
     """Training and validation torch datasets of a config.
 
@@ -108,20 +115,22 @@ def make_datasets(config: TrainConfig):
         augmentation.
 
     Raises:
-        ValueError: ``config.data`` is not set.
+        ValueError: ``config.data`` is not set, or an INTER-SH root has no sample (named, with
+            how many it plans and why none may be there).
     """
     if config.data is None:
         raise ValueError("TrainConfig.data is None: give a data root or pass dataset= to train()")
     common = {"image_size": config.image_size, "seed": config.seed, "cache": config.cache_data}
     if config.dataset == "intersh":
-        src = InterSHDataset(config.data)
+        src = _non_empty(InterSHDataset(config.data))
 
         def make(source, idx, train):
             return TV.InterSHTorchDataset(source, train=train, augment=config.augment and train,
                                          indices=idx, box_scale=config.box_scale, **common)
 
         if config.val_data is not None:
-            return make(src, None, True), make(InterSHDataset(config.val_data), None, False)
+            return make(src, None, True), make(_non_empty(InterSHDataset(config.val_data)), None,
+                                               False)
         tr, va = _split(len(src), config.val_fraction, config.seed)
         return make(src, tr, True), (make(src, va, False) if va else None)
 

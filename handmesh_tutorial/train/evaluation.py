@@ -292,9 +292,12 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
         ``skipped`` (``[{"index": reader index, "sample": folder name such as "000015",
         "error": message}, ...]``, the items ``skip_bad`` left out; also in ``eval.json``),
-        ``notes`` (list of str: files not written, and why). A network whose mesh is not the
-        data's (the shipped MakeHuman hand on FreiHAND's 778-vertex MANO meshes) is scored on
-        its joints only: the vertex and surface keys are absent and a note says so.
+        ``notes`` (list of str: files not written, and why; on an INTER-SH root missing
+        planned samples, "scored N of M planned samples" and why they may be missing),
+        ``planned`` (the samples the INTER-SH root's ``meta.json`` plans, else ``None``). A
+        network whose mesh is not the data's (the shipped MakeHuman hand on FreiHAND's
+        778-vertex MANO meshes) is scored on its joints only: the vertex and surface keys are
+        absent and a note says so.
 
     Shapes:
         ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
@@ -322,6 +325,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     else:
         net = checkpoint_or_model.to(dev)
         box_scale = 1.5
+    planned, coverage = None, ""
     if dataset is None:
         if data is None:
             raise ValueError("give data (a data root) or dataset")
@@ -330,6 +334,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         kind = kind or "intersh"
         if kind == "intersh":
             dataset = TV.InterSHTorchDataset(data, image_size, train=False, box_scale=box_scale)
+            planned, coverage = dataset.source.num_planned, dataset.source.coverage()
         elif kind == "freihand":
             dataset = TV.FreiHANDTorchDataset(data, split, image_size, train=False)
         else:
@@ -344,7 +349,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         skipped = [{"index": b["index"], "sample": b["sample"], "error": b["error"]}
                    for b in bad]
     if len(dataset) == 0:
-        raise ValueError("the evaluation set is empty")
+        raise ValueError(coverage.replace(" present (", " present, none to score (")
+                         if coverage else "the evaluation set is empty")
 
     r = _run_dataset(net, dataset, batch_size, dev, progress=progress, desc="evaluate")
     finite = torch.isfinite(r["pred_vertices"]).flatten(1).all(1) & \
@@ -398,8 +404,10 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
                         "frame": "camera" if camera_frame else "network"},
         "files": {},
         "skipped": skipped,
+        "planned": planned,
     }
-    result["notes"] = []
+    result["notes"] = [f"scored {len(vr)} of {planned} planned samples: {coverage}"] \
+        if coverage else []
     nv, ngt = r["pred_vertices"].shape[1], r["vertices"].shape[1]
     if nv != ngt:
         result["notes"].append(
@@ -465,7 +473,8 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict,
                    "kind_table": res["mean_hand_baseline"]["kind_table"]},
                "comparison": res["comparison"],
                "predictions_frame": res["predictions"]["frame"],
-               "skipped": res.get("skipped", [])}
+               "skipped": res.get("skipped", []), "planned": res.get("planned"),
+               "notes": res.get("notes", [])}
     write_json(files["json"], summary)
     return files
 
