@@ -19,7 +19,9 @@ import os
 import textwrap
 from dataclasses import asdict, dataclass
 
-__all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE"]
+__all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE",
+           "MAX_BATCH_SIZE", "MAX_CHANNELS", "max_threads", "max_workers", "check_count",
+           "check_threads", "check_workers"]
 
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")
@@ -52,6 +54,69 @@ def check_image_size(value, name: str = "image_size") -> int:
         raise ValueError(f"{name} must be an integer in [{MIN_IMAGE_SIZE}, {MAX_IMAGE_SIZE}] "
                          f"pixels, got {value!r}")
     return int(value)
+
+
+MAX_BATCH_SIZE = 65_536
+"""Largest batch an argument may set (the paper's is 32; a batch of 224-px crops this big
+already holds 10 GB of images). A training batch is also at most the training items
+(`train.EpochBatchSampler`)."""
+MAX_CHANNELS = 4096
+"""Largest width of a network layer a config may set (``channels``, ``latent_channels``: the
+paper's are at most 256); checked before any layer is allocated, as a checkpoint's config too."""
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def max_threads() -> int:
+    """Most CPU threads an argument may set (``--threads``): 4 x this machine's cores, at
+    least 8 (more only slice the same cores thinner, and each costs a stack)."""
+    return max(8, 4 * _cores())
+
+
+def max_workers() -> int:
+    """Most worker processes an argument may set (``--loader-workers``, ``--workers``): 2 x
+    this machine's cores, at least 4 (each is a copy of the process: hundreds of MB)."""
+    return max(4, 2 * _cores())
+
+
+def check_count(value, name: str, low: int, high: int, why: str = "") -> int:
+    """Check an integer option against ``[low, high]`` before any work or allocation.
+
+    Args:
+        value: the value.
+        name: the option's name, for the message.
+        low, high: the bounds, inclusive.
+        why: what the upper bound is (``"4 x the 2 CPU cores"``), for the message.
+
+    Returns:
+        ``value`` as an ``int``.
+
+    Raises:
+        ValueError: not an integer in the range; the message names ``name`` and the range.
+    """
+    if isinstance(value, bool) or not hasattr(value, "__index__") or not low <= int(value) <= high:
+        raise ValueError(f"{name} must be an integer in [{low}, {high:,}]"
+                         + (f" ({why})" if why else "") + f", got {value!r}")
+    return int(value)
+
+
+def check_threads(value, name: str = "threads") -> int:
+    """`check_count` of a thread count, 1 to
+    [`max_threads`][handmesh_tutorial.budget.max_threads]."""
+    return check_count(value, name, 1, max_threads(),
+                       f"at most 4 x the {_cores()} CPU cores of this machine, at least 8")
+
+
+def check_workers(value, name: str = "num_workers", low: int = 0) -> int:
+    """`check_count` of a process count, ``low`` to
+    [`max_workers`][handmesh_tutorial.budget.max_workers]."""
+    return check_count(value, name, low, max_workers(),
+                       f"at most 2 x the {_cores()} CPU cores of this machine, at least 4")
 
 
 @dataclass(frozen=True)

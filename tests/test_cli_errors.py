@@ -297,3 +297,60 @@ def test_train_on_a_root_without_samples_says_so(root, tmp_path, capsys, how):
     assert "out of range" not in err
     if how == "file":
         assert "samples is not a folder" in err
+
+
+# ------------------------------------------------------------------ sizes bounded, checked first
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--batch-size", "100000000", r"batch_size must be an integer in \[1, 65,536\] "
+                                  r"\(MAX_BATCH_SIZE\), got 100000000"),
+    ("--loader-workers", "10000", r"num_workers must be an integer in \[0, [\d,]+\] \(at most 2 x "
+                                  r"the \d+ CPU cores of this machine, at least 4\), got 10000"),
+    ("--threads", "100000", r"threads must be an integer in \[1, [\d,]+\] \(at most 4 x the \d+ "
+                            r"CPU cores"),
+    ("--lr", "inf", r"lr must be a finite number > 0, got inf"),
+    ("--lr", "nan", r"lr must be a finite number > 0, got nan"),
+    ("--encoder", "evil", r"encoder must be one of resnet10, .*got 'evil'"),
+    ("--latent-channels", "-1", r"latent_channels must be an integer in \[1, 4,096\]"),
+    ("--latent-channels", "100000000", r"latent_channels must be an integer in \[1, 4,096\]"),
+    ("--channels", "200000,4,8,8,8", r"channels must be at most 4,096 \(MAX_CHANNELS\)"),
+    ("--device", "mps", r"device 'mps': this machine has no MPS"),
+    ("--device", "cuda:99", r"device 'cuda:99': this machine has \d+ CUDA device"),
+])
+def test_train_bounds_every_size_before_any_work(root, tmp_path, capsys, option, value, says):
+    import re
+
+    if option == "--device" and value == "mps" and torch.backends.mps.is_available():
+        pytest.skip("this machine has an MPS device")
+    out = tmp_path / "run"
+    code = cli.main(["train", "--data", str(root), "--out", str(out), *TRAIN, option, value])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["bad-input"], err
+    assert re.search(says, err), err
+    assert "template" not in err and not out.exists()
+
+
+def test_a_batch_larger_than_the_training_items_is_refused_not_padded(root, tmp_path, capsys):
+    code = cli.main(["train", "--data", str(root), "--out", str(tmp_path / "run"), *TRAIN,
+                     "--batch-size", "100"])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["bad-input"], err
+    assert "batch_size 100 is more than the 7 training items" in err, err
+    with pytest.raises(ValueError, match="batch_size 7 is more than the 6 training items"):
+        T.EpochBatchSampler(6, 7)
+
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--threads", "100000", r"threads must be an integer in \[1, "),
+    ("--device", "cuda:99", r"device 'cuda:99': this machine has"),
+    ("--batch-size", "100000000", r"batch_size must be an integer in \[1, 65,536\]"),
+])
+def test_evaluate_names_the_option_not_the_checkpoint(root, tmp_path, capsys, option, value,
+                                                     says):
+    import re
+
+    code = cli.main(["evaluate", "--checkpoint", str(tmp_path / "none.pt"), "--data", str(root),
+                     "--no-progress", option, value])
+    err = capsys.readouterr().err
+    assert code == cli.EXIT_CODES["bad-input"], err
+    assert re.search(says, err) and "unreadable" not in err, err

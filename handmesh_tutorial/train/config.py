@@ -18,14 +18,22 @@ Taught in notebook 08 ("Training").
 from __future__ import annotations
 
 import copy
+import math
 import os
 import textwrap
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
+from ..budget import (
+    MAX_BATCH_SIZE,
+    MAX_CHANNELS,
+    check_count,
+    check_image_size,
+    check_threads,
+    check_workers,
+)
 from ..budget import budget as _budget
-from ..budget import check_image_size
 
 __all__ = ["TrainConfig", "changed_settings", "RESUMABLE_KEYS", "PRESETS"]
 
@@ -190,12 +198,30 @@ class TrainConfig:
                 setattr(self, name, str(v))
         self.out_dir = str(self.out_dir)
         if self.channels is not None:
+            if isinstance(self.channels, str | bytes) or not all(
+                    hasattr(c, "__index__") and not isinstance(c, bool) for c in self.channels):
+                raise ValueError(f"channels must be positive integers, got "
+                                 f"{str(self.channels)[:80]}")
             self.channels = tuple(int(c) for c in self.channels)
             if not self.channels or min(self.channels) < 1:
                 raise ValueError(f"channels must be positive integers, got {self.channels}")
-        if self.threads is not None and (isinstance(self.threads, bool)
-                                         or not isinstance(self.threads, int) or self.threads < 1):
-            raise ValueError(f"threads must be a positive integer or None, got {self.threads!r}")
+            if max(self.channels) > MAX_CHANNELS:  # before any layer is allocated
+                raise ValueError(f"channels must be at most {MAX_CHANNELS:,} (MAX_CHANNELS), got "
+                                 f"{max(self.channels):,}")
+        check_count(self.latent_channels, "latent_channels", 1, MAX_CHANNELS, "MAX_CHANNELS")
+        if self.threads is not None:
+            if isinstance(self.threads, bool) or not isinstance(self.threads, int) \
+                    or self.threads < 1:
+                raise ValueError(f"threads must be a positive integer or None, got "
+                                 f"{self.threads!r}")
+            check_threads(self.threads)
+        from ..nn.encoder import ENCODERS
+
+        if self.encoder not in ENCODERS:
+            raise ValueError(f"encoder must be one of {', '.join(ENCODERS)}, got "
+                             f"{str(self.encoder)[:40]!r}")
+        if self.decoder not in ("multi", "single"):
+            raise ValueError(f"decoder must be 'multi' or 'single', got {str(self.decoder)[:40]!r}")
         self.model_kwargs = dict(self.model_kwargs or {})
         if self.precision not in ("float32", "bfloat16"):
             raise ValueError(f"precision must be 'float32' or 'bfloat16', got {self.precision!r}")
@@ -206,11 +232,15 @@ class TrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        for name in ("batch_size", "val_batch_size"):
+            if getattr(self, name) is not None:
+                check_count(getattr(self, name), name, 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
         check_image_size(self.image_size)
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
-        if not self.lr > 0:
-            raise ValueError(f"lr must be positive, got {self.lr}")
+        if isinstance(self.lr, bool) or not isinstance(self.lr, int | float) \
+                or not math.isfinite(self.lr) or not self.lr > 0:
+            raise ValueError(f"lr must be a finite number > 0, got {self.lr!r}")
         for name in ("keypoint_weight", "aligned_weight", "edge_weight", "normal_weight"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 0:
@@ -228,8 +258,7 @@ class TrainConfig:
                              f"{self.freeze_encoder!r}")
         if not self.encoder_lr_scale >= 0:
             raise ValueError(f"encoder_lr_scale must be >= 0, got {self.encoder_lr_scale}")
-        if self.num_workers < 0:
-            raise ValueError(f"num_workers must be >= 0, got {self.num_workers}")
+        check_workers(self.num_workers)
 
     @classmethod
     def preset(cls, name: str, **overrides) -> TrainConfig:

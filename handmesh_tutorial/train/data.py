@@ -47,8 +47,8 @@ class EpochBatchSampler(torch.utils.data.Sampler):
         shuffle: permute (``False``: keep the dataset order).
 
     Raises:
-        ValueError: ``batch_size`` is not divisible by ``world_size * micro_batches`` or
-            ``n`` is 0.
+        ValueError: ``batch_size`` is not divisible by ``world_size * micro_batches``, is
+            more than ``n`` (checked before any batch is built), or ``n`` is 0.
     """
 
     def __init__(self, n: int, batch_size: int, seed: int = 0, rank: int = 0,
@@ -56,6 +56,9 @@ class EpochBatchSampler(torch.utils.data.Sampler):
         chunks = world_size * micro_batches
         if n < 1:
             raise ValueError("the training set is empty")
+        if batch_size > n:  # each batch would repeat items, and be padded item by item
+            raise ValueError(f"batch_size {batch_size} is more than the {n} training items: a "
+                             f"batch holds an item at most once; use --batch-size {n} or less")
         if batch_size % chunks:
             raise ValueError(f"batch_size {batch_size} must be divisible by world_size x "
                              f"micro_batches = {world_size} x {micro_batches} = {chunks}")

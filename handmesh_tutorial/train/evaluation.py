@@ -33,7 +33,7 @@ from .._io import (
 )
 from .._optional import require
 from .._progress import progress_bar
-from ..budget import check_image_size
+from ..budget import MAX_BATCH_SIZE, check_count, check_image_size, check_threads
 from ..data import KINDS, InterSHDataset
 from ..data import augment as A
 from ..data import torch_views as TV
@@ -305,11 +305,14 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     """
     if image_size is not None:  # before anything is read or allocated
         check_image_size(image_size)
+    check_count(batch_size, "batch_size", 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
     if threads is not None:
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
             raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
-        torch.set_num_threads(threads)
+        check_threads(threads)
     dev = _resolve_device(device)
+    if threads is not None:
+        torch.set_num_threads(threads)
     if out_dir is not None:  # a folder we may not or cannot write is found now, not after
         claim_out_dir(out_dir, "evaluate", EVAL_OUTPUTS, overwrite=overwrite,
                       recognise=lambda d: json_record(d / "eval.json", "scores", "num_samples"))
