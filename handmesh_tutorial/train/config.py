@@ -30,8 +30,6 @@ from ..budget import (
     MAX_CHANNELS,
     check_count,
     check_image_size,
-    check_threads,
-    check_workers,
 )
 from ..budget import budget as _budget
 
@@ -214,7 +212,6 @@ class TrainConfig:
                     or self.threads < 1:
                 raise ValueError(f"threads must be a positive integer or None, got "
                                  f"{self.threads!r}")
-            check_threads(self.threads)
         from ..nn.encoder import ENCODERS
 
         if self.encoder not in ENCODERS:
@@ -258,7 +255,9 @@ class TrainConfig:
                              f"{self.freeze_encoder!r}")
         if not self.encoder_lr_scale >= 0:
             raise ValueError(f"encoder_lr_scale must be >= 0, got {self.encoder_lr_scale}")
-        check_workers(self.num_workers)
+        if isinstance(self.num_workers, bool) or not isinstance(self.num_workers, int) \
+                or self.num_workers < 0:
+            raise ValueError(f"num_workers must be an integer >= 0, got {self.num_workers!r}")
 
     @classmethod
     def preset(cls, name: str, **overrides) -> TrainConfig:
@@ -365,10 +364,14 @@ class TrainConfig:
         """Inverse of [`to_dict`][handmesh_tutorial.train.config.TrainConfig.to_dict]; unknown keys
         raise
         ``ValueError``."""
+        if not isinstance(d, Mapping):
+            raise ValueError(f"a TrainConfig is a mapping of its fields, got "
+                             f"{type(d).__name__}")
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
+        unknown = sorted(map(str, set(d) - known))
         if unknown:
-            raise ValueError(f"unknown TrainConfig keys {unknown}")
+            raise ValueError(f"unknown TrainConfig keys {unknown[:8]}"
+                             + (f" and {len(unknown) - 8} more" if len(unknown) > 8 else ""))
         return cls(**dict(d))
 
     def architecture(self) -> dict:

@@ -51,6 +51,7 @@ from torch import nn
 
 from .._io import single_writer, write_json
 from .._progress import progress_bar
+from ..budget import check_threads, check_workers
 from ..data import torch_views as TV
 from ..nn.keypoints import keypoint_loss, normalised_keypoints
 from ..nn.losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
@@ -244,7 +245,11 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
             run started (its ``meta.json`` or sample ids; the message lists what differs).
     """
     t_start = time.perf_counter()
+    # what this machine can hold, checked here (a checkpoint made on a larger machine still
+    # loads): before any folder is claimed or anything allocated
+    check_workers(config.num_workers)
     if config.threads is not None:
+        check_threads(config.threads)
         torch.set_num_threads(int(config.threads))
     local_rank = int(os.environ.get("LOCAL_RANK", "0"))
     device = _resolve_device(config.device, local_rank)
