@@ -20,8 +20,8 @@ import textwrap
 from dataclasses import asdict, dataclass
 
 __all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE",
-           "MAX_BATCH_SIZE", "MAX_CHANNELS", "max_threads", "max_workers", "check_count",
-           "check_threads", "check_workers"]
+           "MAX_BATCH_SIZE", "MAX_CHANNELS", "MAX_INPUT_PIXELS", "max_threads", "max_workers",
+           "check_count", "check_threads", "check_workers", "check_pixels"]
 
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")
@@ -55,6 +55,11 @@ def check_image_size(value, name: str = "image_size") -> int:
                          f"pixels, got {value!r}")
     return int(value)
 
+
+MAX_INPUT_PIXELS = 8192 * 8192
+"""Most pixels an input image of `inference` may have (a file is checked from its header,
+before it is decoded; an array from its shape): 67 megapixels, more than a 48 MP camera's
+photo. Above it one decoded image needs gigabytes; resize it first."""
 
 MAX_BATCH_SIZE = 65_536
 """Largest batch an argument may set (the paper's is 32; a batch of 224-px crops this big
@@ -103,6 +108,18 @@ def check_count(value, name: str, low: int, high: int, why: str = "") -> int:
         raise ValueError(f"{name} must be an integer in [{low}, {high:,}]"
                          + (f" ({why})" if why else "") + f", got {value!r}")
     return int(value)
+
+
+def check_pixels(height: int, width: int, where: str) -> None:
+    """Refuse an input image of more than `MAX_INPUT_PIXELS`, before it is decoded or copied.
+
+    Raises:
+        ValueError: naming ``where`` (the file, or ``"image"``), its size and the bound.
+    """
+    if int(height) * int(width) > MAX_INPUT_PIXELS:
+        raise ValueError(f"{where}: {width} x {height} pixels, more than the "
+                         f"{MAX_INPUT_PIXELS:,} (MAX_INPUT_PIXELS, 8192 x 8192) an input image "
+                         "may have; resize it first (the network sees a crop of the hand)")
 
 
 def check_threads(value, name: str = "threads") -> int:
