@@ -73,6 +73,9 @@ MANO_FILES = {
     "shared_lists.pkl": _shared_lists(30),  # 2**30 leaves once expanded
     "deep_lists.pkl": _in_dict(b"]" * 100_001 + b"a" * 100_000),
     "cycle.pkl": _in_dict(b"(lp1\ng1\na"),
+    # issue 53: 14 bytes declaring 2^45 (MemoryError, no file named); keys that are no strings
+    "huge_bytes.pkl": b"\x80\x04\x8e" + (2**45).to_bytes(8, "little") + b".",
+    "int_keys.pkl": b"\x80\x02}q\x00(K\x01K\x01X\x01\x00\x00\x00aK\x02u.",
 }
 MANO_EXPECTED = {
     "object_dtype.pkl": r"refusing numpy\.dtype of dtype 'O8'",
@@ -80,6 +83,8 @@ MANO_EXPECTED = {
     "shared_lists.pkl": r"refusing contents that expand to more than 20,000,000 elements",
     "deep_lists.pkl": r"refusing contents nested more than 32 levels",
     "cycle.pkl": r"refusing a container that contains itself",
+    "huge_bytes.pkl": r"not a readable MANO pickle \(expected 35184372088832 bytes in a bytes8",
+    "int_keys.pkl": r"a MANO file's keys are strings, got int key '1'",
 }
 
 # ------------------------------------------------------------------ crafted annotation.npz
