@@ -178,7 +178,7 @@ def test_evaluate_checks_its_output_folder_before_evaluating(root, tmp_path, cap
     (["pretrain", "--device", "cuda:99"], r"device 'cuda:99': this machine has \d+ CUDA"),
     (["pretrain-encoder", "--device", "gpu"], r"device must be .* got 'gpu'"),
     (["pretrain-encoder", "--device", "cuda:99"], r"device 'cuda:99': this machine has"),
-    (["pretrain-encoder", "--lr", "0"], r"lr must be positive, got 0\.0"),
+    (["pretrain-encoder", "--lr", "0"], r"lr must be a finite number > 0, got 0\.0"),
 ])
 def test_pretrain_checks_its_options_before_generating_any_scene(argv, message, tmp_path, capsys,
                                                                  monkeypatch):
@@ -198,6 +198,90 @@ def test_pretrain_checks_its_options_before_generating_any_scene(argv, message, 
     assert code == 3, err
     assert re.search(message, err), err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, code, message", [
+    (["pretrain", "--init", "/nonexistent.pt"], 4, r"--init /nonexistent\.pt: checkpoint not "
+                                                   r"found"),
+    (["pretrain", "--init", "CRAFTED"], 3, r"--init \S*crafted\.pt: unreadable checkpoint"),
+    (["pretrain", "--init-encoder", "/nonexistent.pt"], 4, r"--init-encoder /nonexistent\.pt"),
+    (["pretrain", "--max-generate-seconds", "-5"], 3, r"--max-generate-seconds must be a "
+                                                      r"finite number of seconds > 0, got -5"),
+    (["pretrain", "--max-train-seconds", "nan"], 3, r"--max-train-seconds must be .* got nan"),
+    (["pretrain-encoder", "--init", "/nonexistent.pt"], 4, r"--init /nonexistent\.pt: "),
+    (["pretrain-encoder", "--init", "CRAFTED"], 3, r"--init \S*crafted\.pt: unreadable "
+                                                   r"checkpoint"),
+    (["pretrain-encoder", "--max-train-seconds", "-1"], 3, r"--max-train-seconds must be a "
+                                                           r"finite number of seconds > 0"),
+    (["pretrain-encoder", "--max-train-seconds", "nan"], 3, r"got nan"),
+    (["pretrain-encoder", "--stop-after-steps", "-1"], 3, r"--stop-after-steps must be a "
+                                                          r"positive integer \(steps\), got -1"),
+    (["pretrain-encoder", "--max-generate-seconds", "-3"], 3, r"--max-generate-seconds"),
+    (["pretrain-encoder", "--lr", "inf"], 3, r"lr must be a finite number > 0, got inf"),
+    (["demo", "--init-encoder", "/nonexistent.pt"], 4, r"--init-encoder /nonexistent\.pt: no "
+                                                       r"such pose-encoder file"),
+])
+def test_starting_files_and_budgets_are_checked_before_any_scene(argv, code, message, tmp_path,
+                                                                 capsys, monkeypatch):
+    """Issue 53 items 15-17: a missing or crafted ``--init`` failed after the scenes were
+    generated (hours at the default sizes); negative or NaN budgets and step counts were
+    accepted (``--stop-after-steps -1`` exported an untrained encoder, exit 0)."""
+    import re
+
+    from handmesh_tutorial.apps import pretrain_network, pretraining_data
+    from handmesh_tutorial.apps.demo import run as demo_run
+
+    def never(*a, **k):
+        raise AssertionError("generated scenes before checking the options")
+
+    for module, name in ((pretrain_network, "generate_train_val"),
+                         (pretraining_data, "generate_training_scenes"),
+                         (demo_run, "generate_data")):
+        monkeypatch.setattr(module, name, never)
+    crafted = tmp_path / "crafted.pt"
+    crafted.write_bytes(b"PK\x03\x04 not a checkpoint at all")
+    argv = [str(crafted) if a == "CRAFTED" else a for a in argv]
+    out = tmp_path / "run"
+    got = cli.main([*argv, "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    assert got == code, err
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+def test_starting_files_are_read_in_a_child_before_torch_is_imported(tmp_path, monkeypatch):
+    import sys
+
+    from handmesh_tutorial.apps.pretraining_data import check_start_file
+
+    monkeypatch.delitem(sys.modules, "torch")  # as in a fresh `handmesh pretrain`
+    crafted = tmp_path / "crafted.pt"
+    crafted.write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match=rf"^--init {crafted}: unreadable checkpoint"):
+        check_start_file(crafted, "checkpoint", "--init")
+    assert "torch" not in sys.modules
+
+
+def test_a_time_budget_on_fewer_than_ten_training_scenes_is_cut_into_as_many_shards(
+        tmp_path, monkeypatch):
+    """Issue 53 item 16: ``--train-scenes 4 --max-generate-seconds 100`` failed with "parts must
+    be an integer in [1, num=4], got 10"."""
+    from handmesh_tutorial.apps import pretraining_data
+
+    calls = []
+
+    def fake(root, num, seed, *, parts=1, max_seconds=None, **kw):
+        calls.append((num, parts, max_seconds))
+        return {"root": root, "scenes": num, "seconds": 1.0, "shards": parts}
+
+    monkeypatch.setattr(pretraining_data, "generate_training_scenes", fake)
+    pretraining_data.generate_train_val(tmp_path, 4, 2, 7, render_size=64, workers=1,
+                                        max_generate_seconds=100, log=None)
+    assert calls == [(2, 1, None), (4, 4, 99.0)]
+    calls.clear()
+    pretraining_data.generate_train_val(tmp_path, 40, 2, 7, render_size=64, workers=1,
+                                        max_generate_seconds=0.5, log=None)
+    assert calls[1] == (40, 10, 0.0)  # the validation scenes took the budget: one shard
 
 
 def test_pretrain_encoder_image_sizes_that_are_not_numbers_name_the_option(capsys):

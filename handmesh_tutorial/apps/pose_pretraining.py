@@ -39,7 +39,13 @@ from ..nn.pose_encoder import (
     export_pose_encoder,
     pose_loss,
 )
-from .pretraining_data import check_device, claim_pretraining_dir, crop_caches
+from .pretraining_data import (
+    check_device,
+    check_run_options,
+    check_start_file,
+    claim_pretraining_dir,
+    crop_caches,
+)
 
 __all__ = ["PosePretrainConfig", "evaluate_pose", "pretrain_pose_encoder",
            "build_pretrained_encoder"]
@@ -117,8 +123,9 @@ class PosePretrainConfig:
         for side in self.image_sizes:
             check_image_size(side, "image_sizes")
         check_image_size(self.render_size, "render_size")
-        if not self.lr > 0:
-            raise ValueError(f"lr must be positive, got {self.lr}")
+        if isinstance(self.lr, bool) or not isinstance(self.lr, int | float) \
+                or not 0 < self.lr < math.inf:
+            raise ValueError(f"lr must be a finite number > 0, got {self.lr!r}")
         if self.precision not in ("float32", "bfloat16"):
             raise ValueError(f"precision must be 'float32' or 'bfloat16', got {self.precision!r}")
 
@@ -442,6 +449,16 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
 
     config = config or PosePretrainConfig()
     check_device(config.device, probe=True)  # a CUDA device asked for: before generating
+    check_run_options(max_generate_seconds=max_generate_seconds,
+                      max_train_seconds=max_train_seconds, stop_after=stop_after)
+    if install:
+        from ..nn.pose_encoder import SHIPPED_ENCODERS
+
+        name = "pretrained" if install is True else str(install)
+        if name not in SHIPPED_ENCODERS:
+            raise ValueError(f"install must be one of {sorted(SHIPPED_ENCODERS)}, got {name!r}")
+    if config.init != "network":  # a missing or crafted file: in seconds, not after the scenes
+        check_start_file(config.init, "encoder", "--init")
     say = log or (lambda *_: None)
     out = claim_pretraining_dir(out, "pretrain-encoder", overwrite)
     workers = config.workers or os.cpu_count() or 1

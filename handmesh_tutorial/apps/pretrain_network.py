@@ -32,6 +32,8 @@ from .._version import PRETRAINED_FILE, __version__
 from ..budget import check_image_size
 from .pretraining_data import (
     check_device,
+    check_run_options,
+    check_start_file,
     claim_pretraining_dir,
     generate_train_val,
     generate_training_scenes,
@@ -369,6 +371,11 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     """
     recipe = recipe or PretrainedRecipe()
     check_device(recipe.device, probe=True)  # a CUDA device asked for: before generating
+    check_run_options(max_generate_seconds=max_generate_seconds,
+                      max_train_seconds=max_train_seconds)
+    # the starting weights read as training will: in seconds, not after hours of scenes
+    check_start_file(recipe.init, "checkpoint", "--init")
+    check_start_file(recipe.init_encoder, "encoder", "--init-encoder")
     say = log or (lambda *_: None)
     out = claim_pretraining_dir(out, "pretrain", overwrite)
     tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,
