@@ -327,3 +327,41 @@ def test_a_seeded_subset_of_planted_caches_and_users_files_in_out_is_clean_or_re
     seen = {(r["target"], r["outcome"]) for r in results}
     assert ("hierarchy-cache", "refused") in seen and ("out-folder", "refused") in seen, seen
     assert "clobbered" in F.FAILURES and "| all | all | 12 |" in F.table(results)
+
+
+def _crops(n: int, size: int = 192) -> dict:
+    g = torch.Generator().manual_seed(0)
+    return {"image": torch.zeros(n, 3, size, size, dtype=torch.uint8),
+            "joints": torch.rand(n, 21, 3, generator=g) * 0.05,
+            "root": torch.tensor([[0.0, 0.0, 0.5]]).repeat(n, 1),
+            "K": torch.eye(3).repeat(n, 1, 1), "box": torch.full((n,), 128.0)}
+
+
+@pytest.mark.parametrize("damage, says", [
+    (lambda c: list(c.values()), r"not a crop cache \(a list"),  # was a crash
+    (lambda c: {**c, "joints": c["joints"] * float("nan")}, r"'joints' holds NaN"),
+    (lambda c: {**c, "image": c["image"][:, :, :8, :8]}, r"'image' has shape \(2, 3, 8, 8\), "
+                                                         r"expected \(2, 3, 192, 192\)"),
+    (lambda c: {**c, "joints": c["joints"] * 1000}, r"'joints' holds values up to"),
+    (lambda c: {**c, "K": c["K"].long()}, r"'K' holds NaN, infinity or no floats"),
+])
+def test_another_runs_crop_cache_is_checked_as_an_untrusted_file(tmp_path, damage, says):
+    """Issue 53 item 14: ``pretrain-encoder --scenes-from`` trusted the other run's
+    ``crops_train.pt``: a list or NaN joints crashed, 8x8 images trained silently (exit 0)."""
+    from handmesh_tutorial.apps.pretraining_data import crop_caches
+
+    other, out = tmp_path / "other", tmp_path / "out"
+    other.mkdir()
+    out.mkdir()
+    torch.save(_crops(2), other / "crops_val.pt")
+    splits = {"val": {"root": other / "data" / "val", "scenes": 2}}
+    assert crop_caches(out, splits, scenes_from=other, progress=False)["val"]["image"].shape == (
+        2, 3, 192, 192)
+    torch.save(damage(_crops(2)), other / "crops_val.pt")
+    with pytest.raises(ValueError, match=rf"{re.escape(str(other))}/crops_val\.pt: {says}"):
+        crop_caches(out, splits, scenes_from=other, progress=False)
+    (other / "crops_val.pt").unlink()
+    torch.save(_crops(2), tmp_path / "elsewhere.pt")
+    (other / "crops_val.pt").symlink_to(tmp_path / "elsewhere.pt")
+    with pytest.raises(ValueError, match=r"crops_val\.pt is a symbolic link"):
+        crop_caches(out, splits, scenes_from=other, progress=False)

@@ -284,24 +284,30 @@ def crop_caches(out: Path, splits: dict, *, scenes_from: str | os.PathLike | Non
     """The crops of each split (``{"train": scenes, "val": scenes}`` as `generate_train_val`
     returns them): ``out/crops_<split>.pt`` when it holds as many crops as the split has scenes,
     else the other run's (``scenes_from``, read only) when it does, else cropped now and saved in
-    ``out``.
+    ``out``. A file read is checked as any untrusted input (`check_crop_cache`; a link in its
+    place is refused).
 
     Returns:
         ``{"train": cache, "val": cache}`` (``data.batched_crops.crop_cache`` dicts).
+
+    Raises:
+        ValueError: a ``crops_<split>.pt`` that is a link, unreadable, or no crop cache of
+            ``CACHE_SIZE`` crops with finite, plausible values (named, with what is wrong).
     """
     import torch
 
     from .._io import atomic_write_with
     from .._untrusted import load_torch_file
-    from ..data.batched_crops import crop_cache
+    from ..data.batched_crops import check_crop_cache, crop_cache
+    from ..data.files import _own_file
 
     caches = {}
     for split, scenes in splits.items():
         places = [out] + ([Path(scenes_from)] if scenes_from is not None else [])
         for place in places:
             path = place / f"crops_{split}.pt"
-            if path.is_file():
-                cache = load_torch_file(path)
+            if os.path.lexists(path):  # read as any untrusted file: no link, checked contents
+                cache = check_crop_cache(load_torch_file(_own_file(path)), str(path))
                 if len(cache["image"]) == scenes["scenes"]:
                     caches[split] = cache
                     break
