@@ -438,3 +438,35 @@ def test_evaluate_names_the_option_not_the_checkpoint(root, tmp_path, capsys, op
     err = capsys.readouterr().err
     assert code == cli.EXIT_CODES["bad-input"], err
     assert re.search(says, err) and "unreadable" not in err, err
+
+
+@pytest.mark.parametrize("command", [["generate", "--kind", "hand-hand", "--num", "1"],
+                                     ["train", "--data", "ROOT"],
+                                     ["evaluate", "--checkpoint", "c.pt", "--data", "ROOT"]])
+def test_an_out_name_too_long_is_a_usage_error_naming_the_option(root, tmp_path, capsys,
+                                                                 command):
+    """Issue 53 item 19: a 256-character ``--out`` name (ENAMETOOLONG) was exit 1."""
+    out = tmp_path / ("x" * 256)
+    argv = [str(root) if a == "ROOT" else a for a in command]
+    with pytest.raises(SystemExit) as e:
+        cli.main([*argv, "--out", str(out)])
+    assert e.value.code == cli.EXIT_CODES["usage"]
+    assert "argument --out: a folder name is at most 255 bytes, got one of 256" in \
+        capsys.readouterr().err
+    assert not list(tmp_path.iterdir())  # nothing written
+    err = OSError(errno.ENAMETOOLONG, "File name too long", str(out))  # from anywhere else
+    assert cli.error_kind(err) == "bad-input"
+
+
+def test_a_tampered_train_seconds_file_is_named(tmp_path):
+    from handmesh_tutorial.apps.pretrain_network import _prior_train_seconds
+
+    clock = tmp_path / "train_seconds.json"
+    clock.write_text('{"epoch": 2, "seconds": 10.5}')
+    assert _prior_train_seconds(clock, [{"epoch": 3, "seconds": 4.0}]) == 14.5
+    for text, says in (("{", r"train_seconds\.json: not valid JSON"),  # was "Expecting value"
+                       ('{"epoch": "x", "seconds": 1}', r"train_seconds\.json: expected "),
+                       ('[1, 2]', r"train_seconds\.json: expected ")):
+        clock.write_text(text)
+        with pytest.raises(ValueError, match=says):
+            _prior_train_seconds(clock, [])

@@ -50,6 +50,8 @@ run was stopped by its surroundings, not its inputs: a full disk, a read-only or
 folder, another process holding the writer lock, a killed worker process; fix that and rerun the
 same command (it resumes)."""
 
+# errnos of an OSError that mean a name the user gave (exit code 3): too long, a loop of links
+_INPUT_ERRNOS = {errno.ENAMETOOLONG, errno.ELOOP}
 # errnos of an OSError that mean the machine, not the input or the code (exit code 6)
 _ENVIRONMENT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM,
                        errno.EIO, errno.EMFILE, errno.ENFILE, errno.EBUSY, errno.ETXTBSY}
@@ -452,7 +454,8 @@ def error_kind(err: BaseException) -> str:
                                                and err.errno in _ENVIRONMENT_ERRNOS):
         return "environment"
     if isinstance(err, ValueError | KeyError | pickle.UnpicklingError | zipfile.BadZipFile
-                  | EOFError | FloatingPointError):
+                  | EOFError | FloatingPointError) or (isinstance(err, OSError)
+                                                       and err.errno in _INPUT_ERRNOS):
         return "bad-input"
     return "unexpected"  # TypeError, IndexError, ...: most likely a bug of ours
 

@@ -17,7 +17,6 @@ pretrained model".
 from __future__ import annotations
 
 import datetime
-import json
 import math
 import os
 import platform
@@ -180,8 +179,17 @@ def _prior_train_seconds(clock: Path, history: list[dict]) -> float:
     ``clock``'s (written after each epoch) plus the epochs of the checkpoint's ``history``
     beyond it; without ``clock`` (a run of before 0.6.0) the history's per-epoch seconds."""
     done = {"epoch": 0, "seconds": 0.0}
-    if clock.exists():
-        done = json.loads(clock.read_text())
+    if os.path.lexists(clock):
+        from ..data.files import _read_json  # the reader rule: no link, the file named
+
+        done = _read_json(clock)
+        ok = isinstance(done, dict) and all(
+            isinstance(done.get(k), int | float) and not isinstance(done.get(k), bool)
+            and math.isfinite(done[k]) and done[k] >= 0 for k in ("epoch", "seconds"))
+        if not ok:
+            raise ValueError(f"{clock}: expected {{\"epoch\": N, \"seconds\": S}} (numbers >= "
+                             f"0), got {str(done)[:80]}; it is rewritten after each epoch: "
+                             "delete it to count only the checkpoint's epochs")
     return float(done["seconds"]) + sum(float(r.get("seconds", 0.0)) for r in history
                                         if int(r["epoch"]) > int(done["epoch"]))
 
