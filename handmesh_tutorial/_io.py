@@ -26,7 +26,8 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
            "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer",
            "EnvironmentFailure", "names_path", "check_writable", "claim_out_dir", "out_marker",
-           "json_record", "remove_outputs", "file_identity", "is_locked"]
+           "json_record", "remove_outputs", "file_identity", "is_locked", "claim_state",
+           "release_claim"]
 
 
 _TMP_SUFFIX = ".tmp"
@@ -419,6 +420,58 @@ def claim_out_dir(out: str | os.PathLike, command: str, outputs: tuple[str, ...]
             atomic_write_text(marker, json.dumps({"command": command, "written_by":
                                                   "handmesh_tutorial"}) + "\n", durable=False)
     return folder
+
+
+def claim_state(out: str | os.PathLike | None) -> dict | None:
+    """What an ``--out`` folder holds before a command runs, for `release_claim`:
+    ``{"folder", "missing" (the folders of the path that do not exist yet, deepest first),
+    "names" (its entries)}``; ``None`` without a folder."""
+    if out is None or not str(out).strip():
+        return None
+    folder = Path(out)
+    missing, p = [], folder
+    try:
+        while not os.path.lexists(p) and p != p.parent:
+            missing.append(p)
+            p = p.parent
+        names = set(os.listdir(folder)) if folder.is_dir() and not folder.is_symlink() else set()
+    except OSError:  # a name too long, a folder we may not read: nothing to release later
+        return None
+    return {"folder": folder, "missing": missing, "names": names}
+
+
+def release_claim(state: dict | None) -> list[Path]:
+    """Undo what claiming an output folder left when the command then stopped before writing
+    any output (a refused option, an unreadable checkpoint): the command's marker and lock
+    files it created (hidden, empty or a marker's few bytes) and the folders it created, when
+    nothing else is in them. A folder holding any output, or any file of the user's, is left
+    as it is (a run that wrote something resumes from it).
+
+    Returns:
+        The paths removed.
+    """
+    if state is None:
+        return []
+    folder, gone = state["folder"], []
+    try:
+        if not folder.is_dir() or folder.is_symlink():
+            return []
+        new = [folder / n for n in sorted(set(os.listdir(folder)) - state["names"])]
+        ours = [p for p in new if p.name.startswith(".handmesh-")
+                or (p.name.startswith(".") and p.name.endswith(".lock"))]
+        if len(ours) != len(new) or any(p.is_symlink() or not p.is_file()
+                                        or p.stat().st_size > 4096 for p in ours):
+            return []  # the command wrote more than its bookkeeping: its folder now
+        for p in ours:
+            p.unlink()
+            gone.append(p)
+        for d in state["missing"]:  # deepest first; only those this command made, if empty
+            if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
+                d.rmdir()
+                gone.append(d)
+    except OSError:
+        pass
+    return gone
 
 
 def _refuse_links(folder: Path, command: str, names: tuple[str, ...]) -> None:

@@ -423,6 +423,9 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 0
+    from .._io import claim_state, release_claim
+
+    before = claim_state(getattr(args, "out", None))
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
@@ -430,6 +433,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return EXIT_CODES["interrupted"]
     except Exception as err:  # noqa: BLE001 - every error becomes one line + an exit code
+        release_claim(before)  # a refused command leaves no marker, lock or empty --out
         if args.debug:
             traceback.print_exc()
         kind = error_kind(err)

@@ -372,12 +372,13 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         model = DDP(net, device_ids=[device.index] if device.type == "cuda" else None)
     if rng_to_restore is not None:
         _set_rng_state(rng_to_restore)
+    # the batch against the training items: refused before the run's record is written
+    sampler = EpochBatchSampler(len(train_ds), config.batch_size, config.seed, rank, world,
+                                config.micro_batches)
     if is_main:
         write_json(out / "config.json", {"config": config.to_dict(), "template_hash": t_id,
                                           "world_size": world,
                                           "data_fingerprint": fingerprint})
-    sampler = EpochBatchSampler(len(train_ds), config.batch_size, config.seed, rank, world,
-                                config.micro_batches)
     val_bs = config.val_batch_size or config.batch_size
 
     for epoch in range(start_epoch, config.epochs):
