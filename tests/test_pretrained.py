@@ -626,3 +626,18 @@ def test_the_shipped_network_replays_from_random_weights_with_recorded_commands(
     assert all(s["command"] and "--init pretrained" not in s["command"] for s in stages), \
         "every stage must record the command that replays it, never from a shipped file"
     assert all(s["train_seed"] is not None and s["train_scenes"] for s in stages)
+
+
+def test_a_moved_pretrain_run_resumes_in_its_new_place(tmp_path, monkeypatch):
+    """Issue 53 item 18: a ``pretrain`` run moved to another folder could not resume ("data
+    ('/old/...', 'new/...')"): its data moved with it, the same scenes."""
+    _toy_driver(monkeypatch)
+    small = dict(train_scenes=6, val_scenes=3, render_size=64, image_size=32, epochs=1,
+                 batch_size=3, workers=1, loader_workers=0, device="cpu", precision="float32",
+                 data_seed=7)
+    P.build_pretrained(tmp_path / "old", P.PretrainedRecipe(**small), progress=False, log=None)
+    (tmp_path / "old").rename(tmp_path / "new")
+    with pytest.warns(UserWarning, match=r"the run's data moved"):
+        res = P.build_pretrained(tmp_path / "new", P.PretrainedRecipe(**{**small, "epochs": 2}),
+                                 progress=False, log=None)
+    assert res["info"]["epochs_done"] == 2 and not (tmp_path / "old").exists()

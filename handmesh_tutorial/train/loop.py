@@ -242,7 +242,9 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         RuntimeError: another process is training into ``out_dir`` (it holds ``.train.lock``).
         ValueError: inconsistent config, template/data vertex counts that differ, a
             checkpoint of another architecture, or (``resume``) data that changed since the
-            run started (its ``meta.json`` or sample ids; the message lists what differs).
+            run started (its ``meta.json`` or sample ids; the message lists what differs). A
+            resumed run's ``data`` or ``val_data`` may name another folder (the data moved):
+            it resumes, with a warning, when that folder holds the same data.
     """
     t_start = time.perf_counter()
     # what this machine can hold, checked here (a checkpoint made on a larger machine still
@@ -293,16 +295,28 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         warnings.warn(f"{out}: no checkpoint_last.pt yet (the run stopped before its first "
                       "checkpoint); starting from epoch 1", stacklevel=3)
         resume = False
+    moved: dict = {}
     if resume:  # check before building anything
         ck = _read_checkpoint(last, map_location=device)
         _check_same_network(ck, config, t_id, str(last), "checkpoint")
         changed = changed_settings(ck["config"], config, run_dir=out)
+        # a data root may move (the run's folder moved with it, or --data names the new
+        # place): its fingerprint, compared below, says whether it holds the same data
+        moved = {k: changed.pop(k) for k in ("data", "val_data")
+                 if k in changed and ck.get("data_fingerprint") and dataset is None
+                 and None not in changed[k]}
         if changed:
             raise ValueError(
                 f"{last}: cannot resume with other settings (checkpoint, now): {changed}. "
                 f"Resume with the run's settings (only {', '.join(RESUMABLE_KEYS)} may "
-                "change), or start a new run in another out_dir")
+                "change; data and val_data may name where the same data moved), or start a "
+                "new run in another out_dir")
     fingerprint = _checked_fingerprint(config, dataset, ck, last)
+    if ck is not None and moved:
+        warnings.warn(f"{last}: the run's data moved ("
+                      + ", ".join(f"{k} {a} -> {b}" for k, (a, b) in moved.items())
+                      + "): the same meta.json and samples, so the run resumes there",
+                      stacklevel=3)
 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it
