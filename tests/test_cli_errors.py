@@ -218,6 +218,12 @@ def test_pretrain_checks_its_options_before_generating_any_scene(argv, message, 
                                                           r"positive integer \(steps\), got -1"),
     (["pretrain-encoder", "--max-generate-seconds", "-3"], 3, r"--max-generate-seconds"),
     (["pretrain-encoder", "--lr", "inf"], 3, r"lr must be a finite number > 0, got inf"),
+    (["pretrain", "--loader-workers", "10000"], 3, r"loader_workers must be an integer in "
+                                                   r"\[0, [\d,]+\] \(at most 2 x the \d+ CPU"),
+    (["pretrain", "--workers", "10000"], 3, r"workers must be an integer in \[0, "),
+    (["pretrain-encoder", "--workers", "10000"], 3, r"workers must be an integer in \[0, "),
+    (["generate", "--kind", "hand-hand", "--num", "2", "--workers", "10000"], 3,
+     r"workers must be an integer in \[1, "),
     (["demo", "--init-encoder", "/nonexistent.pt"], 4, r"--init-encoder /nonexistent\.pt: no "
                                                        r"such pose-encoder file"),
 ])

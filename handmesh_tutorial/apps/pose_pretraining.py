@@ -457,6 +457,9 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
         name = "pretrained" if install is True else str(install)
         if name not in SHIPPED_ENCODERS:
             raise ValueError(f"install must be one of {sorted(SHIPPED_ENCODERS)}, got {name!r}")
+    from ..budget import check_workers
+
+    check_workers(config.workers, "workers")  # the machine's bound: before any scene
     if config.init != "network":  # a missing or crafted file: in seconds, not after the scenes
         check_start_file(config.init, "encoder", "--init")
     say = log or (lambda *_: None)

@@ -381,6 +381,10 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     check_device(recipe.device, probe=True)  # a CUDA device asked for: before generating
     check_run_options(max_generate_seconds=max_generate_seconds,
                       max_train_seconds=max_train_seconds)
+    from ..budget import check_workers
+
+    check_workers(recipe.workers, "workers")  # the machine's bounds: before any scene
+    check_workers(recipe.loader_workers, "loader_workers")
     # the starting weights read as training will: in seconds, not after hours of scenes
     check_start_file(recipe.init, "checkpoint", "--init")
     check_start_file(recipe.init_encoder, "encoder", "--init-encoder")

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..budget import check_workers
 from .candidates import _probe, _probe_summary, _Task
 from .files import read_annotation
 from .reader import _disagreements, _planned, _present, read_meta
@@ -240,6 +241,7 @@ def generate_dataset(
     if workers < 1 or max_attempts < 1 or vr_probe < 1:
         raise ValueError(f"workers, max_attempts and vr_probe must be >= 1, got {workers}, "
                          f"{max_attempts}, {vr_probe}")
+    check_workers(workers, "workers", low=1)  # each a process: bounded by the cores
     if isinstance(parts, bool) or not isinstance(parts, int) or not 1 <= parts <= num:
         raise ValueError(f"parts must be an integer in [1, num={num}], got {parts!r}")
     if max_seconds is not None and (parts == 1 or not max_seconds >= 0):
