@@ -122,7 +122,7 @@ def test_a_garbage_checkpoint_is_named_not_a_missing_key(root, tmp_path, capsys)
     text.write_text("hello, this is not a checkpoint\n")  # torch's unpickler: KeyError 101
     empty = tmp_path / "empty.pt"
     torch.save({"format": T.CHECKPOINT_FORMAT}, empty)
-    for path, words in ((text, "unreadable checkpoint (truncated or not a torch file"),
+    for path, words in ((text, "unreadable checkpoint (truncated, or not a zip archive"),
                         (empty, "not a handmesh_tutorial checkpoint (missing keys ['best', "
                                 "'config', 'epoch', 'history', 'model', 'step', "
                                 "'template_hash'])")):
@@ -334,7 +334,8 @@ def test_verify_fails_when_planned_samples_are_missing(root, tmp_path, capsys):
     part = _partial(root, tmp_path)
     assert cli.main(["verify", str(part), "--no-progress"]) == cli.EXIT_CODES["bad-input"]
     out = capsys.readouterr().out
-    assert "6 samples read, 0 bad, 2 of 8 planned samples missing (first [1, 3])" in out, out
+    assert "6 samples read, 0 bad, 2 of 8 planned samples missing (first 000001, 000003)" \
+        in out, out
     assert cli.main(["verify", str(part), "--no-progress", "--remove-bad"]) == 0  # a repair
     assert "to write the missing samples" in capsys.readouterr().out
     shutil.rmtree(part / "samples")
@@ -348,7 +349,8 @@ def test_verify_fails_when_planned_samples_are_missing(root, tmp_path, capsys):
     (part / "meta.json").write_text(json.dumps(meta))
     assert cli.main(["verify", str(part), "--no-progress"]) == 3
     assert "99,999,992" not in (out := capsys.readouterr().out)
-    assert "99999992 of 100000000 planned samples missing (first [8, 9, 10, 11, 12])" in out, out
+    assert ("99999992 of 100000000 planned samples missing (first 000008, 000009, 000010, "
+            "000011, 000012)") in out, out
 
 
 def test_evaluate_says_it_scored_a_partial_root(root, tmp_path, capsys):
@@ -361,7 +363,7 @@ def test_evaluate_says_it_scored_a_partial_root(root, tmp_path, capsys):
                     out_dir=tmp_path / "ev")
     assert ev["num_samples"] == 6 and ev["planned"] == 8
     assert ev["notes"][0].startswith(f"scored 6 of 8 planned samples: {part}: 6 of 8 planned "
-                                     "samples present (first missing [1, 3]); rerun")
+                                     "samples present (first missing 000001, 000003); rerun")
     import json
 
     assert json.loads((tmp_path / "ev" / "eval.json").read_text())["planned"] == 8

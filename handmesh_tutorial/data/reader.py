@@ -84,6 +84,22 @@ def _planned(meta: Mapping) -> list[int]:
     return [i for a, b in meta["ranges"] for i in range(a, b)]
 
 
+def _missing(meta: Mapping, have: set[int]) -> tuple[int, int, list[str]]:
+    """``(planned, missing, first names)``: how many samples ``meta.json`` plans, how many of
+    them are not in ``have``, and the folder names of the first five (a walk that stops there:
+    bounded by ``len(have)``, not by the plan, which may be 1e8)."""
+    width = meta.get("index_width", MIN_INDEX_WIDTH)
+    planned = sum(b - a for a, b in meta["ranges"])
+    here = sum(1 for i in have if any(a <= i < b for a, b in meta["ranges"]))
+    first: list[str] = []
+    for i in (i for a, b in meta["ranges"] for i in range(a, b)) if here < planned else ():
+        if i not in have:
+            first.append(f"{i:0{width}d}")
+            if len(first) == 5:
+                break
+    return planned, planned - here, first
+
+
 class InterSHDataset:
     """An INTER-SH root read lazily: ``len(ds)``, ``ds[i]`` -> sample dict (numpy).
 
@@ -145,29 +161,21 @@ class InterSHDataset:
     def coverage(self) -> str:
         """What a reader of this root must say about it: ``""`` when every planned sample is
         present, else one sentence such as ``"root: 4 of 6 planned samples present (first
-        missing [1, 3]); ..."`` naming why they may be missing (``samples`` is no folder, or a
-        ``generate`` is writing the root now). Used by ``evaluate`` (a note, and "scored N of M
-        planned") and ``train`` (refused when none is present)."""
+        missing 000001, 000003); ..."`` naming why they may be missing (``samples`` is no
+        folder, or a ``generate`` is writing the root now). Used by ``evaluate`` (a note, and
+        "scored N of M planned") and ``train`` (refused when none is present)."""
         from .._io import is_locked
         from .schema import _LOCK_FILE
 
-        planned = self.num_planned
-        present = sum(int(((self.indices >= a) & (self.indices < b)).sum())
-                      for a, b in self.meta["ranges"])
-        if present >= planned:
+        planned, missing, first = _missing(self.meta, set(self.indices.tolist()))
+        if not missing:
             return ""
-        have, first = set(self.indices.tolist()), []
-        for i in (i for a, b in self.meta["ranges"] for i in range(a, b)):
-            if i not in have:
-                first.append(i)
-                if len(first) == 5:
-                    break
         samples = self.root / SAMPLES_DIR
         why = ("; " + f"{samples} is not a folder" if not _own_folder(samples)
                else "; a `handmesh generate` is writing it now" if is_locked(self.root / _LOCK_FILE)
                else "; rerun the `handmesh generate` command that made it to finish it")
-        return (f"{self.root}: {present} of {planned} planned samples present (first missing "
-                f"{first}){why}")
+        return (f"{self.root}: {planned - missing} of {planned} planned samples present "
+                f"(first missing {', '.join(first)}){why}")
 
     @property
     def missing(self) -> list[int]:
@@ -307,7 +315,7 @@ class VerifyReport:
         missing: how many of them have no entry in ``samples/`` (a generation not finished, or
             ``samples`` missing or a file): a check (``remove=False``) is not ``ok`` with any;
             rerunning the ``generate`` command that made the root writes them.
-        missing_first: the first (at most five) missing indices.
+        missing_first: the folder names of the first (at most five) missing samples.
     """
 
     root: Path
@@ -321,7 +329,7 @@ class VerifyReport:
     unplanned: list[str] = field(default_factory=list)
     planned: int = 0
     missing: int = 0
-    missing_first: list[int] = field(default_factory=list)
+    missing_first: list[str] = field(default_factory=list)
     repair: bool = field(default=False, repr=False)
 
     @property
@@ -354,7 +362,7 @@ class VerifyReport:
         lines = [f"{self.root}: {self.checked} samples read, {len(self.bad)} bad"
                  + (f", {len(self.removed)} removed" if self.removed else "")
                  + (f", {self.missing} of {self.planned} planned samples missing (first "
-                    f"{self.missing_first})" if self.missing else "")
+                    f"{', '.join(self.missing_first)})" if self.missing else "")
                  + (f", {len({n for n, _, _ in self.disagree})} disagree with meta.json"
                     if self.disagree else "")
                  + (f", {len(self.foreign)} entries that are no sample (left as they are)"
@@ -511,17 +519,9 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                                    "left as it is"))
             else:
                 removed.append(name)
-    names = {p.name for p in entries}
-    planned = sum(b - a for a, b in meta["ranges"])
-    here = sum(1 for n in names if _sample_index(n, width) is not None
-               and any(a <= int(n) < b for a, b in meta["ranges"]))
-    first = []
-    for i in (i for a, b in meta["ranges"] for i in range(a, b)) if here < planned else ():
-        if f"{i:0{width}d}" not in names:
-            first.append(i)
-            if len(first) == 5:
-                break
+    planned, missing, first = _missing(meta, {int(p.name) for p in entries
+                                              if _sample_index(p.name, width) is not None})
     return VerifyReport(root=root, checked=len(entries), bad=bad, removed=removed,
                         disagree=disagree, kept=kept, foreign=foreign, error=error,
-                        unplanned=unplanned, planned=planned, missing=planned - here,
+                        unplanned=unplanned, planned=planned, missing=missing,
                         missing_first=first, repair=remove)
