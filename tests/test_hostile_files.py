@@ -382,3 +382,16 @@ def test_a_linked_file_in_a_sample_folder_is_refused_by_every_read(tmp_path):
     report = D.verify_dataset(root, progress=False)
     assert [n for n, _ in report.bad] == [sample.name]
     assert "symbolic link" in report.bad[0][1]
+
+
+def test_generate_neither_counts_nor_writes_through_a_linked_sample_folder(tmp_path):
+    root = _toy_root(tmp_path / "root", num=3)
+    outside = tmp_path / "outside"
+    sample = root / "samples" / "000001"
+    sample.rename(outside)
+    sample.symlink_to(outside, target_is_directory=True)
+    before = sorted(p.name for p in outside.iterdir())
+    with pytest.raises(ValueError, match=r"000001 is a link or a file where a sample folder "
+                                         r"belongs"):
+        _toy_root(root, num=3)
+    assert sorted(p.name for p in outside.iterdir()) == before and sample.is_symlink()

@@ -23,7 +23,7 @@ from typing import Any
 
 from ..budget import check_workers
 from .candidates import _probe, _probe_summary, _Task
-from .files import read_annotation
+from .files import _own_folder, read_annotation
 from .reader import _disagreements, _planned, _present, read_meta
 from .root import (
     _check_root,
@@ -45,6 +45,7 @@ from .schema import (
     MAX_SAMPLES,
     META_FILE,
     SAMPLES_DIR,
+    _sample_index,
 )
 from .seeds import _SEED_RULE, index_width, sample_seed, shard_range, vr_bins, vr_histogram
 from .workers import _callable_name, _check_for_workers, _Pool, _run, _start_method, _worker_probe
@@ -347,6 +348,16 @@ def generate_dataset(
             if why:  # a sample of another set (kind, image size, seed): never counted as done
                 raise ValueError(f"{why[0]}; remove the folder or use another root")
             done_vr[i] = float(ann["vr"][ann["target"]])
+        # a link or a file where a planned sample folder belongs: no sample (the reader rule),
+        # and never written through nor over
+        blocked = sorted(p.name for p in samples_dir.iterdir()
+                         if (i := _sample_index(p.name, width)) is not None and i in indices
+                         and not _own_folder(p))
+        if blocked:
+            raise ValueError(f"{samples_dir}: {', '.join(blocked[:5])} "
+                             f"{'is' if len(blocked) == 1 else 'are'} a link or a file where a "
+                             "sample folder belongs (not the generator's): `handmesh verify "
+                             "--remove-bad` unlinks links; move files away, then rerun")
         skipped = len(done_vr)
         todo = [i for i in indices if i not in done_vr]
         results = _run(task, todo, workers, worker_init, progress, len(indices), skipped,
