@@ -315,7 +315,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     tr = sub.add_parser("train", help="train MSMR-Net on an INTER-SH (or FreiHAND) root; "
                         "sizes default to the HANDMESH_BUDGET tier; works under torchrun")
-    tr.add_argument("--data", help="training data root")
+    tr.add_argument("--data", help="training data root (with --resume: may name where the "
+                    "run's data moved; the same data is checked by its fingerprint)")
     tr.add_argument("--dataset", choices=("intersh", "freihand"), help="data format "
                     "(default: intersh)")
     tr.add_argument("--val-data", help="separate validation root (default: hold out "
