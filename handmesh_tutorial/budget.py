@@ -84,9 +84,9 @@ def max_threads() -> int:
 
 
 def max_workers() -> int:
-    """Most worker processes an argument may set (``--loader-workers``, ``--workers``): 2 x
-    this machine's cores, at least 4 (each is a copy of the process: hundreds of MB)."""
-    return max(4, 2 * _cores())
+    """Most worker processes an argument may set (``--loader-workers``, ``--workers``): 4 x
+    this machine's cores, at least 8 (each is a copy of the process: hundreds of MB)."""
+    return max(8, 4 * _cores())
 
 
 def check_count(value, name: str, low: int, high: int, why: str = "") -> int:
@@ -133,7 +133,7 @@ def check_workers(value, name: str = "num_workers", low: int = 0) -> int:
     """`check_count` of a process count, ``low`` to
     [`max_workers`][handmesh_tutorial.budget.max_workers]."""
     return check_count(value, name, low, max_workers(),
-                       f"at most 2 x the {_cores()} CPU cores of this machine, at least 4")
+                       f"at most 4 x the {_cores()} CPU cores of this machine, at least 8")
 
 
 @dataclass(frozen=True)

@@ -219,7 +219,7 @@ def test_pretrain_checks_its_options_before_generating_any_scene(argv, message, 
     (["pretrain-encoder", "--max-generate-seconds", "-3"], 3, r"--max-generate-seconds"),
     (["pretrain-encoder", "--lr", "inf"], 3, r"lr must be a finite number > 0, got inf"),
     (["pretrain", "--loader-workers", "10000"], 3, r"loader_workers must be an integer in "
-                                                   r"\[0, [\d,]+\] \(at most 2 x the \d+ CPU"),
+                                                   r"\[0, [\d,]+\] \(at most 4 x the \d+ CPU"),
     (["pretrain", "--workers", "10000"], 3, r"workers must be an integer in \[0, "),
     (["pretrain-encoder", "--workers", "10000"], 3, r"workers must be an integer in \[0, "),
     (["generate", "--kind", "hand-hand", "--num", "2", "--workers", "10000"], 3,
@@ -396,8 +396,8 @@ def test_train_on_a_root_without_samples_says_so(root, tmp_path, capsys, how):
 @pytest.mark.parametrize("option, value, says", [
     ("--batch-size", "100000000", r"batch_size must be an integer in \[1, 65,536\] "
                                   r"\(MAX_BATCH_SIZE\), got 100000000"),
-    ("--loader-workers", "10000", r"num_workers must be an integer in \[0, [\d,]+\] \(at most 2 x "
-                                  r"the \d+ CPU cores of this machine, at least 4\), got 10000"),
+    ("--loader-workers", "10000", r"num_workers must be an integer in \[0, [\d,]+\] \(at most 4 x "
+                                  r"the \d+ CPU cores of this machine, at least 8\), got 10000"),
     ("--threads", "100000", r"threads must be an integer in \[1, [\d,]+\] \(at most 4 x the \d+ "
                             r"CPU cores"),
     ("--lr", "inf", r"lr must be a finite number > 0, got inf"),

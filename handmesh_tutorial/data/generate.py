@@ -23,7 +23,7 @@ from typing import Any
 
 from ..budget import check_workers
 from .candidates import _probe, _probe_summary, _Task
-from .files import _own_folder, read_annotation
+from .files import read_annotation
 from .reader import _disagreements, _planned, _present, read_meta
 from .root import (
     _check_root,
@@ -348,16 +348,16 @@ def generate_dataset(
             if why:  # a sample of another set (kind, image size, seed): never counted as done
                 raise ValueError(f"{why[0]}; remove the folder or use another root")
             done_vr[i] = float(ann["vr"][ann["target"]])
-        # a link or a file where a planned sample folder belongs: no sample (the reader rule),
-        # and never written through nor over
+        # a link where a planned sample folder belongs: no sample (the reader rule), never
+        # written through (a file there stops the rename, named: NotADirectoryError)
         blocked = sorted(p.name for p in samples_dir.iterdir()
                          if (i := _sample_index(p.name, width)) is not None and i in indices
-                         and not _own_folder(p))
+                         and p.is_symlink())
         if blocked:
             raise ValueError(f"{samples_dir}: {', '.join(blocked[:5])} "
-                             f"{'is' if len(blocked) == 1 else 'are'} a link or a file where a "
+                             f"{'is a link' if len(blocked) == 1 else 'are links'} where a "
                              "sample folder belongs (not the generator's): `handmesh verify "
-                             "--remove-bad` unlinks links; move files away, then rerun")
+                             "--remove-bad` unlinks them, then rerun")
         skipped = len(done_vr)
         todo = [i for i in indices if i not in done_vr]
         results = _run(task, todo, workers, worker_init, progress, len(indices), skipped,
