@@ -144,6 +144,15 @@ class TrainConfig:
             statistics stay fixed (0: trained from the first step; ``>= epochs``: frozen
             throughout).
         encoder_lr_scale: the encoder's learning rate as a share of ``lr`` once it trains.
+
+    Raises:
+        ValueError: a field out of its range, checked before anything is allocated (also for
+            a checkpoint's config): ``batch_size`` and ``val_batch_size`` above
+            [`MAX_BATCH_SIZE`][handmesh_tutorial.budget.MAX_BATCH_SIZE], ``channels`` or
+            ``latent_channels`` above [`MAX_CHANNELS`][handmesh_tutorial.budget.MAX_CHANNELS],
+            an unknown ``encoder`` or ``decoder``, an ``lr`` that is not finite and > 0... The
+            machine's bounds (``threads``, ``num_workers`` by its cores) are checked by
+            [`train`][handmesh_tutorial.train.loop.train], so a checkpoint made elsewhere loads.
     """
 
     data: str | None = None
