@@ -374,6 +374,15 @@ def test_evaluate_says_it_scored_a_partial_root(root, tmp_path, capsys):
     assert ev["notes"] == [] and ev["planned"] == ev["num_samples"] == 8
 
 
+def test_train_warns_that_a_root_misses_planned_samples(root, tmp_path):
+    from handmesh_tutorial.train.data import make_datasets
+
+    part = _partial(root, tmp_path)
+    with pytest.warns(UserWarning, match=r"training on 6 samples: .*6 of 8 planned samples "
+                                         r"present \(first missing 000001, 000003\)"):
+        make_datasets(T.TrainConfig(data=str(part), image_size=32))
+
+
 @pytest.mark.parametrize("how", ["empty", "file"])
 def test_train_on_a_root_without_samples_says_so(root, tmp_path, capsys, how):
     import shutil

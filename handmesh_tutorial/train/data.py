@@ -101,9 +101,12 @@ def _split(n: int, fraction: float, seed: int) -> tuple[list[int], list[int]]:
 
 
 def _non_empty(src: InterSHDataset) -> InterSHDataset:
-    """``src``, refused when it holds no sample (`InterSHDataset.coverage` says why)."""
+    """``src``, refused when it holds no sample (`InterSHDataset.coverage` says why); a
+    warning says when planned samples are missing (a generation not finished)."""
     if len(src) == 0:
         raise ValueError(f"no sample to train on: {src.coverage()}")
+    if coverage := src.coverage():
+        warnings.warn(f"training on {len(src)} samples: {coverage}", UserWarning, stacklevel=3)
     return src
 
 
@@ -119,7 +122,8 @@ def make_datasets(config: TrainConfig):
 
     Raises:
         ValueError: ``config.data`` is not set, or an INTER-SH root has no sample (named, with
-            how many it plans and why none may be there).
+            how many it plans and why none may be there). A root missing some of its planned
+            samples is read with a ``UserWarning`` saying how many and why.
     """
     if config.data is None:
         raise ValueError("TrainConfig.data is None: give a data root or pass dataset= to train()")
