@@ -179,8 +179,12 @@ def _new_file_mode() -> int:
     """The mode ``open()`` gives a new file: ``0o666`` less the process's umask (``0o644`` under
     the usual 022, ``0o600`` under 077), so an atomic write shares a file exactly as widely as
     the user's other files (and the sample folders the generator writes)."""
-    mask = os.umask(0)
-    os.umask(mask)
+    try:  # Linux: read, never set (setting it for a moment would race other threads)
+        with open("/proc/self/status", encoding="ascii") as fh:
+            mask = next(int(ln.split()[1], 8) for ln in fh if ln.startswith("Umask:"))
+    except (OSError, StopIteration, ValueError, IndexError):
+        mask = os.umask(0)
+        os.umask(mask)
     return 0o666 & ~mask
 
 
