@@ -63,7 +63,7 @@ photo. Above it one decoded image needs gigabytes; resize it first."""
 
 MAX_BATCH_SIZE = 65_536
 """Largest batch an argument may set (the paper's is 32; a batch of 224-px crops this big
-already holds 10 GB of images). A training batch is also at most the training items
+already holds 10 GB of images). A training batch is also at most twice the training items
 (`train.EpochBatchSampler`)."""
 MAX_CHANNELS = 4096
 """Largest width of a network layer a config may set (``channels``, ``latent_channels``: the

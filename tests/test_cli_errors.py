@@ -436,9 +436,10 @@ def test_a_batch_larger_than_the_training_items_is_refused_not_padded(root, tmp_
                      "--batch-size", "100"])
     err = capsys.readouterr().err
     assert code == cli.EXIT_CODES["bad-input"], err
-    assert "batch_size 100 is more than the 7 training items" in err, err
-    with pytest.raises(ValueError, match="batch_size 7 is more than the 6 training items"):
-        T.EpochBatchSampler(6, 7)
+    assert "batch_size 100 is more than twice the 7 training items" in err, err
+    with pytest.raises(ValueError, match="batch_size 13 is more than twice the 6 training items"):
+        T.EpochBatchSampler(6, 13)
+    assert len(T.EpochBatchSampler(6, 12).global_batches(0)[0]) == 12  # a small set: padded
 
 
 @pytest.mark.parametrize("option, value, says", [

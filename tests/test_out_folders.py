@@ -286,7 +286,7 @@ def test_a_refused_command_leaves_no_marker_lock_or_empty_out(toy_root, tmp_path
     run = tmp_path / "new" / "run"
     code = cli_main(["train", "--data", str(toy_root), "--out", str(run), *TRAIN,
                      "--batch-size", "100"])  # refused once the training items are counted
-    assert code == 3 and "batch_size 100 is more than" in capsys.readouterr().err
+    assert code == 3 and "batch_size 100 is more than twice" in capsys.readouterr().err
     assert not run.exists()
     # a folder that holds the command's outputs keeps its marker (it resumes from there)
     done = tmp_path / "done"

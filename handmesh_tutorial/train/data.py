@@ -48,7 +48,7 @@ class EpochBatchSampler(torch.utils.data.Sampler):
 
     Raises:
         ValueError: ``batch_size`` is not divisible by ``world_size * micro_batches``, is
-            more than ``n`` (checked before any batch is built), or ``n`` is 0.
+            more than ``2 * n`` (checked before any batch is built), or ``n`` is 0.
     """
 
     def __init__(self, n: int, batch_size: int, seed: int = 0, rank: int = 0,
@@ -56,9 +56,10 @@ class EpochBatchSampler(torch.utils.data.Sampler):
         chunks = world_size * micro_batches
         if n < 1:
             raise ValueError("the training set is empty")
-        if batch_size > n:  # each batch would repeat items, and be padded item by item
-            raise ValueError(f"batch_size {batch_size} is more than the {n} training items: a "
-                             f"batch holds an item at most once; use --batch-size {n} or less")
+        if batch_size > 2 * n:  # padded item by item: every batch would repeat every item
+            raise ValueError(f"batch_size {batch_size} is more than twice the {n} training "
+                             f"items (every batch would repeat each of them); use --batch-size "
+                             f"{2 * n} or less")
         if batch_size % chunks:
             raise ValueError(f"batch_size {batch_size} must be divisible by world_size x "
                              f"micro_batches = {world_size} x {micro_batches} = {chunks}")
