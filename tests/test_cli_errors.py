@@ -222,6 +222,12 @@ def test_pretrain_checks_its_options_before_generating_any_scene(argv, message, 
                                                    r"\[0, [\d,]+\] \(at most 4 x the \d+ CPU"),
     (["pretrain", "--workers", "10000"], 3, r"workers must be an integer in \[0, "),
     (["pretrain-encoder", "--workers", "10000"], 3, r"workers must be an integer in \[0, "),
+    (["pretrain-encoder", "--batch-size", "100000000"], 3, r"batch_size must be an integer in "
+                                                           r"\[1, 65,536\]"),
+    (["pretrain-encoder", "--train-scenes", "10", "--batch-size", "64"], 3,
+     r"batch_size 64 is more than the 10 training scenes"),
+    (["pretrain", "--train-scenes", "10", "--batch-size", "64"], 3,
+     r"batch_size 64 is more than twice the 10 training scenes"),
     (["generate", "--kind", "hand-hand", "--num", "2", "--workers", "10000"], 3,
      r"workers must be an integer in \[1, "),
     (["demo", "--init-encoder", "/nonexistent.pt"], 4, r"--init-encoder /nonexistent\.pt: no "

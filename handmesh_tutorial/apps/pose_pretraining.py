@@ -28,7 +28,7 @@ import torch
 from .._io import atomic_write_bytes, atomic_write_with, file_identity, single_writer, write_json
 from .._progress import progress_bar
 from .._untrusted import load_torch_file
-from ..budget import check_image_size
+from ..budget import MAX_BATCH_SIZE, check_count, check_image_size
 from ..data.batched_crops import BOX_SCALE, augment_crops
 from ..nn.losses import similarity_align
 from ..nn.pose_encoder import (
@@ -118,6 +118,11 @@ class PosePretrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        check_count(self.batch_size, "batch_size", 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+        if self.batch_size > self.train_scenes:  # one crop per scene: not one batch
+            raise ValueError(f"batch_size {self.batch_size} is more than the "
+                             f"{self.train_scenes} training scenes (one crop each): use "
+                             f"--batch-size {self.train_scenes} or less")
         if not self.image_sizes:
             raise ValueError("image_sizes must name at least one crop side")
         for side in self.image_sizes:

@@ -28,7 +28,7 @@ from pathlib import Path
 from .. import _version
 from .._io import atomic_write_bytes, file_identity, write_json
 from .._version import PRETRAINED_FILE, __version__
-from ..budget import check_image_size
+from ..budget import MAX_BATCH_SIZE, check_count, check_image_size
 from .pretraining_data import (
     check_device,
     check_run_options,
@@ -116,6 +116,11 @@ class PretrainedRecipe:
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
         # what training would refuse, refused before hours of scene generation
+        check_count(self.batch_size, "batch_size", 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+        if self.batch_size > 2 * self.train_scenes:  # as train.EpochBatchSampler refuses
+            raise ValueError(f"batch_size {self.batch_size} is more than twice the "
+                             f"{self.train_scenes} training scenes: use --batch-size "
+                             f"{2 * self.train_scenes} or less")
         check_image_size(self.image_size)
         check_image_size(self.render_size, "render_size")
         for name, ok, want in (("lr", lambda x: 0 < x < math.inf, "a finite number > 0"),
