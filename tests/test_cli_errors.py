@@ -417,6 +417,7 @@ def test_train_on_a_root_without_samples_says_so(root, tmp_path, capsys, how):
                             r"CPU cores"),
     ("--lr", "inf", r"lr must be a finite number > 0, got inf"),
     ("--lr", "nan", r"lr must be a finite number > 0, got nan"),
+    ("--encoder-lr-scale", "inf", r"encoder_lr_scale must be a finite number >= 0, got inf"),
     ("--encoder", "evil", r"encoder must be one of resnet10, .*got 'evil'"),
     ("--latent-channels", "-1", r"latent_channels must be an integer in \[1, 4,096\]"),
     ("--latent-channels", "100000000", r"latent_channels must be an integer in \[1, 4,096\]"),

@@ -262,8 +262,16 @@ class TrainConfig:
                 or self.freeze_encoder < 0:
             raise ValueError(f"freeze_encoder must be an integer >= 0 (epochs), got "
                              f"{self.freeze_encoder!r}")
-        if not self.encoder_lr_scale >= 0:
-            raise ValueError(f"encoder_lr_scale must be >= 0, got {self.encoder_lr_scale}")
+        # the rest of the optimiser's numbers: finite (inf gave NaN weights at step 2)
+        for name, ok, want in (("encoder_lr_scale", lambda x: 0 <= x < math.inf,
+                                "a finite number >= 0"),
+                               ("lr_gamma", lambda x: 0 < x <= 1, "in (0, 1]"),
+                               ("weight_decay", lambda x: 0 <= x < math.inf,
+                                "a finite number >= 0"),
+                               ("box_scale", lambda x: 0 < x < math.inf, "a finite number > 0")):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not ok(v):
+                raise ValueError(f"{name} must be {want}, got {v!r}")
         if isinstance(self.num_workers, bool) or not isinstance(self.num_workers, int) \
                 or self.num_workers < 0:
             raise ValueError(f"num_workers must be an integer >= 0, got {self.num_workers!r}")
