@@ -27,7 +27,8 @@ read by ``mesh_hierarchy``) and ``out-folder`` (the user's files in the ``--out`
 ``value`` (a JSON value, a pickled or saved array or tensor edited: types, huge numbers, NaN,
 nesting, shapes), ``header`` (an ``.npy`` member header, a zip header field, or an image's width
 and height in a PNG's IHDR or a JPEG's SOF), and for INTER-SH roots ``foreign`` (a user's files,
-links to outside, non-ASCII names, a sample of another set) and ``extra`` (``annotation.json``
+links to outside (a sample folder, ``samples/``, a sample's file), non-ASCII names, a sample of
+another set, a planned sample missing: issue 53) and ``extra`` (``annotation.json``
 ``extra`` fields). Byte positions are drawn half uniformly, half in a file's structure (zip
 headers and directory, ``.npy`` headers, pickle opcodes).
 
@@ -434,7 +435,7 @@ def _outside_tree(case_root: Path) -> dict:
 
 
 FOREIGN_KINDS = ("user-files", "photo", "photo-in-bad", "non-ascii", "samples-link", "lock-link",
-                 "sample-link", "other-set", "file-at-name")
+                 "sample-link", "other-set", "file-at-name", "file-link", "partial")
 """What `_plant_foreign` plants (one per case, drawn first)."""
 
 
@@ -496,6 +497,11 @@ def _plant_foreign(rng: random.Random, case_root: Path, base: Path) -> tuple[str
     elif kind == "sample-link":  # a sample folder that is a link to a copy outside
         shutil.move(samples / name, outside / name)
         (samples / name).symlink_to(outside / name, target_is_directory=True)
+    elif kind == "file-link":  # a sample's image a link to a file outside (issue 53)
+        shutil.move(samples / name / "image.png", outside / "image.png")
+        (samples / name / "image.png").symlink_to(outside / "image.png")
+    elif kind == "partial":  # a planned sample missing: said by every reader (issue 53)
+        shutil.rmtree(samples / name)
     elif kind == "other-set":
         other = _other_set(base)
         shutil.rmtree(samples / name)
@@ -703,6 +709,10 @@ def read(target: str, case_root: Path, base: Path) -> dict:
             return {"ok": False, "code": code, "message": text}
         if "skipped" in text:
             return {"ok": False, "code": 0, "message": text, "skipped": True}
+        if target.startswith("intersh") and "planned samples" not in text and sum(
+                p.is_dir() and not p.is_symlink() for p in (data / "samples").iterdir()) < 4:
+            return {"ok": True, "implausible": "a root missing planned samples (or one a link "
+                                               "outside) scored without saying so"}
         m = re.search(r"MPVPE (\S+) mm", text)
         bad = m is None or not np.isfinite(float(m.group(1)))
         return {"ok": True, "implausible": f"scores: {text[-200:]}" if bad else None}

@@ -26,7 +26,8 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_with", "atomic_savez",
            "write_json", "json_safe", "fsync_dir", "leftover_temporaries", "single_writer",
            "EnvironmentFailure", "names_path", "check_writable", "claim_out_dir", "out_marker",
-           "json_record", "remove_outputs", "file_identity"]
+           "json_record", "remove_outputs", "file_identity", "is_locked", "claim_state",
+           "release_claim"]
 
 
 _TMP_SUFFIX = ".tmp"
@@ -113,6 +114,29 @@ def single_writer(lock_file: str | os.PathLike, what: str):
         os.close(fd)
 
 
+def is_locked(lock_file: str | os.PathLike) -> bool:
+    """Whether another process holds `single_writer`'s lock on ``lock_file`` now (a reader's
+    question: nothing is created, a link or a missing file is no lock)."""
+    try:
+        import fcntl
+    except ImportError:
+        return False
+    try:
+        fd = os.open(lock_file, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0)
+                     | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    else:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
+    finally:
+        os.close(fd)
+
+
 def check_writable(folder: str | os.PathLike) -> Path:
     """Create ``folder`` (and its parents) and check that a file can be written in it, before a
     long computation whose results go there.
@@ -151,6 +175,19 @@ def fsync_dir(path: str | os.PathLike) -> None:
             os.close(fd)
 
 
+def _new_file_mode() -> int:
+    """The mode ``open()`` gives a new file: ``0o666`` less the process's umask (``0o644`` under
+    the usual 022, ``0o600`` under 077), so an atomic write shares a file exactly as widely as
+    the user's other files (and the sample folders the generator writes)."""
+    try:  # Linux: read, never set (setting it for a moment would race other threads)
+        with open("/proc/self/status", encoding="ascii") as fh:
+            mask = next(int(ln.split()[1], 8) for ln in fh if ln.startswith("Umask:"))
+    except (OSError, StopIteration, ValueError, IndexError):
+        mask = os.umask(0)
+        os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, binary: bool = True,
                       durable: bool = True, tmp_path: str | os.PathLike | None = None) -> Path:
     """Call ``write(file)`` on a temporary file beside ``path``, then rename it to ``path``.
@@ -165,7 +202,8 @@ def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, bi
             ``.<name>.<random>.tmp`` (the form `leftover_temporaries` finds).
 
     Returns:
-        The written path.
+        The written path, with the mode a new file gets under the user's umask (``0o644``
+        under 022, ``0o600`` under 077).
 
     Raises:
         OSError: the write failed (full disk, read-only or forbidden folder); the error names
@@ -186,7 +224,7 @@ def atomic_write_with(path: str | os.PathLike, write: Callable[[IO], Any], *, bi
             if durable:
                 fh.flush()
                 os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; outputs are meant to be shared
+        os.chmod(tmp, _new_file_mode())  # mkstemp creates 0600: as open() would, by umask
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -386,6 +424,58 @@ def claim_out_dir(out: str | os.PathLike, command: str, outputs: tuple[str, ...]
             atomic_write_text(marker, json.dumps({"command": command, "written_by":
                                                   "handmesh_tutorial"}) + "\n", durable=False)
     return folder
+
+
+def claim_state(out: str | os.PathLike | None) -> dict | None:
+    """What an ``--out`` folder holds before a command runs, for `release_claim`:
+    ``{"folder", "missing" (the folders of the path that do not exist yet, deepest first),
+    "names" (its entries)}``; ``None`` without a folder."""
+    if out is None or not str(out).strip():
+        return None
+    folder = Path(out)
+    missing, p = [], folder
+    try:
+        while not os.path.lexists(p) and p != p.parent:
+            missing.append(p)
+            p = p.parent
+        names = set(os.listdir(folder)) if folder.is_dir() and not folder.is_symlink() else set()
+    except OSError:  # a name too long, a folder we may not read: nothing to release later
+        return None
+    return {"folder": folder, "missing": missing, "names": names}
+
+
+def release_claim(state: dict | None) -> list[Path]:
+    """Undo what claiming an output folder left when the command then stopped before writing
+    any output (a refused option, an unreadable checkpoint): the command's marker and lock
+    files it created (hidden, empty or a marker's few bytes) and the folders it created, when
+    nothing else is in them. A folder holding any output, or any file of the user's, is left
+    as it is (a run that wrote something resumes from it).
+
+    Returns:
+        The paths removed.
+    """
+    if state is None:
+        return []
+    folder, gone = state["folder"], []
+    try:
+        if not folder.is_dir() or folder.is_symlink():
+            return []
+        new = [folder / n for n in sorted(set(os.listdir(folder)) - state["names"])]
+        ours = [p for p in new if p.name.startswith(".handmesh-")
+                or (p.name.startswith(".") and p.name.endswith(".lock"))]
+        if len(ours) != len(new) or any(p.is_symlink() or not p.is_file()
+                                        or p.stat().st_size > 4096 for p in ours):
+            return []  # the command wrote more than its bookkeeping: its folder now
+        for p in ours:
+            p.unlink()
+            gone.append(p)
+        for d in state["missing"]:  # deepest first; only those this command made, if empty
+            if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
+                d.rmdir()
+                gone.append(d)
+    except OSError:
+        pass
+    return gone
 
 
 def _refuse_links(folder: Path, command: str, names: tuple[str, ...]) -> None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import pickle
 import zipfile
 import zlib
 from collections.abc import Iterator
@@ -193,13 +194,24 @@ def load_torch_file(path: str | os.PathLike, map_location="cpu",
     Raises:
         ValueError: see ``check_checkpoint``; or a tensor with more elements than its storage
             (the message names the file and the tensor's place).
-        pickle.UnpicklingError, RuntimeError: as ``torch.load`` (objects other than tensors
-            and containers, damaged data).
+            Objects other than tensors and plain containers are a ``ValueError`` too, naming
+            the file (never torch's advice to load with ``weights_only=False``).
+        RuntimeError: as ``torch.load`` (damaged data).
     """
     import torch
 
     check_checkpoint(path, max_bytes)
-    obj = torch.load(path, map_location=map_location, weights_only=True)
+    try:
+        obj = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as err:
+        # torch's text advises weights_only=False, i.e. running the file's code: say otherwise
+        what = [ln.strip().split(". Please")[0][:120] for ln in str(err).splitlines()
+                if "Unsupported" in ln]
+        raise ValueError(
+            f"{path}: refused: the file holds objects other than tensors and plain containers"
+            + (f" ({what[0]})" if what else "") + ". It was not written by handmesh_tutorial "
+            "or was altered; never load it with weights_only=False, which runs any code it "
+            "carries.") from None
     stack, seen = [(obj, "")], set()
     while stack:
         item, where = stack.pop()

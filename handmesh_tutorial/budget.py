@@ -19,7 +19,9 @@ import os
 import textwrap
 from dataclasses import asdict, dataclass
 
-__all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE"]
+__all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE",
+           "MAX_BATCH_SIZE", "MAX_CHANNELS", "MAX_INPUT_PIXELS", "max_threads", "max_workers",
+           "check_count", "check_threads", "check_workers", "check_pixels"]
 
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")
@@ -52,6 +54,86 @@ def check_image_size(value, name: str = "image_size") -> int:
         raise ValueError(f"{name} must be an integer in [{MIN_IMAGE_SIZE}, {MAX_IMAGE_SIZE}] "
                          f"pixels, got {value!r}")
     return int(value)
+
+
+MAX_INPUT_PIXELS = 8192 * 8192
+"""Most pixels an input image of `inference` may have (a file is checked from its header,
+before it is decoded; an array from its shape): 67 megapixels, more than a 48 MP camera's
+photo. Above it one decoded image needs gigabytes; resize it first."""
+
+MAX_BATCH_SIZE = 65_536
+"""Largest batch an argument may set (the paper's is 32; a batch of 224-px crops this big
+already holds 10 GB of images). A training batch is also at most twice the training items
+(`train.EpochBatchSampler`)."""
+MAX_CHANNELS = 4096
+"""Largest width of a network layer a config may set (``channels``, ``latent_channels``: the
+paper's are at most 256); checked before any layer is allocated, as a checkpoint's config too."""
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def max_threads() -> int:
+    """Most CPU threads an argument may set (``--threads``): 4 x this machine's cores, at
+    least 8 (more only slice the same cores thinner, and each costs a stack)."""
+    return max(8, 4 * _cores())
+
+
+def max_workers() -> int:
+    """Most worker processes an argument may set (``--loader-workers``, ``--workers``): 4 x
+    this machine's cores, at least 8 (each is a copy of the process: hundreds of MB)."""
+    return max(8, 4 * _cores())
+
+
+def check_count(value, name: str, low: int, high: int, why: str = "") -> int:
+    """Check an integer option against ``[low, high]`` before any work or allocation.
+
+    Args:
+        value: the value.
+        name: the option's name, for the message.
+        low, high: the bounds, inclusive.
+        why: what the upper bound is (``"4 x the 2 CPU cores"``), for the message.
+
+    Returns:
+        ``value`` as an ``int``.
+
+    Raises:
+        ValueError: not an integer in the range; the message names ``name`` and the range.
+    """
+    if isinstance(value, bool) or not hasattr(value, "__index__") or not low <= int(value) <= high:
+        raise ValueError(f"{name} must be an integer in [{low}, {high:,}]"
+                         + (f" ({why})" if why else "") + f", got {value!r}")
+    return int(value)
+
+
+def check_pixels(height: int, width: int, where: str) -> None:
+    """Refuse an input image of more than `MAX_INPUT_PIXELS`, before it is decoded or copied.
+
+    Raises:
+        ValueError: naming ``where`` (the file, or ``"image"``), its size and the bound.
+    """
+    if int(height) * int(width) > MAX_INPUT_PIXELS:
+        raise ValueError(f"{where}: {width} x {height} pixels, more than the "
+                         f"{MAX_INPUT_PIXELS:,} (MAX_INPUT_PIXELS, 8192 x 8192) an input image "
+                         "may have; resize it first (the network sees a crop of the hand)")
+
+
+def check_threads(value, name: str = "threads") -> int:
+    """`check_count` of a thread count, 1 to
+    [`max_threads`][handmesh_tutorial.budget.max_threads]."""
+    return check_count(value, name, 1, max_threads(),
+                       f"at most 4 x the {_cores()} CPU cores of this machine, at least 8")
+
+
+def check_workers(value, name: str = "num_workers", low: int = 0) -> int:
+    """`check_count` of a process count, ``low`` to
+    [`max_workers`][handmesh_tutorial.budget.max_workers]."""
+    return check_count(value, name, low, max_workers(),
+                       f"at most 4 x the {_cores()} CPU cores of this machine, at least 8")
 
 
 @dataclass(frozen=True)

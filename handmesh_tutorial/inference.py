@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,7 +34,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .budget import check_image_size
+from .budget import check_image_size, check_pixels
 from .data.augment import (
     IMAGE_MEAN,
     IMAGE_STD,
@@ -109,7 +110,11 @@ def _read_file(path: Path) -> np.ndarray:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such image file")
     try:
-        with Image.open(path) as im:
+        with warnings.catch_warnings():  # Pillow's bomb warning: MAX_INPUT_PIXELS is lower
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(path)
+        with im:
+            check_pixels(im.height, im.width, str(path))  # from the header: nothing decoded
             im.load()
             mode = im.mode
             if mode not in _FILE_MODES:
@@ -146,7 +151,9 @@ def check_image(image) -> np.ndarray:
             how to convert it: ``(image // 257).astype(np.uint8)`` for 16-bit values,
             ``image.astype(np.uint8)`` for integers already in 0-255), float values in
             ``[0, 1]`` (multiply by 255), negative or above 255 (already normalised?), NaN,
-            an image smaller than 2 x 2, an unreadable file or a 16-bit/float file.
+            an image smaller than 2 x 2 or larger than
+            [`MAX_INPUT_PIXELS`][handmesh_tutorial.budget.MAX_INPUT_PIXELS] (a file's size read
+            from its header, before decoding), an unreadable file or a 16-bit/float file.
     """
     if isinstance(image, str | os.PathLike):
         return _read_file(Path(image))
@@ -168,6 +175,7 @@ def check_image(image) -> np.ndarray:
         raise ValueError(f"image must be (H, W, 3) RGB, got shape {shape}")
     if min(shape[:2]) < 2:
         raise ValueError(f"image {shape} is too small (at least 2 x 2 pixels)")
+    check_pixels(shape[0], shape[1], "image")
     if arr.dtype == np.uint8:
         return arr
     if not np.issubdtype(arr.dtype, np.floating):

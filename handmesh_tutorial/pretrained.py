@@ -176,13 +176,15 @@ def lineage(made: dict | None = None) -> list[dict]:
         ``commit`` (the code that ran it), ``date``.
 
     Raises:
-        ValueError: ``made`` is not a training record (no ``data``).
+        ValueError: ``made`` is not a training record (no ``data``), or its recorded chain is
+            deeper than 64 or holds more than `MAX_STAGES` stages (each record is walked once,
+            however often it is referred to).
     """
     made = pretrained_info()["pretrained"] if made is None else made
     if not isinstance(made, dict) or "data" not in made:
         raise ValueError("lineage() takes a network file's 'pretrained' record (with 'data'), "
                          f"got {type(made).__name__} with keys {sorted(made or {})[:8]}")
-    return _network_stages(made, depth=0)
+    return _network_stages(made, depth=0, seen=set())
 
 
 def _stage(node: dict, part: str, start: str) -> dict:
@@ -200,15 +202,33 @@ def _stage(node: dict, part: str, start: str) -> dict:
     return row
 
 
-def _network_stages(node: dict, depth: int) -> list[dict]:
+MAX_STAGES = 256
+"""Most stages `lineage` lists (the shipped file has four): a record is a tree of dicts that a
+file can make share its branches, so each is walked once and the total is bounded."""
+
+
+def _visit(node: dict, seen: set[int]) -> bool:
+    """Whether ``node`` is new (then marked seen); raises past `MAX_STAGES` records."""
+    if id(node) in seen:
+        return False
+    seen.add(id(node))
+    if len(seen) > MAX_STAGES:
+        raise ValueError(f"the recorded chain of runs holds more than {MAX_STAGES} stages "
+                         "(MAX_STAGES): not a record this library wrote")
+    return True
+
+
+def _network_stages(node: dict, depth: int, seen: set[int]) -> list[dict]:
     if depth > 64:  # a recorded chain is never a cycle; bounded all the same
         raise ValueError("the recorded chain of runs is deeper than 64 stages")
+    if not _visit(node, seen):  # a shared record: listed where first met
+        return []
     parent, encoder = node.get("init_from"), node.get("init_encoder_from")
     stages: list[dict] = []
     if isinstance(parent, dict):
-        stages += _network_stages(parent, depth + 1)
+        stages += _network_stages(parent, depth + 1, seen)
     if isinstance(encoder, dict) and isinstance(encoder.get("made_by"), dict):
-        stages += _encoder_stages(encoder["made_by"], depth + 1)
+        stages += _encoder_stages(encoder["made_by"], depth + 1, seen)
     if isinstance(parent, dict):
         start = "the stage before"
     elif stages:
@@ -219,13 +239,14 @@ def _network_stages(node: dict, depth: int) -> list[dict]:
     return stages + [_stage(node, "network", start)]
 
 
-def _encoder_stages(node: dict, depth: int) -> list[dict]:
+def _encoder_stages(node: dict, depth: int, seen: set[int]) -> list[dict]:
     from .nn.pose_encoder import _encoder_runs
 
     nodes, origin, network = _encoder_runs(node)
     first = {"random weights": "random weights"}.get(origin, "unknown")
     before: list[dict] = []
     if isinstance(network, dict):  # began as a network's encoder: its stages come first
-        before, first = _network_stages(network, depth + 1), "the encoder of the stage before"
+        before = _network_stages(network, depth + 1, seen)
+        first = "the encoder of the stage before"
     return before + [_stage(n, "encoder", first if i == 0 else "the stage before")
-                     for i, n in enumerate(nodes)]
+                     for i, n in enumerate(nodes) if _visit(n, seen)]

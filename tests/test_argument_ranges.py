@@ -69,3 +69,39 @@ def test_the_values_inside_the_ranges_still_work():
     assert data.vr_bins([(0.4, 0.6), (0.6, 1.0)]) == data.vr_bins([0.4, 0.6, 1.0])
     R, t, K = scenes.frame_camera(_hand_points(), 0, 64)
     assert np.isfinite(K).all() and K[0, 0] > 0
+
+
+def _png_claiming(path, width: int, height: int) -> None:
+    """A tiny PNG whose header claims ``width`` x ``height`` (its CRC fixed): 12000 x 12000
+    pixels in a few hundred bytes."""
+    import io
+    import struct
+    import zlib
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.new("RGB", (8, 8)).save(buf, format="PNG")
+    raw = bytearray(buf.getvalue())
+    ihdr = raw.index(b"IHDR")
+    raw[ihdr + 4:ihdr + 12] = struct.pack(">II", width, height)
+    raw[ihdr + 17:ihdr + 21] = struct.pack(">I", zlib.crc32(bytes(raw[ihdr:ihdr + 17])))
+    path.write_bytes(bytes(raw))
+
+
+def test_an_input_image_of_too_many_pixels_is_refused_before_decoding(tmp_path):
+    from handmesh_tutorial.budget import MAX_INPUT_PIXELS
+
+    path = tmp_path / "huge.png"
+    _png_claiming(path, 12_000, 12_000)  # decoded: 432 MB, and 4 GB on its way to the network
+    assert path.stat().st_size < 1000
+    with pytest.raises(ValueError, match=r"huge\.png: 12000 x 12000 pixels, more than the "
+                                         r"67,108,864 \(MAX_INPUT_PIXELS"):
+        inference.check_image(path)
+    with pytest.raises(ValueError, match=r"huge\.png: 12000 x 12000 pixels"):
+        inference.predict_hand(path, (0, 0, 100, 100), "right")
+    big = np.broadcast_to(np.zeros((1, 1, 3), np.uint8), (9000, 8000, 3))  # no memory
+    with pytest.raises(ValueError, match=r"image: 8000 x 9000 pixels, more than"):
+        inference.check_image(big)
+    assert 8192 * 8192 == MAX_INPUT_PIXELS
+    assert inference.check_image(np.zeros((64, 48, 3), np.uint8)).shape == (64, 48, 3)

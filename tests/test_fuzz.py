@@ -159,8 +159,13 @@ def test_a_flipped_bit_in_a_checkpoint_is_refused_not_loaded(tmp_path):
 
 @pytest.mark.parametrize("config, pattern", [
     ({"dataset": 0.0}, r"dataset must be"),  # was a ValueError naming no file
-    (7, r"'int' object is not iterable"),  # was a TypeError (exit 1)
+    (7, r"a TrainConfig is a mapping of its fields, got int"),  # was a TypeError (exit 1)
     ({"model_kwargs": {"bogus": 1}}, r"builds no network \(TypeError"),  # was exit 1
+    # issue 53: a string listed its letters as keys; sizes allocated 1.44 TB before any check
+    ("abc", r"a TrainConfig is a mapping of its fields, got str\)"),
+    ({"channels": [200_000] * 5}, r"channels must be at most 4,096 \(MAX_CHANNELS\), got 200,000"),
+    ({"latent_channels": 10**8}, r"latent_channels must be an integer in \[1, 4,096\]"),
+    ({"encoder": "evil"}, r"encoder must be one of resnet10, .* got 'evil'"),
 ])
 def test_a_checkpoint_with_an_invalid_config_is_refused_naming_it(tmp_path, config, pattern):
     path = tmp_path / "odd.pt"
@@ -171,6 +176,43 @@ def test_a_checkpoint_with_an_invalid_config_is_refused_naming_it(tmp_path, conf
                                          r"odd\.pt: its config .* builds no network") as e:
         load_checkpoint(path)
     assert re.search(pattern, str(e.value)), e.value
+
+
+def test_a_checkpoint_without_weights_or_truncated_is_named_in_one_short_line(tmp_path):
+    from handmesh_tutorial import train as T
+
+    path = tmp_path / "none.pt"
+    config = T.TrainConfig(encoder="resnet10", image_size=32, channels=(4, 4, 8, 8, 8),
+                           latent_channels=8)
+    torch.save({"format": CHECKPOINT_FORMAT, "model": {}, "config": config.to_dict(),
+                "template_hash": template_hash(None), "epoch": 0, "step": 0, "history": [],
+                "best": 1.0}, path)
+    with pytest.raises(ValueError) as e:
+        load_checkpoint(path)
+    msg = str(e.value)  # was about 20 KB: every key of the network
+    assert len(msg) < 600 and "\n" not in msg, msg
+    assert re.search(r"none\.pt: weights do not fit the architecture .*: \d+ missing \(first "
+                     r"encoder\.", msg), msg
+    good = tmp_path / "good.pt"
+    torch.save({"w": torch.ones(100)}, good)
+    cut = tmp_path / "cut.pt"
+    cut.write_bytes(good.read_bytes()[:300])
+    with pytest.raises(ValueError) as e:
+        load_checkpoint(cut)
+    msg = str(e.value)  # was nested twice and cut mid-word
+    assert msg.count("cut.pt") == 1 and msg.count("unreadable checkpoint") == 1, msg
+
+
+def test_the_pose_encoder_loader_never_advises_weights_only_false(tmp_path):
+    from handmesh_tutorial.nn.pose_encoder import read_pose_encoder
+
+    path = tmp_path / "enc.pt"
+    torch.save({"format": "x", "obj": Path("/")}, path)  # an object torch refuses to unpickle
+    with pytest.raises(ValueError) as e:
+        read_pose_encoder(path)
+    msg = str(e.value)
+    assert msg.startswith(f"{path}: refused: the file holds objects other than tensors"), msg
+    assert "will likely succeed" not in msg and msg.count(str(path)) == 1, msg
 
 
 @pytest.mark.parametrize("key, value, pattern", [
@@ -285,3 +327,41 @@ def test_a_seeded_subset_of_planted_caches_and_users_files_in_out_is_clean_or_re
     seen = {(r["target"], r["outcome"]) for r in results}
     assert ("hierarchy-cache", "refused") in seen and ("out-folder", "refused") in seen, seen
     assert "clobbered" in F.FAILURES and "| all | all | 12 |" in F.table(results)
+
+
+def _crops(n: int, size: int = 192) -> dict:
+    g = torch.Generator().manual_seed(0)
+    return {"image": torch.zeros(n, 3, size, size, dtype=torch.uint8),
+            "joints": torch.rand(n, 21, 3, generator=g) * 0.05,
+            "root": torch.tensor([[0.0, 0.0, 0.5]]).repeat(n, 1),
+            "K": torch.eye(3).repeat(n, 1, 1), "box": torch.full((n,), 128.0)}
+
+
+@pytest.mark.parametrize("damage, says", [
+    (lambda c: list(c.values()), r"not a crop cache \(a list"),  # was a crash
+    (lambda c: {**c, "joints": c["joints"] * float("nan")}, r"'joints' holds NaN"),
+    (lambda c: {**c, "image": c["image"][:, :, :8, :8]}, r"'image' has shape \(2, 3, 8, 8\), "
+                                                         r"expected \(2, 3, 192, 192\)"),
+    (lambda c: {**c, "joints": c["joints"] * 1000}, r"'joints' holds values up to"),
+    (lambda c: {**c, "K": c["K"].long()}, r"'K' holds NaN, infinity or no floats"),
+])
+def test_another_runs_crop_cache_is_checked_as_an_untrusted_file(tmp_path, damage, says):
+    """Issue 53 item 14: ``pretrain-encoder --scenes-from`` trusted the other run's
+    ``crops_train.pt``: a list or NaN joints crashed, 8x8 images trained silently (exit 0)."""
+    from handmesh_tutorial.apps.pretraining_data import crop_caches
+
+    other, out = tmp_path / "other", tmp_path / "out"
+    other.mkdir()
+    out.mkdir()
+    torch.save(_crops(2), other / "crops_val.pt")
+    splits = {"val": {"root": other / "data" / "val", "scenes": 2}}
+    assert crop_caches(out, splits, scenes_from=other, progress=False)["val"]["image"].shape == (
+        2, 3, 192, 192)
+    torch.save(damage(_crops(2)), other / "crops_val.pt")
+    with pytest.raises(ValueError, match=rf"{re.escape(str(other))}/crops_val\.pt: {says}"):
+        crop_caches(out, splits, scenes_from=other, progress=False)
+    (other / "crops_val.pt").unlink()
+    torch.save(_crops(2), tmp_path / "elsewhere.pt")
+    (other / "crops_val.pt").symlink_to(tmp_path / "elsewhere.pt")
+    with pytest.raises(ValueError, match=r"crops_val\.pt is a symbolic link"):
+        crop_caches(out, splits, scenes_from=other, progress=False)

@@ -73,6 +73,9 @@ MANO_FILES = {
     "shared_lists.pkl": _shared_lists(30),  # 2**30 leaves once expanded
     "deep_lists.pkl": _in_dict(b"]" * 100_001 + b"a" * 100_000),
     "cycle.pkl": _in_dict(b"(lp1\ng1\na"),
+    # issue 53: 14 bytes declaring 2^45 (MemoryError, no file named); keys that are no strings
+    "huge_bytes.pkl": b"\x80\x04\x8e" + (2**45).to_bytes(8, "little") + b".",
+    "int_keys.pkl": b"\x80\x02}q\x00(K\x01K\x01X\x01\x00\x00\x00aK\x02u.",
 }
 MANO_EXPECTED = {
     "object_dtype.pkl": r"refusing numpy\.dtype of dtype 'O8'",
@@ -80,6 +83,8 @@ MANO_EXPECTED = {
     "shared_lists.pkl": r"refusing contents that expand to more than 20,000,000 elements",
     "deep_lists.pkl": r"refusing contents nested more than 32 levels",
     "cycle.pkl": r"refusing a container that contains itself",
+    "huge_bytes.pkl": r"not a readable MANO pickle \(expected 35184372088832 bytes in a bytes8",
+    "int_keys.pkl": r"a MANO file's keys are strings, got int key '1'",
 }
 
 # ------------------------------------------------------------------ crafted annotation.npz
@@ -303,3 +308,89 @@ def test_image_sizes_have_one_bounded_range(tmp_path, capsys):
     assert code == 3 and "image_size must be an integer in [32, 4096]" in capsys.readouterr().err
     assert TrainConfig(image_size=4096).image_size == 4096
 
+
+
+# ------------------------------------------------------------------ one reader rule: no links
+
+def _toy_root(root: Path, num: int = 4, shard=None) -> Path:
+    from handmesh_tutorial.testing import toy_sample
+
+    D.generate_dataset(root, functools.partial(toy_sample, image_size=64), num=num, seed=11,
+                       kind="hand-hand", shard=shard, progress=False, durable=False)
+    return root
+
+
+@pytest.fixture
+def two_shards(tmp_path):
+    shards = [_toy_root(tmp_path / f"s{k}", shard=(k, 2)) for k in range(2)]
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    return shards, outside
+
+
+@pytest.mark.parametrize("durable", [False, True])
+def test_merge_never_copies_nor_links_what_a_link_points_to(two_shards, tmp_path, durable):
+    (s0, s1), outside = two_shards
+    secret = outside / "secret.json"
+    secret.write_text('{"secret": 1}')
+    sample = sorted((s1 / "samples").iterdir())[0]
+    (sample / "annotation.json").unlink()
+    (sample / "annotation.json").symlink_to(secret)
+    with pytest.raises(ValueError, match=r"annotation\.json is a symbolic link"):
+        D.merge_shards([s0, s1], tmp_path / "m1", link=True, progress=False, durable=durable)
+    assert os.stat(secret).st_nlink == 1  # the outside file gained no hard link
+    assert not any(p.name == "annotation.json" and p.read_bytes() == secret.read_bytes()
+                   for p in (tmp_path / "m1").rglob("annotation.json"))
+    # a linked sub-folder inside a sample (a link to / would copy the filesystem)
+    sample.joinpath("annotation.json").unlink()
+    (sample / "annotation.json").write_bytes((sorted((s0 / "samples").iterdir())[0]
+                                              / "annotation.json").read_bytes())
+    (sample / "extra").symlink_to(outside, target_is_directory=True)
+    with pytest.raises(ValueError, match=r"extra is a symbolic link"):
+        D.merge_shards([s0, s1], tmp_path / "m2", progress=False, durable=durable)
+    (sample / "extra").unlink()
+    (sample / "sub").mkdir()  # a real sub-folder: no IsADirectoryError, no recursive copy
+    with pytest.raises(ValueError, match=r"sub is a folder"):
+        D.merge_shards([s0, s1], tmp_path / "m3", progress=False, durable=durable)
+
+
+def test_a_sample_folder_linked_outside_is_no_sample_for_any_reader(two_shards, tmp_path):
+    (s0, s1), outside = two_shards
+    sample = sorted((s1 / "samples").iterdir())[0]
+    real = outside / sample.name
+    sample.rename(real)
+    sample.symlink_to(real, target_is_directory=True)
+    with pytest.raises(ValueError, match=r"incomplete: 1 samples missing"):
+        D.merge_shards([s0, s1], tmp_path / "m", link=True, progress=False)
+    assert all(os.stat(p).st_nlink == 1 for p in real.iterdir())
+    ds = D.InterSHDataset(s1)  # train, evaluate and the lean read count the samples here
+    assert int(sample.name) not in ds.indices.tolist() and int(sample.name) in ds.missing
+    report = D.verify_dataset(s1, progress=False)
+    assert (sample.name, "not a sample folder (a link)") in report.bad
+
+
+def test_a_linked_file_in_a_sample_folder_is_refused_by_every_read(tmp_path):
+    root = _toy_root(tmp_path / "root", num=2)
+    sample = sorted((root / "samples").iterdir())[0]
+    image = tmp_path / "image.png"
+    (sample / "image.png").rename(image)
+    (sample / "image.png").symlink_to(image)
+    ds = D.InterSHDataset(root)
+    for read in (lambda: ds[0], lambda: ds.target(0), lambda: D.read_sample(sample)):
+        with pytest.raises(ValueError, match=r"image\.png is a symbolic link"):
+            read()
+    report = D.verify_dataset(root, progress=False)
+    assert [n for n, _ in report.bad] == [sample.name]
+    assert "symbolic link" in report.bad[0][1]
+
+
+def test_generate_neither_counts_nor_writes_through_a_linked_sample_folder(tmp_path):
+    root = _toy_root(tmp_path / "root", num=3)
+    outside = tmp_path / "outside"
+    sample = root / "samples" / "000001"
+    sample.rename(outside)
+    sample.symlink_to(outside, target_is_directory=True)
+    before = sorted(p.name for p in outside.iterdir())
+    with pytest.raises(ValueError, match=r"000001 is a link where a sample folder belongs"):
+        _toy_root(root, num=3)
+    assert sorted(p.name for p in outside.iterdir()) == before and sample.is_symlink()

@@ -55,10 +55,29 @@ def test_text_mode_custom_temporary_name_and_shared_permissions(tmp_path):
     _io.atomic_write_with(path, lambda fh: fh.write("h\u00e9llo"), binary=False,
                           tmp_path=tmp_path / ".tmp-report.md-1")
     assert path.read_text(encoding="utf-8") == "h\u00e9llo"
-    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~_umask()
     assert not (tmp_path / ".tmp-report.md-1").exists()
     _io.atomic_write_text(path, "second", durable=False)
     assert path.read_text() == "second"
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o077])
+def test_written_files_honour_the_users_umask_as_samples_do(tmp_path, mask):
+    old = os.umask(mask)
+    try:
+        path = _io.write_json(tmp_path / "eval.json", {"a": 1}, durable=False)
+        with open(tmp_path / "plain", "w"):
+            pass
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == stat.S_IMODE((tmp_path / "plain").stat().st_mode)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~mask
 
 
 def test_atomic_savez_round_trips_both_formats_and_refuses_object_arrays(tmp_path):

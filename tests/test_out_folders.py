@@ -268,3 +268,30 @@ def test_pretraining_refuses_the_users_files_and_links_before_any_scene(tmp_path
     (old / "data" / "val" / "meta.json").write_text(json.dumps({"seed": 1, "num_samples": 2}))
     (old / "crops_val.pt").write_text("")
     assert pretraining_data.claim_pretraining_dir(old, command) == old
+
+
+@pytest.mark.parametrize("made", [False, True])
+def test_a_refused_command_leaves_no_marker_lock_or_empty_out(toy_root, tmp_path, capsys, made):
+    """Issue 53 item 21: ``.handmesh-evaluate``, ``.train.lock``, ``.handmesh-train`` or an empty
+    ``--out`` were left behind by a command refused after claiming its folder."""
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_text("not a checkpoint")
+    out = tmp_path / "new" / "eval"
+    if made:  # the user's own empty folder stays; only what the command made goes
+        out.mkdir(parents=True)
+    code = cli_main(["evaluate", "--checkpoint", str(garbage), "--data", str(toy_root),
+                     "--out", str(out), "--no-progress"])
+    assert code == 3, capsys.readouterr().err
+    assert (sorted(out.iterdir()) == [] if made else not (tmp_path / "new").exists())
+    run = tmp_path / "new" / "run"
+    code = cli_main(["train", "--data", str(toy_root), "--out", str(run), *TRAIN,
+                     "--batch-size", "100"])  # refused once the training items are counted
+    assert code == 3 and "batch_size 100 is more than twice" in capsys.readouterr().err
+    assert not run.exists()
+    # a folder that holds the command's outputs keeps its marker (it resumes from there)
+    done = tmp_path / "done"
+    assert cli_main(["train", "--data", str(toy_root), "--out", str(done), *TRAIN]) == 0
+    capsys.readouterr()
+    assert cli_main(["train", "--data", str(toy_root), "--out", str(done), *TRAIN,
+                     "--resume", "--lr", "0.5"]) == 3
+    assert (done / ".handmesh-train").is_file() and (done / "checkpoint_last.pt").is_file()

@@ -606,6 +606,34 @@ def test_lineage_of_an_encoder_made_from_a_network_and_of_an_unrecorded_start():
         L.lineage({"config": {}})
 
 
+def _shared_record(levels: int) -> dict:
+    """A record whose every level refers to the level below twice (as its network and as its
+    encoder's network): a few KB in a file (pickle keeps shared references), 2^levels paths."""
+    node = _record(0)
+    for k in range(1, levels + 1):
+        enc = _record(k, init="network", init_from={"made_by": node})
+        node = _record(k, init="x.pt", init_from=node, init_encoder_from={"made_by": enc})
+    return node
+
+
+def test_lineage_walks_each_shared_record_once_and_bounds_the_total():
+    stages = L.lineage(_shared_record(12))  # was 2^12 paths: thousands of stages
+    assert len(stages) == 25  # each level's network and encoder once, and the first network
+    assert [s["train_seed"] for s in stages if s["part"] == "network"] == list(range(13))
+    assert len(L.lineage(_shared_record(40))) == 81  # never returned
+
+
+    def tree(depth):  # distinct records branching in two at every level: 2^depth stages
+        if depth == 0:
+            return _record(0)
+        enc = _record(depth, init="network", init_from={"made_by": tree(depth - 1)})
+        return _record(depth, init="x.pt", init_from=tree(depth - 1),
+                       init_encoder_from={"made_by": enc})
+
+    with pytest.raises(ValueError, match=r"more than 256 stages \(MAX_STAGES\)"):
+        L.lineage(tree(9))
+
+
 def test_the_shipped_network_replays_from_random_weights_with_recorded_commands():
     stages = L.lineage()
     assert stages[0]["start"] == "random weights"
@@ -653,3 +681,18 @@ def test_save_network_of_a_fine_tuned_pretrained_network_loads_back(tmp_path):
     np.testing.assert_allclose(a.vertices, b.vertices, rtol=0, atol=1e-6)
     with pytest.raises(ValueError, match="weights must be"):
         hmt.pretrained.save_network(tmp_path / "x.pt", net, weights="int4")
+
+
+def test_a_moved_pretrain_run_resumes_in_its_new_place(tmp_path, monkeypatch):
+    """Issue 53 item 18: a ``pretrain`` run moved to another folder could not resume ("data
+    ('/old/...', 'new/...')"): its data moved with it, the same scenes."""
+    _toy_driver(monkeypatch)
+    small = dict(train_scenes=6, val_scenes=3, render_size=64, image_size=32, epochs=1,
+                 batch_size=3, workers=1, loader_workers=0, device="cpu", precision="float32",
+                 data_seed=7)
+    P.build_pretrained(tmp_path / "old", P.PretrainedRecipe(**small), progress=False, log=None)
+    (tmp_path / "old").rename(tmp_path / "new")
+    with pytest.warns(UserWarning, match=r"the run's data moved"):
+        res = P.build_pretrained(tmp_path / "new", P.PretrainedRecipe(**{**small, "epochs": 2}),
+                                 progress=False, log=None)
+    assert res["info"]["epochs_done"] == 2 and not (tmp_path / "old").exists()

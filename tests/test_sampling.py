@@ -351,6 +351,7 @@ def _no_cache_env(monkeypatch, home):
 def test_default_cache_dir_follows_handmesh_cache_then_xdg_then_home(tmp_path, monkeypatch,
                                                                      sphere):
     _no_cache_env(monkeypatch, tmp_path / "home")
+    (tmp_path / "home").mkdir()
     assert default_cache_dir() == tmp_path / "home" / ".cache" / "handmesh_tutorial"
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert default_cache_dir() == tmp_path / "xdg" / "handmesh_tutorial"
@@ -358,10 +359,20 @@ def test_default_cache_dir_follows_handmesh_cache_then_xdg_then_home(tmp_path, m
     assert default_cache_dir() == tmp_path / "mine"
     mesh_hierarchy(*sphere, factors=(2,))  # the default cache is the chosen folder
     assert len(list((tmp_path / "mine").glob("hierarchy_*.npz"))) == 1
-    assert not (tmp_path / "xdg").exists() and not (tmp_path / "home").exists()
+    assert not (tmp_path / "xdg").exists() and not any((tmp_path / "home").iterdir())
     monkeypatch.setenv("HANDMESH_CACHE", "")  # empty = unset
     monkeypatch.setenv("XDG_CACHE_HOME", "relative/path")  # not absolute: ignored (XDG spec)
     assert default_cache_dir() == tmp_path / "home" / ".cache" / "handmesh_tutorial"
+
+
+def test_a_missing_home_is_never_created_the_cache_falls_back_to_memory(tmp_path, monkeypatch,
+                                                                         sphere):
+    _no_cache_env(monkeypatch, tmp_path / "nonexistent" / "x")
+    with pytest.raises(RuntimeError, match="does not exist"):
+        default_cache_dir()
+    with pytest.warns(UserWarning, match="cannot write the mesh-hierarchy cache"):
+        h = mesh_hierarchy(*sphere, factors=(2,))
+    assert len(h.vertices) == 2 and not (tmp_path / "nonexistent").exists()
 
 
 def _unwritable_cache(tmp_path, how):

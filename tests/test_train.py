@@ -156,11 +156,31 @@ def test_a_run_started_in_one_folder_resumes_from_another(tmp_path, monkeypatch)
     kw = dict(out_dir="runs/r", epochs=2, batch_size=4, **TINY)
     res = T.train(T.TrainConfig(data="data", **kw), resume=True)
     assert res.history[-1]["epoch"] == 2
-    with pytest.raises(ValueError, match="other settings.*'data'"):
+    with pytest.raises(ValueError, match=r"data changed since this run started \(data "
+                       r"meta.json: seed 11 -> 12"):  # another set, not the same one moved
         T.train(T.TrainConfig(data="other", **{**kw, "epochs": 3}), resume=True)
     assert C._saved_folder(root / "nb" / "runs" / "r", "nb/runs/r") == str(root.resolve())
     assert C._saved_folder(root / "nb" / "runs" / "r", "elsewhere/r") is None
     assert C._saved_folder(root / "nb" / "runs" / "r", str(root / "nb" / "runs" / "r")) is None
+
+
+def test_a_run_resumes_on_its_data_moved_elsewhere_when_told_where(tmp_path):
+    """Issue 53 item 18: a run whose data moved could not resume ("data ('/old/...',
+    'new/...')"), and nothing let the user say where the data went."""
+    data = tmp_path / "old" / "data"
+    generate_dataset(data, functools.partial(toy_sample, image_size=64), num=8, seed=11,
+                     kind="hand-hand", progress=False, durable=False)
+    kw = dict(out_dir=str(tmp_path / "run"), batch_size=4, **TINY)
+    T.train(T.TrainConfig(data=str(data), epochs=1, **kw))
+    (tmp_path / "new").mkdir()
+    data.rename(tmp_path / "new" / "data")
+    with pytest.warns(UserWarning, match=r"the run's data moved \(data .*old/data -> "
+                                         r".*new/data\): the same meta\.json and samples"):
+        res = T.train(T.TrainConfig(data=str(tmp_path / "new" / "data"), epochs=2, **kw),
+                      resume=True)
+    assert res.history[-1]["epoch"] == 2
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())["config"]
+    assert saved["data"] == str(tmp_path / "new" / "data")  # the next resume finds it there
 
 
 def test_resume_refuses_data_replaced_at_the_same_path(tmp_path):

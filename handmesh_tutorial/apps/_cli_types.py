@@ -6,6 +6,7 @@ pipeline" (apps layer)."""
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 
@@ -56,7 +57,15 @@ def _out_folder(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError(f"must name a folder, got {text!r} (use . for the "
                                          "current folder)")
+    long = next((p for p in text.split("/") if len(os.fsencode(p)) > _NAME_MAX), None)
+    if long is not None:  # ENAMETOOLONG only once a file is written there
+        raise argparse.ArgumentTypeError(f"a folder name is at most {_NAME_MAX} bytes, got one of "
+                                         f"{len(os.fsencode(long))} ({long[:24]}...)")
     return text
+
+
+_NAME_MAX = 255
+"""Longest file or folder name, bytes (Linux, macOS and Windows file systems)."""
 
 
 def _positive_int(text: str) -> int:

@@ -50,6 +50,8 @@ run was stopped by its surroundings, not its inputs: a full disk, a read-only or
 folder, another process holding the writer lock, a killed worker process; fix that and rerun the
 same command (it resumes)."""
 
+# errnos of an OSError that mean a name the user gave (exit code 3): too long, a loop of links
+_INPUT_ERRNOS = {errno.ENAMETOOLONG, errno.ELOOP}
 # errnos of an OSError that mean the machine, not the input or the code (exit code 6)
 _ENVIRONMENT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM,
                        errno.EIO, errno.EMFILE, errno.ENFILE, errno.EBUSY, errno.ETXTBSY}
@@ -203,7 +205,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .demo import BASELINE_ROW, headline
 
     sc = ev["scores"]
-    print(f"handmesh evaluate: {ev['num_samples']} samples of {args.data} (targets centred at "
+    n, planned = ev["num_samples"], ev.get("planned")
+    scored = (f"scored {n} of {planned} planned samples" if planned not in (None, n)
+              else f"{n} samples")
+    print(f"handmesh evaluate: {scored} of {args.data} (targets centred at "
           f"joint 9; '{BASELINE_ROW}' = the template's open hand for every image)")
     print(headline(sc, ev["baseline"]["scores"]))
     if "mpvpe" in sc:  # joints only when the network's mesh is not the data's (a note says so)
@@ -310,7 +315,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     tr = sub.add_parser("train", help="train MSMR-Net on an INTER-SH (or FreiHAND) root; "
                         "sizes default to the HANDMESH_BUDGET tier; works under torchrun")
-    tr.add_argument("--data", help="training data root")
+    tr.add_argument("--data", help="training data root (with --resume: may name where the "
+                    "run's data moved; the same data is checked by its fingerprint)")
     tr.add_argument("--dataset", choices=("intersh", "freihand"), help="data format "
                     "(default: intersh)")
     tr.add_argument("--val-data", help="separate validation root (default: hold out "
@@ -418,6 +424,9 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 0
+    from .._io import claim_state, release_claim
+
+    before = claim_state(getattr(args, "out", None))
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
@@ -425,6 +434,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return EXIT_CODES["interrupted"]
     except Exception as err:  # noqa: BLE001 - every error becomes one line + an exit code
+        release_claim(before)  # a refused command leaves no marker, lock or empty --out
         if args.debug:
             traceback.print_exc()
         kind = error_kind(err)
@@ -449,7 +459,8 @@ def error_kind(err: BaseException) -> str:
                                                and err.errno in _ENVIRONMENT_ERRNOS):
         return "environment"
     if isinstance(err, ValueError | KeyError | pickle.UnpicklingError | zipfile.BadZipFile
-                  | EOFError | FloatingPointError):
+                  | EOFError | FloatingPointError) or (isinstance(err, OSError)
+                                                       and err.errno in _INPUT_ERRNOS):
         return "bad-input"
     return "unexpected"  # TypeError, IndexError, ...: most likely a bug of ours
 

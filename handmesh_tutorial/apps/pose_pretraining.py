@@ -28,7 +28,7 @@ import torch
 from .._io import atomic_write_bytes, atomic_write_with, file_identity, single_writer, write_json
 from .._progress import progress_bar
 from .._untrusted import load_torch_file
-from ..budget import check_image_size
+from ..budget import MAX_BATCH_SIZE, check_count, check_image_size
 from ..data.batched_crops import BOX_SCALE, augment_crops
 from ..nn.losses import similarity_align
 from ..nn.pose_encoder import (
@@ -39,7 +39,13 @@ from ..nn.pose_encoder import (
     export_pose_encoder,
     pose_loss,
 )
-from .pretraining_data import check_device, claim_pretraining_dir, crop_caches
+from .pretraining_data import (
+    check_device,
+    check_run_options,
+    check_start_file,
+    claim_pretraining_dir,
+    crop_caches,
+)
 
 __all__ = ["PosePretrainConfig", "evaluate_pose", "pretrain_pose_encoder",
            "build_pretrained_encoder"]
@@ -112,13 +118,19 @@ class PosePretrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        check_count(self.batch_size, "batch_size", 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+        if self.batch_size > self.train_scenes:  # one crop per scene: not one batch
+            raise ValueError(f"batch_size {self.batch_size} is more than the "
+                             f"{self.train_scenes} training scenes (one crop each): use "
+                             f"--batch-size {self.train_scenes} or less")
         if not self.image_sizes:
             raise ValueError("image_sizes must name at least one crop side")
         for side in self.image_sizes:
             check_image_size(side, "image_sizes")
         check_image_size(self.render_size, "render_size")
-        if not self.lr > 0:
-            raise ValueError(f"lr must be positive, got {self.lr}")
+        if isinstance(self.lr, bool) or not isinstance(self.lr, int | float) \
+                or not 0 < self.lr < math.inf:
+            raise ValueError(f"lr must be a finite number > 0, got {self.lr!r}")
         if self.precision not in ("float32", "bfloat16"):
             raise ValueError(f"precision must be 'float32' or 'bfloat16', got {self.precision!r}")
 
@@ -448,6 +460,19 @@ def build_pretrained_encoder(out: str | os.PathLike = "runs/pretrained_encoder",
 
     config = config or PosePretrainConfig()
     check_device(config.device, probe=True)  # a CUDA device asked for: before generating
+    check_run_options(max_generate_seconds=max_generate_seconds,
+                      max_train_seconds=max_train_seconds, stop_after=stop_after)
+    if install:
+        from ..nn.pose_encoder import SHIPPED_ENCODERS
+
+        name = "pretrained" if install is True else str(install)
+        if name not in SHIPPED_ENCODERS:
+            raise ValueError(f"install must be one of {sorted(SHIPPED_ENCODERS)}, got {name!r}")
+    from ..budget import check_workers
+
+    check_workers(config.workers, "workers")  # the machine's bound: before any scene
+    if config.init != "network":  # a missing or crafted file: in seconds, not after the scenes
+        check_start_file(config.init, "encoder", "--init")
     say = log or (lambda *_: None)
     out = claim_pretraining_dir(out, "pretrain-encoder", overwrite)
     workers = config.workers or os.cpu_count() or 1

@@ -17,7 +17,6 @@ pretrained model".
 from __future__ import annotations
 
 import datetime
-import json
 import math
 import os
 import platform
@@ -29,9 +28,11 @@ from pathlib import Path
 from .. import _version
 from .._io import atomic_write_bytes, file_identity, write_json
 from .._version import PRETRAINED_FILE, __version__
-from ..budget import check_image_size
+from ..budget import MAX_BATCH_SIZE, check_count, check_image_size
 from .pretraining_data import (
     check_device,
+    check_run_options,
+    check_start_file,
     claim_pretraining_dir,
     generate_train_val,
     generate_training_scenes,
@@ -115,6 +116,11 @@ class PretrainedRecipe:
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
         # what training would refuse, refused before hours of scene generation
+        check_count(self.batch_size, "batch_size", 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+        if self.batch_size > 2 * self.train_scenes:  # as train.EpochBatchSampler refuses
+            raise ValueError(f"batch_size {self.batch_size} is more than twice the "
+                             f"{self.train_scenes} training scenes: use --batch-size "
+                             f"{2 * self.train_scenes} or less")
         check_image_size(self.image_size)
         check_image_size(self.render_size, "render_size")
         for name, ok, want in (("lr", lambda x: 0 < x < math.inf, "a finite number > 0"),
@@ -178,8 +184,17 @@ def _prior_train_seconds(clock: Path, history: list[dict]) -> float:
     ``clock``'s (written after each epoch) plus the epochs of the checkpoint's ``history``
     beyond it; without ``clock`` (a run of before 0.6.0) the history's per-epoch seconds."""
     done = {"epoch": 0, "seconds": 0.0}
-    if clock.exists():
-        done = json.loads(clock.read_text())
+    if os.path.lexists(clock):
+        from ..data.files import _read_json  # the reader rule: no link, the file named
+
+        done = _read_json(clock)
+        ok = isinstance(done, dict) and all(
+            isinstance(done.get(k), int | float) and not isinstance(done.get(k), bool)
+            and math.isfinite(done[k]) and done[k] >= 0 for k in ("epoch", "seconds"))
+        if not ok:
+            raise ValueError(f"{clock}: expected {{\"epoch\": N, \"seconds\": S}} (numbers >= "
+                             f"0), got {str(done)[:80]}; it is rewritten after each epoch: "
+                             "delete it to count only the checkpoint's epochs")
     return float(done["seconds"]) + sum(float(r.get("seconds", 0.0)) for r in history
                                         if int(r["epoch"]) > int(done["epoch"]))
 
@@ -369,6 +384,15 @@ def build_pretrained(out: str | os.PathLike = "runs/pretrained",
     """
     recipe = recipe or PretrainedRecipe()
     check_device(recipe.device, probe=True)  # a CUDA device asked for: before generating
+    check_run_options(max_generate_seconds=max_generate_seconds,
+                      max_train_seconds=max_train_seconds)
+    from ..budget import check_workers
+
+    check_workers(recipe.workers, "workers")  # the machine's bounds: before any scene
+    check_workers(recipe.loader_workers, "loader_workers")
+    # the starting weights read as training will: in seconds, not after hours of scenes
+    check_start_file(recipe.init, "checkpoint", "--init")
+    check_start_file(recipe.init_encoder, "encoder", "--init-encoder")
     say = log or (lambda *_: None)
     out = claim_pretraining_dir(out, "pretrain", overwrite)
     tr, val, t_gen = generate_train_val(out / "data", recipe.train_scenes, recipe.val_scenes,

@@ -65,6 +65,81 @@ def check_device(device, *, probe: bool = False) -> str:
     return device
 
 
+_READ_START = {
+    "checkpoint": "from handmesh_tutorial.train.checkpoints import _read_checkpoint as read",
+    "encoder": "from handmesh_tutorial.nn.pose_encoder import read_pose_encoder, "
+               "encoder_source_path\nread = lambda p: read_pose_encoder(encoder_source_path(p))",
+}
+
+
+def check_start_file(path, kind: str, option: str) -> None:
+    """Read a run's starting weights (``--init``, ``--init-encoder``) before any scene is
+    generated, as training will, so that a missing or crafted file fails in seconds, not after
+    hours of generation. Read in a child process when torch is not imported yet (importing it
+    here would make the scene generator's workers start by ``spawn`` instead of ``fork``).
+
+    Args:
+        path: the file; ``None`` or a shipped name (``"pretrained"``, ``"neutral"``): nothing
+            to check.
+        kind: ``"checkpoint"`` (a network) or ``"encoder"`` (a pose-encoder file).
+        option: the option, for the message (``"--init"``).
+
+    Raises:
+        FileNotFoundError: no such file (named).
+        ValueError: the file cannot be read as ``kind`` (the reader's message, after the
+            option's name).
+    """
+    if path is None or str(path) in ("pretrained", "neutral"):  # the shipped files: tested
+        return
+    code = _READ_START[kind] + "\nimport sys\ntry:\n    read(sys.argv[1])\n" \
+        "except (FileNotFoundError, ValueError) as e:\n" \
+        "    print(type(e).__name__, str(e).splitlines()[0] if str(e) else '', sep='\\n')\n" \
+        "    sys.exit(3)\n"
+    if "torch" in sys.modules:
+        scope: dict = {}
+        exec(_READ_START[kind], scope)  # noqa: S102 - one of two fixed import lines
+        try:
+            scope["read"](str(path))
+        except (FileNotFoundError, ValueError) as err:
+            raise type(err)(_named(option, path, str(err))) from None
+        return
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
+                         text=True, timeout=600)
+    if out.returncode == 3:
+        name, _, message = out.stdout.partition("\n")
+        error = FileNotFoundError if name == "FileNotFoundError" else ValueError
+        raise error(_named(option, path, message))
+    if out.returncode != 0:
+        last = (out.stderr.strip().splitlines() or ["no message"])[-1]
+        raise ValueError(f"{option} {path}: cannot be read ({last[:200]})")
+
+
+def _named(option: str, path, message: str) -> str:
+    """``"--init FILE: why"`` in one line (the file named once, if the reader named it)."""
+    message = (message.strip().splitlines() or [""])[0]
+    return f"{option} {message}" if message.startswith(str(path)) else \
+        f"{option} {path}: {message}"
+
+
+def check_run_options(*, max_generate_seconds=None, max_train_seconds=None,
+                      stop_after=None) -> None:
+    """The numbers of a pretraining command, checked before any scene (``None``: not set).
+
+    Raises:
+        ValueError: a budget that is not a finite number > 0 of seconds, or ``stop_after`` that
+            is not a positive integer (steps); the message names the option.
+    """
+    for option, v in (("--max-generate-seconds", max_generate_seconds),
+                      ("--max-train-seconds", max_train_seconds)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
+                              or not 0 < v < float("inf")):
+            raise ValueError(f"{option} must be a finite number of seconds > 0, got {v!r}")
+    if stop_after is not None and (isinstance(stop_after, bool) or not isinstance(stop_after, int)
+                                   or stop_after < 1):
+        raise ValueError(f"--stop-after-steps must be a positive integer (steps), got "
+                         f"{stop_after!r}")
+
+
 def claim_pretraining_dir(out: str | os.PathLike, command: str,
                           overwrite: bool = False) -> Path:
     """``_io.claim_out_dir`` for ``handmesh pretrain`` / ``pretrain-encoder`` (before any scene):
@@ -150,9 +225,12 @@ def generate_train_val(data: str | os.PathLike, train_scenes: int, val_scenes: i
                                    render_size=render_size, workers=workers, progress=progress,
                                    log=log)
     budget = None if max_generate_seconds is None else max_generate_seconds - val["seconds"]
+    if budget is not None:  # the validation scenes may have taken it all: cut at once
+        budget = max(0.0, budget)
+    parts = min(10, train_scenes) if budget is not None else 1  # a shard holds a scene at least
     tr = generate_training_scenes(data / "train", train_scenes, data_seed,
                                   render_size=render_size, workers=workers, max_seconds=budget,
-                                  parts=10 if budget else 1, progress=progress, log=log)
+                                  parts=parts, progress=progress, log=log)
     t_gen = time.perf_counter() - t0
     say(f"      {tr['scenes']} training + {val['scenes']} validation scenes in {t_gen:.0f} s")
     return tr, val, t_gen
@@ -206,24 +284,30 @@ def crop_caches(out: Path, splits: dict, *, scenes_from: str | os.PathLike | Non
     """The crops of each split (``{"train": scenes, "val": scenes}`` as `generate_train_val`
     returns them): ``out/crops_<split>.pt`` when it holds as many crops as the split has scenes,
     else the other run's (``scenes_from``, read only) when it does, else cropped now and saved in
-    ``out``.
+    ``out``. A file read is checked as any untrusted input (`check_crop_cache`; a link in its
+    place is refused).
 
     Returns:
         ``{"train": cache, "val": cache}`` (``data.batched_crops.crop_cache`` dicts).
+
+    Raises:
+        ValueError: a ``crops_<split>.pt`` that is a link, unreadable, or no crop cache of
+            ``CACHE_SIZE`` crops with finite, plausible values (named, with what is wrong).
     """
     import torch
 
     from .._io import atomic_write_with
     from .._untrusted import load_torch_file
-    from ..data.batched_crops import crop_cache
+    from ..data.batched_crops import check_crop_cache, crop_cache
+    from ..data.files import _own_file
 
     caches = {}
     for split, scenes in splits.items():
         places = [out] + ([Path(scenes_from)] if scenes_from is not None else [])
         for place in places:
             path = place / f"crops_{split}.pt"
-            if path.is_file():
-                cache = load_torch_file(path)
+            if os.path.lexists(path):  # read as any untrusted file: no link, checked contents
+                cache = check_crop_cache(load_torch_file(_own_file(path)), str(path))
                 if len(cache["image"]) == scenes["scenes"]:
                     caches[split] = cache
                     break

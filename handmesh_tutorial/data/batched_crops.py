@@ -23,7 +23,7 @@ import torch.nn.functional as F  # noqa: N812 - the usual torch alias
 
 from .._progress import progress_bar
 
-__all__ = ["BOX_SCALE", "crop_cache", "augment_crops"]
+__all__ = ["BOX_SCALE", "crop_cache", "check_crop_cache", "augment_crops"]
 
 CACHE_SIZE = 192
 """Side of the cached crops, pixels (a 128-px training crop then samples them about 1:1)."""
@@ -64,6 +64,48 @@ def crop_cache(root, *, size: int = CACHE_SIZE, box_scale: float = CACHE_BOX,
     out = {k: torch.cat(v) for k, v in parts.items()}
     out["box"] = torch.full((len(out["image"]),), size * BOX_SCALE / box_scale)
     return out
+
+
+def check_crop_cache(cache, where: str, size: int = CACHE_SIZE) -> dict[str, torch.Tensor]:
+    """Check a crop cache read from a file (another run's ``crops_<split>.pt``) as any
+    untrusted input: `crop_cache`'s keys, dtypes and shapes, crops of side ``size``, finite
+    values and plausible joints.
+
+    Args:
+        cache: what the file held.
+        where: the file, for messages.
+        size: the crop side the cache must have, pixels.
+
+    Returns:
+        ``cache``.
+
+    Raises:
+        ValueError: the first thing wrong, naming ``where`` and the key.
+    """
+    if not isinstance(cache, dict):
+        raise ValueError(f"{where}: not a crop cache (a {type(cache).__name__}, expected a dict "
+                         "of tensors as crop_cache writes)")
+    want = {"image": (3, size, size), "joints": (21, 3), "root": (3,), "K": (3, 3), "box": ()}
+    missing = [k for k in want if not isinstance(cache.get(k), torch.Tensor)]
+    if missing:
+        raise ValueError(f"{where}: not a crop cache (no tensor {missing[0]!r})")
+    n = len(cache["image"]) if cache["image"].dim() else -1
+    for key, tail in want.items():
+        t = cache[key]
+        if tuple(t.shape) != (n, *tail):
+            raise ValueError(f"{where}: '{key}' has shape {tuple(t.shape)}, expected "
+                             f"{(max(n, 0), *tail)} (crops of {size} px)")
+        if key == "image":
+            if t.dtype != torch.uint8:
+                raise ValueError(f"{where}: 'image' has dtype {t.dtype}, expected torch.uint8")
+        elif not t.is_floating_point() or not torch.isfinite(t).all():
+            raise ValueError(f"{where}: '{key}' holds NaN, infinity or no floats")
+    if n and float(cache["joints"].abs().max()) > 0.5:  # root-relative metres: a hand is small
+        raise ValueError(f"{where}: 'joints' holds values up to "
+                         f"{float(cache['joints'].abs().max()):.3g} m from the root: not a hand")
+    if n and not bool((cache["box"] > 0).all()):
+        raise ValueError(f"{where}: 'box' holds sides <= 0")
+    return cache
 
 
 def _rotation_z(angle: torch.Tensor) -> torch.Tensor:

@@ -15,6 +15,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import uuid
 import zipfile
 from collections.abc import Mapping, Sequence
@@ -244,9 +245,40 @@ def _named_errors(read):
     return wrapper
 
 
+def _own_file(path: Path) -> Path:
+    """The reader rule for a file of a root (``meta.json``, a sample's files), links not
+    followed: every reader of a root (train, evaluate, verify, merge, the lean read,
+    pretraining's ``--scenes-from``) reads only regular files that are the root's own, so a
+    link to a file elsewhere is never read nor copied (`_own_folder` is the rule for a sample
+    folder).
+
+    Returns:
+        ``path``.
+
+    Raises:
+        FileNotFoundError: nothing at ``path``.
+        ValueError: a symbolic link (its target named) or not a regular file there.
+    """
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path} missing") from None
+    if stat.S_ISLNK(st.st_mode):
+        raise ValueError(f"{path} is a symbolic link (to {os.readlink(path)}): a root's files "
+                         "are read only from the root itself, never through a link")
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{path} is not a regular file")
+    return path
+
+
+def _own_folder(path: Path) -> bool:
+    """The reader rule for a sample folder: a real folder, not a symbolic link (a link to a
+    folder elsewhere is no sample of the root: never read, copied or counted as present)."""
+    return path.is_dir() and not path.is_symlink()
+
+
 def _read_json(path: Path) -> Any:
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} missing")
+    _own_file(path)
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
@@ -262,8 +294,7 @@ def _read_png(path: Path, modes: Sequence[str], size: Sequence[int] | None = Non
 
     from PIL import Image
 
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} missing")
+    _own_file(path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", Image.DecompressionBombWarning)
@@ -365,7 +396,7 @@ def read_annotation(directory: str | os.PathLike) -> dict:
 
 def _read_npz(npz_path: Path, keys=None) -> dict:
     """An ``annotation.npz``'s arrays, declared sizes checked first (`ANNOTATION_MAX_BYTES`)."""
-    return read_npz(npz_path, keys, ANNOTATION_MAX_BYTES)
+    return read_npz(_own_file(npz_path), keys, ANNOTATION_MAX_BYTES)
 
 
 @_named_errors
@@ -387,8 +418,6 @@ def read_sample(directory: str | os.PathLike) -> dict:
     d = Path(directory)
     ann = read_annotation(d)
     npz_path = d / "annotation.npz"
-    if not npz_path.is_file():
-        raise FileNotFoundError(f"{npz_path} missing")
     arrays = _read_npz(npz_path)
     labels, hands = ann["labels"], ann["hands"]
     need = ["K", *(f"{p}_{lab}" for lab in labels for p in ("vertices", "faces")),
@@ -470,8 +499,6 @@ def _read_target(directory: str | os.PathLike) -> tuple[tuple, dict]:
     ann = read_annotation(d)
     t = ann["target"]
     npz_path = d / "annotation.npz"
-    if not npz_path.is_file():
-        raise FileNotFoundError(f"{npz_path} missing")
     keys = ("K", f"vertices_{t}", f"joints_{t}")
     found = _read_npz(npz_path, keys)
     missing = [k for k in keys if k not in found]

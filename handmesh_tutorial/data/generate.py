@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..budget import check_workers
 from .candidates import _probe, _probe_summary, _Task
 from .files import read_annotation
 from .reader import _disagreements, _planned, _present, read_meta
@@ -44,6 +45,7 @@ from .schema import (
     MAX_SAMPLES,
     META_FILE,
     SAMPLES_DIR,
+    _sample_index,
 )
 from .seeds import _SEED_RULE, index_width, sample_seed, shard_range, vr_bins, vr_histogram
 from .workers import _callable_name, _check_for_workers, _Pool, _run, _start_method, _worker_probe
@@ -240,6 +242,7 @@ def generate_dataset(
     if workers < 1 or max_attempts < 1 or vr_probe < 1:
         raise ValueError(f"workers, max_attempts and vr_probe must be >= 1, got {workers}, "
                          f"{max_attempts}, {vr_probe}")
+    check_workers(workers, "workers", low=1)  # each a process: bounded by the cores
     if isinstance(parts, bool) or not isinstance(parts, int) or not 1 <= parts <= num:
         raise ValueError(f"parts must be an integer in [1, num={num}], got {parts!r}")
     if max_seconds is not None and (parts == 1 or not max_seconds >= 0):
@@ -345,6 +348,16 @@ def generate_dataset(
             if why:  # a sample of another set (kind, image size, seed): never counted as done
                 raise ValueError(f"{why[0]}; remove the folder or use another root")
             done_vr[i] = float(ann["vr"][ann["target"]])
+        # a link where a planned sample folder belongs: no sample (the reader rule), never
+        # written through (a file there stops the rename, named: NotADirectoryError)
+        blocked = sorted(p.name for p in samples_dir.iterdir()
+                         if (i := _sample_index(p.name, width)) is not None and i in indices
+                         and p.is_symlink())
+        if blocked:
+            raise ValueError(f"{samples_dir}: {', '.join(blocked[:5])} "
+                             f"{'is a link' if len(blocked) == 1 else 'are links'} where a "
+                             "sample folder belongs (not the generator's): `handmesh verify "
+                             "--remove-bad` unlinks them, then rerun")
         skipped = len(done_vr)
         todo = [i for i in indices if i not in done_vr]
         results = _run(task, todo, workers, worker_init, progress, len(indices), skipped,

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .files import _read_json, _read_target, read_annotation, read_sample
+from .files import _own_folder, _read_json, _read_target, read_annotation, read_sample
 from .schema import (
     FORMAT_NAME,
     KINDS,
@@ -71,16 +71,33 @@ def read_meta(root: str | os.PathLike) -> dict:
 
 
 def _present(samples_dir: Path, width: int) -> list[int]:
-    """Indices of the sample folders in ``samples_dir``: folders named by exactly ``width`` ASCII
-    digits (`schema._sample_index`); anything else there is not a sample of the set."""
+    """Indices of the sample folders in ``samples_dir``: real folders (`files._own_folder`: a
+    link is none) named by exactly ``width`` ASCII digits (`schema._sample_index`); anything
+    else there is not a sample of the set. Every reader of a root counts samples here."""
     if not samples_dir.is_dir():
         return []
     found = ((_sample_index(p.name, width), p) for p in samples_dir.iterdir())
-    return sorted(i for i, p in found if i is not None and p.is_dir())
+    return sorted(i for i, p in found if i is not None and _own_folder(p))
 
 
 def _planned(meta: Mapping) -> list[int]:
     return [i for a, b in meta["ranges"] for i in range(a, b)]
+
+
+def _missing(meta: Mapping, have: set[int]) -> tuple[int, int, list[str]]:
+    """``(planned, missing, first names)``: how many samples ``meta.json`` plans, how many of
+    them are not in ``have``, and the folder names of the first five (a walk that stops there:
+    bounded by ``len(have)``, not by the plan, which may be 1e8)."""
+    width = meta.get("index_width", MIN_INDEX_WIDTH)
+    planned = sum(b - a for a, b in meta["ranges"])
+    here = sum(1 for i in have if any(a <= i < b for a, b in meta["ranges"]))
+    first: list[str] = []
+    for i in (i for a, b in meta["ranges"] for i in range(a, b)) if here < planned else ():
+        if i not in have:
+            first.append(f"{i:0{width}d}")
+            if len(first) == 5:
+                break
+    return planned, planned - here, first
 
 
 class InterSHDataset:
@@ -135,6 +152,30 @@ class InterSHDataset:
                       for a, b in self.meta["ranges"])
         return (f"InterSHDataset({str(self.root)!r}: {len(self)} samples, kinds "
                 f"{self.meta['kinds']}, {planned - present} missing)")
+
+    @property
+    def num_planned(self) -> int:
+        """How many samples ``meta.json`` plans (its ranges)."""
+        return sum(b - a for a, b in self.meta["ranges"])
+
+    def coverage(self) -> str:
+        """What a reader of this root must say about it: ``""`` when every planned sample is
+        present, else one sentence such as ``"root: 4 of 6 planned samples present (first
+        missing 000001, 000003); ..."`` naming why they may be missing (``samples`` is no
+        folder, or a ``generate`` is writing the root now). Used by ``evaluate`` (a note, and
+        "scored N of M planned") and ``train`` (refused when none is present)."""
+        from .._io import is_locked
+        from .schema import _LOCK_FILE
+
+        planned, missing, first = _missing(self.meta, set(self.indices.tolist()))
+        if not missing:
+            return ""
+        samples = self.root / SAMPLES_DIR
+        why = ("; " + f"{samples} is not a folder" if not _own_folder(samples)
+               else "; a `handmesh generate` is writing it now" if is_locked(self.root / _LOCK_FILE)
+               else "; rerun the `handmesh generate` command that made it to finish it")
+        return (f"{self.root}: {planned - missing} of {planned} planned samples present "
+                f"(first missing {', '.join(first)}){why}")
 
     @property
     def missing(self) -> list[int]:
@@ -270,6 +311,11 @@ class VerifyReport:
         unplanned: the names in ``kept`` that are no sample ``meta.json`` plans (``2024`` or
             ``99`` beside 6-digit names, ``000007`` of a 7-sample set): ``generate`` neither
             counts them as done nor writes them, so a repair may go on beside them.
+        planned: how many samples ``meta.json`` plans (its ``ranges``).
+        missing: how many of them have no entry in ``samples/`` (a generation not finished, or
+            ``samples`` missing or a file): a check (``remove=False``) is not ``ok`` with any;
+            rerunning the ``generate`` command that made the root writes them.
+        missing_first: the folder names of the first (at most five) missing samples.
     """
 
     root: Path
@@ -281,12 +327,18 @@ class VerifyReport:
     foreign: list[tuple[str, str]] = field(default_factory=list)
     error: OSError | None = field(default=None, repr=False, compare=False)
     unplanned: list[str] = field(default_factory=list)
+    planned: int = 0
+    missing: int = 0
+    missing_first: list[str] = field(default_factory=list)
+    repair: bool = field(default=False, repr=False)
 
     @property
     def ok(self) -> bool:
-        """Nothing left to fix: no disagreement, and every bad sample removed (entries that are
+        """Nothing left to fix: no disagreement, every bad sample removed, and (for a check, not
+        a repair, which leaves them to ``generate``) no planned sample missing (entries that are
         no sample, ``foreign``, do not count)."""
-        return not self.disagree and len(self.removed) == len(self.bad)
+        return (not self.disagree and len(self.removed) == len(self.bad)
+                and (self.repair or not self.missing))
 
     def disagreements(self) -> dict[str, list[str]]:
         """``{meta.json key: [folder names]}`` of the disagreements, keys in order of
@@ -309,16 +361,19 @@ class VerifyReport:
     def __str__(self) -> str:
         lines = [f"{self.root}: {self.checked} samples read, {len(self.bad)} bad"
                  + (f", {len(self.removed)} removed" if self.removed else "")
+                 + (f", {self.missing} of {self.planned} planned samples missing (first "
+                    f"{', '.join(self.missing_first)})" if self.missing else "")
                  + (f", {len({n for n, _, _ in self.disagree})} disagree with meta.json"
                     if self.disagree else "")
                  + (f", {len(self.foreign)} entries that are no sample (left as they are)"
                     if self.foreign else "")]
         lines += [f"  {name}: {why}" for name, why in self.bad]
         lines += [f"  {name}: not removed: {why}" for name, why in self.kept]
-        if self.removed:  # only indices meta.json plans: the generator writes exactly these
+        if self.removed or self.missing:  # only planned indices: the generator writes these
             lines.append("  rerun the `handmesh generate` command that made it (same --kind, "
-                         "--num, --seed, --image-size, --shard) to write the removed samples "
-                         "again")
+                         "--num, --seed, --image-size, --shard) to write the "
+                         + ("removed and missing" if self.removed and self.missing else
+                            "removed" if self.removed else "missing") + " samples")
         lines += [f"  {name!r}: {what}, not a sample (left as it is)"
                   for name, what in self.foreign[:20]]
         if len(self.foreign) > 20:
@@ -464,6 +519,9 @@ def verify_dataset(root: str | os.PathLike, *, remove: bool = False,
                                    "left as it is"))
             else:
                 removed.append(name)
+    planned, missing, first = _missing(meta, {int(p.name) for p in entries
+                                              if _sample_index(p.name, width) is not None})
     return VerifyReport(root=root, checked=len(entries), bad=bad, removed=removed,
                         disagree=disagree, kept=kept, foreign=foreign, error=error,
-                        unplanned=unplanned)
+                        unplanned=unplanned, planned=planned, missing=missing,
+                        missing_first=first, repair=remove)

@@ -55,6 +55,26 @@ def _is_own_temporary(p: Path) -> bool:
 
 
 
+def _sample_files(folder: Path) -> list[str]:
+    """The files of a sample folder that a copy takes (`merge_shards`), by the reader rule
+    (`files._own_file`): only regular files of a sample's names, links never followed.
+
+    Raises:
+        ValueError: the folder holds anything else (a link, a sub-folder, another file), named;
+            nothing is copied from it.
+    """
+    names = []
+    for child in sorted(folder.iterdir()):
+        if not _SAMPLE_FILE.match(child.name) or child.is_symlink() or not child.is_file():
+            what = ("a symbolic link" if child.is_symlink() else "a folder" if child.is_dir()
+                    else "no sample's file")
+            raise ValueError(f"{child} is {what}: a merge copies only a sample's own files, "
+                             "never through a link; `handmesh verify` the shard, move it away "
+                             "and regenerate that sample")
+        names.append(child.name)
+    return names
+
+
 def _remove_sample_folder(folder: Path) -> list[str]:
     """Delete a sample folder of the generator's, touching nothing else: a link at its place is
     unlinked (its target untouched); in a real folder only the files a sample has
@@ -358,10 +378,13 @@ def merge_shards(shard_roots: Sequence[str | os.PathLike], out_root: str | os.Pa
             if dst.exists():
                 skipped += 1
                 continue
+            src = r / SAMPLES_DIR / name
+            names = _sample_files(src)
             tmp = _temporary(dst)
             try:
-                shutil.copytree(r / SAMPLES_DIR / name, tmp,
-                                copy_function=os.link if link else shutil.copyfile)
+                tmp.mkdir()
+                for f in names:
+                    (os.link if link else shutil.copyfile)(src / f, tmp / f)
                 if durable and not link:
                     for p in tmp.iterdir():
                         with open(p, "rb+") as fh:

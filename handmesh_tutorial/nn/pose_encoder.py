@@ -185,7 +185,11 @@ def read_pose_encoder(path: str | os.PathLike) -> tuple[PoseNet, dict]:
     try:
         blob = load_torch_file(path)
     except Exception as e:  # a truncated or foreign file: say which
-        raise ValueError(f"{path}: not a readable pose-encoder file ({e})") from e
+        if isinstance(e, ValueError) and str(e).startswith(f"{path}:"):
+            raise  # load_torch_file's refusal names the file and says why
+        why = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ValueError(f"{path}: not a readable pose-encoder file ({type(e).__name__}: "
+                         f"{why})") from e
     if not isinstance(blob, dict) or blob.get("format") != FORMAT:
         got = blob.get("format") if isinstance(blob, dict) else type(blob).__name__
         raise ValueError(f"{path}: format {got!r}, expected {FORMAT!r} (a file of "

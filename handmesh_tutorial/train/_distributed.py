@@ -24,10 +24,26 @@ def _resolve_device(device: str | torch.device, local_rank: int = 0) -> torch.de
             raise ValueError("device 'cuda' requested but torch.cuda.is_available() is False")
         return torch.device("cuda", local_rank)
     try:
-        return torch.device(device)
+        dev = torch.device(device)
     except (RuntimeError, TypeError):
         raise ValueError(f"device must be 'auto', 'cpu', 'cuda', 'cuda:N' or 'mps', got "
                          f"{device!r}") from None
+    # a device this machine lacks: said now, not as a failure to load or move weights later
+    if dev.type == "cuda":
+        count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if (dev.index or 0) >= count:
+            raise ValueError(f"device {device!r}: this machine has {count} CUDA device(s) "
+                             "(torch.cuda.is_available() says so); use --device cpu or auto")
+    elif dev.type == "mps":
+        mps = getattr(torch.backends, "mps", None)
+        if mps is None or not mps.is_available():
+            raise ValueError(f"device {device!r}: this machine has no MPS (Apple GPU) device "
+                             "(torch.backends.mps.is_available() is False); use --device cpu "
+                             "or auto")
+    elif dev.type != "cpu":
+        raise ValueError(f"device must be 'auto', 'cpu', 'cuda', 'cuda:N' or 'mps', got "
+                         f"{device!r}")
+    return dev
 
 
 def _init_distributed(device: torch.device) -> tuple[int, int, bool]:

@@ -15,8 +15,8 @@ import csv
 import io
 import math
 import os
-import pickle
 import random
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -123,6 +123,11 @@ def save_checkpoint(path: str | os.PathLike, *, model: nn.Module, config: TrainC
     return path
 
 
+def _shorten(text: str, width: int = 160) -> str:
+    """``text`` cut at a word (with ``...``) to at most ``width`` characters, for one line."""
+    return textwrap.shorten(text, width, placeholder=" ...") or text[:width]
+
+
 # what every checkpoint holds (save_checkpoint; a weights-only one has optimizer None)
 _REQUIRED_KEYS = ("model", "config", "template_hash", "epoch", "step", "history", "best")
 
@@ -135,20 +140,13 @@ def _read_checkpoint(path: str | os.PathLike, map_location="cpu") -> dict:
         raise FileNotFoundError(f"checkpoint not found: {path}")
     try:
         ck = load_torch_file(path, map_location=map_location)
-    except pickle.UnpicklingError as err:
-        # torch's text advises weights_only=False, i.e. running the file's code: say otherwise
-        what = [ln.strip().split(". Please")[0][:120] for ln in str(err).splitlines()
-                if "Unsupported" in ln]
-        raise ValueError(
-            f"{path}: refused: the file holds objects other than tensors and plain containers"
-            + (f" ({what[0]})" if what else "") + ". It was not written by handmesh_tutorial "
-            "or was altered; never load it with weights_only=False, which runs any code it "
-            "carries.") from None
     except (RuntimeError, EOFError, OSError, KeyError, IndexError, ValueError, TypeError,
             AttributeError) as err:  # garbage makes torch's unpickler fail in many ways
-        why = (str(err).strip().splitlines() or [type(err).__name__])[0][:120]
+        if isinstance(err, ValueError) and str(err).startswith(f"{path}:"):
+            raise  # load_torch_file's own refusal names the file and says why already
+        why = (str(err).strip().splitlines() or [type(err).__name__])[0]
         raise ValueError(f"{path}: unreadable checkpoint (truncated or not a torch file: "
-                         f"{type(err).__name__}: {why})") from err
+                         f"{type(err).__name__}: {_shorten(why)})") from err
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT:
         got = ck.get("format") if isinstance(ck, dict) else type(ck).__name__
         raise ValueError(f"{path}: not a handmesh_tutorial checkpoint (format {got!r}, "
@@ -207,11 +205,20 @@ def load_checkpoint(path: str | os.PathLike, device: str | torch.device = "cpu",
     if bad is not None:  # a diverged run or an altered file: every prediction would be NaN
         raise ValueError(f"{path}: weight '{bad}' holds NaN or infinity (a diverged run or an "
                          "altered file); use an earlier checkpoint")
+    want = net.state_dict()
+    missing = [k for k in want if k not in state]
+    unexpected = [str(k) for k in state if k not in want]
+    if missing or unexpected:  # named by count and a few keys: not a line of every key
+        raise ValueError(f"{path}: weights do not fit the architecture {cfg.architecture()}: "
+                         + "; ".join(f"{len(keys)} {what} (first {', '.join(keys[:3])})"
+                                     for keys, what in ((missing, "missing"),
+                                                        (unexpected, "unexpected")) if keys))
     try:
         net.load_state_dict(ck["model"], strict=True)
     except RuntimeError as e:
-        raise ValueError(f"{path}: weights do not fit the architecture "
-                         f"{cfg.architecture()}: {e}") from None
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        raise ValueError(f"{path}: weights do not fit the architecture {cfg.architecture()}: "
+                         f"{_shorten(lines[1] if len(lines) > 1 else str(e))}") from None
     return net.to(device).eval(), ck
 
 

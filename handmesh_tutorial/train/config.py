@@ -18,14 +18,20 @@ Taught in notebook 08 ("Training").
 from __future__ import annotations
 
 import copy
+import math
 import os
 import textwrap
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
+from ..budget import (
+    MAX_BATCH_SIZE,
+    MAX_CHANNELS,
+    check_count,
+    check_image_size,
+)
 from ..budget import budget as _budget
-from ..budget import check_image_size
 
 __all__ = ["TrainConfig", "changed_settings", "RESUMABLE_KEYS", "PRESETS"]
 
@@ -143,6 +149,15 @@ class TrainConfig:
             fixed for the whole run, BatchNorm statistics included. ``("decoder",)`` fine-tunes
             the mesh decoder alone, e.g. of ``init="pretrained"``. ``None``: everything trains
             (as ``freeze_encoder`` says).
+
+    Raises:
+        ValueError: a field out of its range, checked before anything is allocated (also for
+            a checkpoint's config): ``batch_size`` and ``val_batch_size`` above
+            [`MAX_BATCH_SIZE`][handmesh_tutorial.budget.MAX_BATCH_SIZE], ``channels`` or
+            ``latent_channels`` above [`MAX_CHANNELS`][handmesh_tutorial.budget.MAX_CHANNELS],
+            an unknown ``encoder`` or ``decoder``, an ``lr`` that is not finite and > 0... The
+            machine's bounds (``threads``, ``num_workers`` by its cores) are checked by
+            [`train`][handmesh_tutorial.train.loop.train], so a checkpoint made elsewhere loads.
     """
 
     data: str | None = None
@@ -196,12 +211,29 @@ class TrainConfig:
                 setattr(self, name, str(v))
         self.out_dir = str(self.out_dir)
         if self.channels is not None:
+            if isinstance(self.channels, str | bytes) or not all(
+                    hasattr(c, "__index__") and not isinstance(c, bool) for c in self.channels):
+                raise ValueError(f"channels must be positive integers, got "
+                                 f"{str(self.channels)[:80]}")
             self.channels = tuple(int(c) for c in self.channels)
             if not self.channels or min(self.channels) < 1:
                 raise ValueError(f"channels must be positive integers, got {self.channels}")
-        if self.threads is not None and (isinstance(self.threads, bool)
-                                         or not isinstance(self.threads, int) or self.threads < 1):
-            raise ValueError(f"threads must be a positive integer or None, got {self.threads!r}")
+            if max(self.channels) > MAX_CHANNELS:  # before any layer is allocated
+                raise ValueError(f"channels must be at most {MAX_CHANNELS:,} (MAX_CHANNELS), got "
+                                 f"{max(self.channels):,}")
+        check_count(self.latent_channels, "latent_channels", 1, MAX_CHANNELS, "MAX_CHANNELS")
+        if self.threads is not None:
+            if isinstance(self.threads, bool) or not isinstance(self.threads, int) \
+                    or self.threads < 1:
+                raise ValueError(f"threads must be a positive integer or None, got "
+                                 f"{self.threads!r}")
+        from ..nn.encoder import ENCODERS
+
+        if self.encoder not in ENCODERS:
+            raise ValueError(f"encoder must be one of {', '.join(ENCODERS)}, got "
+                             f"{str(self.encoder)[:40]!r}")
+        if self.decoder not in ("multi", "single"):
+            raise ValueError(f"decoder must be 'multi' or 'single', got {str(self.decoder)[:40]!r}")
         self.model_kwargs = dict(self.model_kwargs or {})
         if self.precision not in ("float32", "bfloat16"):
             raise ValueError(f"precision must be 'float32' or 'bfloat16', got {self.precision!r}")
@@ -212,11 +244,15 @@ class TrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        for name in ("batch_size", "val_batch_size"):
+            if getattr(self, name) is not None:
+                check_count(getattr(self, name), name, 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
         check_image_size(self.image_size)
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in [0, 1), got {self.val_fraction}")
-        if not self.lr > 0:
-            raise ValueError(f"lr must be positive, got {self.lr}")
+        if isinstance(self.lr, bool) or not isinstance(self.lr, int | float) \
+                or not math.isfinite(self.lr) or not self.lr > 0:
+            raise ValueError(f"lr must be a finite number > 0, got {self.lr!r}")
         for name in ("keypoint_weight", "aligned_weight", "edge_weight", "normal_weight"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 0:
@@ -238,10 +274,19 @@ class TrainConfig:
             if not self.train_only:
                 raise ValueError("train_only must name at least one part of the network (e.g. "
                                  "('decoder',)), or be None to train everything")
-        if not self.encoder_lr_scale >= 0:
-            raise ValueError(f"encoder_lr_scale must be >= 0, got {self.encoder_lr_scale}")
-        if self.num_workers < 0:
-            raise ValueError(f"num_workers must be >= 0, got {self.num_workers}")
+        # the rest of the optimiser's numbers: finite (inf gave NaN weights at step 2)
+        for name, ok, want in (("encoder_lr_scale", lambda x: 0 <= x < math.inf,
+                                "a finite number >= 0"),
+                               ("lr_gamma", lambda x: 0 < x <= 1, "in (0, 1]"),
+                               ("weight_decay", lambda x: 0 <= x < math.inf,
+                                "a finite number >= 0"),
+                               ("box_scale", lambda x: 0 < x < math.inf, "a finite number > 0")):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not ok(v):
+                raise ValueError(f"{name} must be {want}, got {v!r}")
+        if isinstance(self.num_workers, bool) or not isinstance(self.num_workers, int) \
+                or self.num_workers < 0:
+            raise ValueError(f"num_workers must be an integer >= 0, got {self.num_workers!r}")
 
     @classmethod
     def preset(cls, name: str, **overrides) -> TrainConfig:
@@ -349,10 +394,14 @@ class TrainConfig:
         """Inverse of [`to_dict`][handmesh_tutorial.train.config.TrainConfig.to_dict]; unknown keys
         raise
         ``ValueError``."""
+        if not isinstance(d, Mapping):
+            raise ValueError(f"a TrainConfig is a mapping of its fields, got "
+                             f"{type(d).__name__}")
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
+        unknown = sorted(map(str, set(d) - known))
         if unknown:
-            raise ValueError(f"unknown TrainConfig keys {unknown}")
+            raise ValueError(f"unknown TrainConfig keys {unknown[:8]}"
+                             + (f" and {len(unknown) - 8} more" if len(unknown) > 8 else ""))
         return cls(**dict(d))
 
     def architecture(self) -> dict:

@@ -47,8 +47,8 @@ class EpochBatchSampler(torch.utils.data.Sampler):
         shuffle: permute (``False``: keep the dataset order).
 
     Raises:
-        ValueError: ``batch_size`` is not divisible by ``world_size * micro_batches`` or
-            ``n`` is 0.
+        ValueError: ``batch_size`` is not divisible by ``world_size * micro_batches``, is
+            more than ``2 * n`` (checked before any batch is built), or ``n`` is 0.
     """
 
     def __init__(self, n: int, batch_size: int, seed: int = 0, rank: int = 0,
@@ -56,6 +56,10 @@ class EpochBatchSampler(torch.utils.data.Sampler):
         chunks = world_size * micro_batches
         if n < 1:
             raise ValueError("the training set is empty")
+        if batch_size > 2 * n:  # padded item by item: every batch would repeat every item
+            raise ValueError(f"batch_size {batch_size} is more than twice the {n} training "
+                             f"items (every batch would repeat each of them); use --batch-size "
+                             f"{2 * n} or less")
         if batch_size % chunks:
             raise ValueError(f"batch_size {batch_size} must be divisible by world_size x "
                              f"micro_batches = {world_size} x {micro_batches} = {chunks}")
@@ -97,6 +101,16 @@ def _split(n: int, fraction: float, seed: int) -> tuple[list[int], list[int]]:
     return sorted(perm[n_val:].tolist()), sorted(perm[:n_val].tolist())
 
 
+def _non_empty(src: InterSHDataset) -> InterSHDataset:
+    """``src``, refused when it holds no sample (`InterSHDataset.coverage` says why); a
+    warning says when planned samples are missing (a generation not finished)."""
+    if len(src) == 0:
+        raise ValueError(f"no sample to train on: {src.coverage()}")
+    if coverage := src.coverage():
+        warnings.warn(f"training on {len(src)} samples: {coverage}", UserWarning, stacklevel=3)
+    return src
+
+
 def make_datasets(config: TrainConfig):
     """Training and validation torch datasets of a config.
 
@@ -108,20 +122,23 @@ def make_datasets(config: TrainConfig):
         augmentation.
 
     Raises:
-        ValueError: ``config.data`` is not set.
+        ValueError: ``config.data`` is not set, or an INTER-SH root has no sample (named, with
+            how many it plans and why none may be there). A root missing some of its planned
+            samples is read with a ``UserWarning`` saying how many and why.
     """
     if config.data is None:
         raise ValueError("TrainConfig.data is None: give a data root or pass dataset= to train()")
     common = {"image_size": config.image_size, "seed": config.seed, "cache": config.cache_data}
     if config.dataset == "intersh":
-        src = InterSHDataset(config.data)
+        src = _non_empty(InterSHDataset(config.data))
 
         def make(source, idx, train):
             return TV.InterSHTorchDataset(source, train=train, augment=config.augment and train,
                                          indices=idx, box_scale=config.box_scale, **common)
 
         if config.val_data is not None:
-            return make(src, None, True), make(InterSHDataset(config.val_data), None, False)
+            return make(src, None, True), make(_non_empty(InterSHDataset(config.val_data)), None,
+                                               False)
         tr, va = _split(len(src), config.val_fraction, config.seed)
         return make(src, tr, True), (make(src, va, False) if va else None)
 

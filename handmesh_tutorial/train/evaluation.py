@@ -33,7 +33,7 @@ from .._io import (
 )
 from .._optional import require
 from .._progress import progress_bar
-from ..budget import check_image_size
+from ..budget import MAX_BATCH_SIZE, check_count, check_image_size, check_threads
 from ..data import KINDS, InterSHDataset
 from ..data import augment as A
 from ..data import torch_views as TV
@@ -292,9 +292,12 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         ``joints`` (N, 21, 3) numpy, metres), ``num_samples``, ``files`` (paths written) and
         ``skipped`` (``[{"index": reader index, "sample": folder name such as "000015",
         "error": message}, ...]``, the items ``skip_bad`` left out; also in ``eval.json``),
-        ``notes`` (list of str: files not written, and why). A network whose mesh is not the
-        data's (the shipped MakeHuman hand on FreiHAND's 778-vertex MANO meshes) is scored on
-        its joints only: the vertex and surface keys are absent and a note says so.
+        ``notes`` (list of str: files not written, and why; on an INTER-SH root missing
+        planned samples, "scored N of M planned samples" and why they may be missing),
+        ``planned`` (the samples the INTER-SH root's ``meta.json`` plans, else ``None``). A
+        network whose mesh is not the data's (the shipped MakeHuman hand on FreiHAND's
+        778-vertex MANO meshes) is scored on its joints only: the vertex and surface keys are
+        absent and a note says so.
 
     Shapes:
         ``mean_hand (V, 3)``; ``predictions``: ``vertices (N, V, 3)``, ``joints (N, 21, 3)``;
@@ -302,11 +305,14 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     """
     if image_size is not None:  # before anything is read or allocated
         check_image_size(image_size)
+    check_count(batch_size, "batch_size", 1, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
     if threads is not None:
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
             raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
-        torch.set_num_threads(threads)
+        check_threads(threads)
     dev = _resolve_device(device)
+    if threads is not None:
+        torch.set_num_threads(threads)
     if out_dir is not None:  # a folder we may not or cannot write is found now, not after
         claim_out_dir(out_dir, "evaluate", EVAL_OUTPUTS, overwrite=overwrite,
                       recognise=lambda d: json_record(d / "eval.json", "scores", "num_samples"))
@@ -322,6 +328,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
     else:
         net = checkpoint_or_model.to(dev)
         box_scale = 1.5
+    planned, coverage = None, ""
     if dataset is None:
         if data is None:
             raise ValueError("give data (a data root) or dataset")
@@ -330,6 +337,7 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         kind = kind or "intersh"
         if kind == "intersh":
             dataset = TV.InterSHTorchDataset(data, image_size, train=False, box_scale=box_scale)
+            planned, coverage = dataset.source.num_planned, dataset.source.coverage()
         elif kind == "freihand":
             dataset = TV.FreiHANDTorchDataset(data, split, image_size, train=False)
         else:
@@ -344,7 +352,8 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
         skipped = [{"index": b["index"], "sample": b["sample"], "error": b["error"]}
                    for b in bad]
     if len(dataset) == 0:
-        raise ValueError("the evaluation set is empty")
+        raise ValueError(coverage.replace(" present (", " present, none to score (")
+                         if coverage else "the evaluation set is empty")
 
     r = _run_dataset(net, dataset, batch_size, dev, progress=progress, desc="evaluate")
     finite = torch.isfinite(r["pred_vertices"]).flatten(1).all(1) & \
@@ -398,8 +407,10 @@ def evaluate(checkpoint_or_model, data=None, *, dataset=None, kind: str | None =
                         "frame": "camera" if camera_frame else "network"},
         "files": {},
         "skipped": skipped,
+        "planned": planned,
     }
-    result["notes"] = []
+    result["notes"] = [f"scored {len(vr)} of {planned} planned samples: {coverage}"] \
+        if coverage else []
     nv, ngt = r["pred_vertices"].shape[1], r["vertices"].shape[1]
     if nv != ngt:
         result["notes"].append(
@@ -465,7 +476,8 @@ def _write_eval(out: Path, res: dict, source: str | None, errors: dict,
                    "kind_table": res["mean_hand_baseline"]["kind_table"]},
                "comparison": res["comparison"],
                "predictions_frame": res["predictions"]["frame"],
-               "skipped": res.get("skipped", [])}
+               "skipped": res.get("skipped", []), "planned": res.get("planned"),
+               "notes": res.get("notes", [])}
     write_json(files["json"], summary)
     return files
 

@@ -54,6 +54,7 @@ from torch import nn
 
 from .._io import single_writer, write_json
 from .._progress import progress_bar
+from ..budget import check_threads, check_workers
 from ..data import torch_views as TV
 from ..nn.keypoints import keypoint_loss, normalised_keypoints
 from ..nn.losses import aligned_joint_loss, edge_length_loss, normal_loss, vertex_loss
@@ -244,10 +245,16 @@ def train(config: TrainConfig, *, resume: bool = False, overwrite: bool = False,
         RuntimeError: another process is training into ``out_dir`` (it holds ``.train.lock``).
         ValueError: inconsistent config, template/data vertex counts that differ, a
             checkpoint of another architecture, or (``resume``) data that changed since the
-            run started (its ``meta.json`` or sample ids; the message lists what differs).
+            run started (its ``meta.json`` or sample ids; the message lists what differs). A
+            resumed run's ``data`` or ``val_data`` may name another folder (the data moved):
+            it resumes, with a warning, when that folder holds the same data.
     """
     t_start = time.perf_counter()
+    # what this machine can hold, checked here (a checkpoint made on a larger machine still
+    # loads): before any folder is claimed or anything allocated
+    check_workers(config.num_workers)
     if config.threads is not None:
+        check_threads(config.threads)
         torch.set_num_threads(int(config.threads))
     local_rank = int(os.environ.get("LOCAL_RANK", "0"))
     device = _resolve_device(config.device, local_rank)
@@ -291,16 +298,28 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         warnings.warn(f"{out}: no checkpoint_last.pt yet (the run stopped before its first "
                       "checkpoint); starting from epoch 1", stacklevel=3)
         resume = False
+    moved: dict = {}
     if resume:  # check before building anything
         ck = _read_checkpoint(last, map_location=device)
         _check_same_network(ck, config, t_id, str(last), "checkpoint")
         changed = changed_settings(ck["config"], config, run_dir=out)
+        # a data root may move (the run's folder moved with it, or --data names the new
+        # place): its fingerprint, compared below, says whether it holds the same data
+        moved = {k: changed.pop(k) for k in ("data", "val_data")
+                 if k in changed and ck.get("data_fingerprint") and dataset is None
+                 and None not in changed[k]}
         if changed:
             raise ValueError(
                 f"{last}: cannot resume with other settings (checkpoint, now): {changed}. "
                 f"Resume with the run's settings (only {', '.join(RESUMABLE_KEYS)} may "
-                "change), or start a new run in another out_dir")
+                "change; data and val_data may name where the same data moved), or start a "
+                "new run in another out_dir")
     fingerprint = _checked_fingerprint(config, dataset, ck, last)
+    if ck is not None and moved:
+        warnings.warn(f"{last}: the run's data moved ("
+                      + ", ".join(f"{k} {a} -> {b}" for k, (a, b) in moved.items())
+                      + "): the same meta.json and samples, so the run resumes there",
+                      stacklevel=3)
 
     torch.manual_seed(config.seed)
     np.random.seed(config.seed % 2**32)  # noqa: NPY002 - for user code relying on it
@@ -374,12 +393,13 @@ def _train(config, resume, overwrite, dataset, val_dataset, template, callback, 
         model = DDP(net, device_ids=[device.index] if device.type == "cuda" else None)
     if rng_to_restore is not None:
         _set_rng_state(rng_to_restore)
+    # the batch against the training items: refused before the run's record is written
+    sampler = EpochBatchSampler(len(train_ds), config.batch_size, config.seed, rank, world,
+                                config.micro_batches)
     if is_main:
         write_json(out / "config.json", {"config": config.to_dict(), "template_hash": t_id,
                                           "world_size": world,
                                           "data_fingerprint": fingerprint})
-    sampler = EpochBatchSampler(len(train_ds), config.batch_size, config.seed, rank, world,
-                                config.micro_batches)
     val_bs = config.val_batch_size or config.batch_size
 
     for epoch in range(start_epoch, config.epochs):

@@ -181,6 +181,9 @@ def run_demo(out: str | os.PathLike = "runs/demo", seed: int = 0, config: DemoCo
 
     cfg = config or DemoConfig.from_budget()
     say = log or (lambda *_: None)
+    from ..pretraining_data import check_start_file
+
+    check_start_file(cfg.init_encoder, "encoder", "--init-encoder")  # before the scenes
     out = claim_out_dir(out, "demo", DEMO_OUTPUTS, overwrite=overwrite,
                         recognise=_is_demo_folder)
     t0 = time.perf_counter()

@@ -422,6 +422,27 @@ class RestrictedUnpickler(pickle.Unpickler):
         raise UnsafePickleError(f"{self.source}: persistent ids are not allowed ({pid!r})")
 
 
+def _check_lengths(raw: bytes, path: Path) -> None:
+    """Walk the file's opcodes (``pickletools.genops``, which reads, never allocates, what an
+    opcode declares) before the unpickler runs: a string or bytes opcode that declares more
+    bytes than the file holds (14 bytes claiming 2^45) would make the unpickler allocate them.
+
+    Raises:
+        ValueError: naming the file and what the opcode declares.
+    """
+    import pickletools
+
+    try:
+        for _ in pickletools.genops(raw):
+            pass
+    except ValueError as err:  # "expected N bytes in a bytes8, but only M remain"
+        if "remain" in str(err):
+            raise ValueError(f"{path}: not a readable MANO pickle ({str(err)[:200]}); refused "
+                             "before reading") from None
+        # other complaints (genops decodes protocol-0 strings more strictly than the
+        # unpickler): the unpickler decides, and a MemoryError it raises is named too
+
+
 def read_mano_pickle(path: str | Path) -> dict:
     """Read a MANO-format pickle into plain numpy / scipy objects, safely.
 
@@ -440,7 +461,9 @@ def read_mano_pickle(path: str | Path) -> dict:
             an object, structured or sub-array dtype, an array over `MAX_PICKLE_ELEMENTS`,
             contents that expand past it, nesting deeper than `MAX_PICKLE_DEPTH` or a container
             that holds itself (refused before numpy allocates or reads anything).
-        ValueError: the file is not a pickled dict, or is damaged (the message names it).
+        ValueError: the file is not a pickled dict of string keys, is damaged, or declares a
+            string longer than the file (checked before anything is allocated); the message
+            names it.
     """
     path = Path(path)
     if not path.is_file():
@@ -451,10 +474,15 @@ def read_mano_pickle(path: str | Path) -> dict:
                          f"{MAX_PICKLE_BYTES:,})")
     with open(path, "rb") as fh:
         raw = fh.read()
+    _check_lengths(raw, path)
     try:
         data = RestrictedUnpickler(io.BytesIO(raw), source=str(path)).load()
         if not isinstance(data, dict):
             raise ValueError(f"{path}: expected a pickled dict, got {type(data).__name__}")
+        odd = [k for k in data if not isinstance(k, str)]
+        if odd:  # load_mano sorts and names the keys: a TypeError about '<' otherwise
+            raise ValueError(f"{path}: a MANO file's keys are strings, got "
+                             f"{type(odd[0]).__name__} key {str(odd[0])[:40]!r}")
         _check_expansion(data, str(path))
         return {k: _plain(v) for k, v in data.items()}
     except UnsafePickleError as err:
@@ -466,6 +494,6 @@ def read_mano_pickle(path: str | Path) -> dict:
             raise
         raise ValueError(f"{path}: {err}") from None
     except (pickle.UnpicklingError, EOFError, TypeError, AttributeError, IndexError, KeyError,
-            OverflowError) as err:  # a damaged or crafted file: name it, whatever numpy said
+            OverflowError, MemoryError) as err:  # a damaged or crafted file: name it
         raise ValueError(f"{path}: not a readable MANO pickle ({type(err).__name__}: "
                          f"{str(err)[:200]})") from None

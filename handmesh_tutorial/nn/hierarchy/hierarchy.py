@@ -107,7 +107,9 @@ def default_cache_dir() -> Path:
         hierarchy.mesh_hierarchy] then computes in memory (with a warning).
 
     Raises:
-        RuntimeError: none of the variables is set and the home folder cannot be determined.
+        RuntimeError: none of the variables is set and the home folder cannot be determined or
+            is not an existing folder (``HOME=/nonexistent/x``): a missing home folder is never
+            created.
     """
     own = os.environ.get(CACHE_ENV, "")
     if own:
@@ -115,7 +117,10 @@ def default_cache_dir() -> Path:
     xdg = os.environ.get("XDG_CACHE_HOME", "")
     if xdg and os.path.isabs(xdg):
         return Path(xdg) / "handmesh_tutorial"
-    return Path.home() / ".cache" / "handmesh_tutorial"
+    home = Path.home()
+    if not home.is_dir():
+        raise RuntimeError(f"the home folder {home} does not exist (it is never created)")
+    return home / ".cache" / "handmesh_tutorial"
 
 
 def _warn_no_cache(where, err: Exception) -> None:
