@@ -157,11 +157,16 @@ def test_compiled_training_gives_the_eager_gradients(nets):
 
 
 @pytest.mark.slow
-def test_inductor_compiles_the_smallest_decoder(nets):
-    # inductor's fixed cost (C++ kernels) is tens of seconds on 2 CPUs even for one map: one run
+def test_inductor_compiles_the_smallest_decoder(nets, tmp_path):
+    # inductor's fixed cost (C++ kernels) is tens of seconds on 2 CPUs even for one map: one run.
+    # Its own kernel cache, not the shared one in /tmp: this test aborted the process twice in
+    # a full suite while other processes (other checkouts) compiled into that cache at the same
+    # time, and never alone; a private cache rules that cause out.
+    from torch._inductor.runtime.cache_dir_utils import temporary_cache_dir
+
     net, x = nets["single"]
     torch._dynamo.reset()
-    with torch.no_grad():
+    with temporary_cache_dir(str(tmp_path / "inductor")), torch.no_grad():
         out = torch.compile(net, fullgraph=True)(x)  # inductor, the default backend
     _assert_equal_to_eager(net, x, out)
 
