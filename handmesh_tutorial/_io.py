@@ -4,6 +4,10 @@ A write goes to a temporary file in the destination's folder and is renamed over
 (``os.replace``), so a crash or a kill leaves the old file or the new one, never half a file
 (docs page *Reliability*). `json_safe` turns numpy scalars/arrays, paths and non-finite floats
 into plain JSON values, and names where a value that JSON cannot hold sits.
+
+Why one file: every way the library puts a file on disk (atomic writes, locks, the claim of an
+``--out`` folder and its undoing) shares the temporary names and link checks defined here;
+split, a writer could miss one of them.
 """
 
 from __future__ import annotations

@@ -20,8 +20,7 @@ import textwrap
 from dataclasses import asdict, dataclass
 
 __all__ = ["ENV_VAR", "TIERS", "Budget", "budget", "MIN_IMAGE_SIZE", "MAX_IMAGE_SIZE",
-           "MAX_BATCH_SIZE", "MAX_CHANNELS", "MAX_INPUT_PIXELS", "max_threads", "max_workers",
-           "check_count", "check_threads", "check_workers", "check_pixels"]
+           "MAX_BATCH_SIZE", "MAX_CHANNELS", "MAX_INPUT_PIXELS", "max_threads", "max_workers"]
 
 ENV_VAR = "HANDMESH_BUDGET"
 TIERS = ("smoke", "default", "full")

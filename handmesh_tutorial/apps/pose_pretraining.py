@@ -11,6 +11,9 @@ made.
 
 Runs are deterministic for a seed (the step's draws come from ``(seed, step)``) and resume: the
 checkpoint holds weights, optimiser, the planned number of steps and the history.
+
+Why one file: the recipe, the validation that decides what its history records, and the loop
+read together as one procedure; the evaluation is shared with nothing else.
 """
 
 from __future__ import annotations

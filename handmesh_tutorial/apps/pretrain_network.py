@@ -12,6 +12,9 @@ mixed-kind INTER-SH scenes, train, export.
 The loader is the library's: [`hmt.pretrained.pretrained`][handmesh_tutorial.pretrained.pretrained].
 Why a separate recipe from the demo's, and how the shipped weights were made: docs page "The
 pretrained model".
+
+Why one file: the recipe, the command that replays it and the export that records it must
+agree field by field; kept together, a change of one is seen beside the others.
 """
 
 from __future__ import annotations

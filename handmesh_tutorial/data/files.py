@@ -5,6 +5,9 @@ A sample folder holds ``image.png``, ``scene_mask.png``, ``alone_<l>.png`` (and 
 (same sample -> same bytes: no time stamps in PNG, JSON or zip headers), and every folder appears
 atomically (written in a temporary sibling ``.tmp-<name>-<pid>-<8 hex>``, then renamed). Taught in
 notebook 05 ("Rendering and the visibility ratio").
+
+Why one file: writing and reading a sample folder must agree on every name, and the one rule of
+what a reader may open (no link, only the sample's own regular files) sits beside both.
 """
 
 from __future__ import annotations

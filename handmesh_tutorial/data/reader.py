@@ -3,6 +3,9 @@
 [`InterSHDataset`][handmesh_tutorial.data.reader.InterSHDataset] is numpy-only; the torch
 training crops built on it are in [`torch_views`][handmesh_tutorial.data.torch_views]. Taught
 in notebook 05 ("Rendering and the visibility ratio"), used from notebook 08 ("Training") on.
+
+Why one file: the lazy reader and `verify` count a root's planned, present and missing samples
+with the same functions; apart, the two could disagree on what a root holds.
 """
 
 from __future__ import annotations
