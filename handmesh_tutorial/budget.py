@@ -94,7 +94,8 @@ def check_count(value, name: str, low: int, high: int, why: str = "") -> int:
     Args:
         value: the value.
         name: the option's name, for the message.
-        low, high: the bounds, inclusive.
+        low: the smallest value allowed.
+        high: the largest value allowed.
         why: what the upper bound is (``"4 x the 2 CPU cores"``), for the message.
 
     Returns:
