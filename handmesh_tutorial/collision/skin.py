@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .hand_proxies import hand_cylinders
+from .hand_proxies import _to_numpy, hand_cylinders
 from .queries import SELF_CONTACT_COMPRESSION, self_collisions
 
 __all__ = ["finger_collisions", "finger_of_vertices", "skin_collisions", "triangles_intersect"]
@@ -33,8 +33,7 @@ _FINGERS = 5
 
 
 def _poses(vertices, name: str = "vertices") -> np.ndarray:
-    v = vertices.detach().cpu().numpy() if hasattr(vertices, "detach") else vertices
-    v = np.asarray(v, dtype=np.float64)
+    v = np.asarray(_to_numpy(vertices, name), dtype=np.float64)  # None -> the shape error below
     if v.ndim == 2:
         v = v[None]
     if v.ndim != 3 or v.shape[-1] != 3:
